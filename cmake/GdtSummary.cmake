@@ -1,0 +1,13 @@
+# Configure summary: what was found, where, and which options are on.
+message(STATUS "")
+message(STATUS "gdt-tile ${PROJECT_VERSION} configuration")
+message(STATUS "  build type      : ${CMAKE_BUILD_TYPE}")
+message(STATUS "  C compiler      : ${CMAKE_C_COMPILER_ID} ${CMAKE_C_COMPILER_VERSION}")
+message(STATUS "  sanitizers      : ${GDT_SANITIZE}")
+message(STATUS "  unsafe FP build : ${GDT_UNSAFE_FP}")
+message(STATUS "  OpenCL          : ${OpenCL_VERSION_STRING} (${OpenCL_LIBRARIES})")
+message(STATUS "  SQLite          : ${SQLITE3_VERSION}")
+message(STATUS "  GeographicLib   : ${GEOGRAPHICLIB_VERSION}")
+message(STATUS "  PCL             : ${PCL_VERSION}")
+message(STATUS "  OpenVDB         : ${OpenVDB_VERSION}")
+message(STATUS "")

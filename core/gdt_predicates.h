@@ -1,0 +1,100 @@
+/* gdt_predicates.h — the one module of exact geometric predicates.
+ *
+ * Coordinates are tile-local lattice integers.  Precondition for every
+ * predicate: each coordinate lies in [0, 2^31 - 1] (so every difference fits
+ * in 32 bits signed); callers subtract the tile origin first.  Under that
+ * precondition:
+ *   - orient2d is exact in int64 (|det| < 2^63);
+ *   - incircle is exact in 128-bit integers built from 64-bit halves
+ *     (|det| <= 6 L^4 < 2^127 with L = 2^31), no __int128 required, so the
+ *     same arithmetic compiles as OpenCL C;
+ *   - a double-precision filter with a proven error bound decides almost all
+ *     cases; only undecided ones take the exact integer path.
+ * Results are signs: +1, 0, -1.  No other code in gdt-tile evaluates a
+ * geometric determinant; everything goes through here.  The arithmetic is
+ * kernels/gdt_exact.clh, the same source the OpenCL kernels include.
+ * The predicates are pure and thread-safe (each thread passes its own
+ * counters); debug builds assert the coordinate precondition.
+ *
+ * The unique-Delaunay tie-break (Dyken & Floater, preferred directions
+ * d1 = (1,0), d2 = (1,1)): among the two diagonals e, f of a convex
+ * co-circular quad, e wins iff
+ *   (e.d1)^2 |f|^2 > (f.d1)^2 |e|^2, or equal and (e.d2)^2 |f|^2 > (f.d2)^2 |e|^2.
+ * For non-parallel e, f exactly one of them wins.
+ */
+#ifndef GDT_PREDICATES_H
+#define GDT_PREDICATES_H
+
+#include <stdint.h>
+
+#include "gdt_error.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* Largest legal tile-local coordinate. */
+#define GDT_COORD_MAX INT64_C(2147483647)
+
+typedef struct gdt_ipt {
+    int64_t x, y; /* tile-local lattice coordinates, 0 <= x, y <= GDT_COORD_MAX */
+} gdt_ipt;
+
+/* Call counters (shown with -v).  One per thread or per context: the
+ * predicates update them without synchronisation.  Every predicate accepts
+ * st == NULL (nothing is counted).  Start from a zeroed struct. */
+typedef struct gdt_pred_stats {
+    uint64_t orient_calls;     /* orient2d, including the convexity tests of edge_needs_flip */
+    uint64_t incircle_calls;   /* incircle, including the one inside edge_needs_flip */
+    uint64_t incircle_exact;   /* incircle calls the filter could not decide */
+    uint64_t tiebreak_calls;   /* prefer_diagonal calls and co-circular convex quads
+                                  decided by the tie-break in edge_needs_flip */
+} gdt_pred_stats;
+
+/* dst += src, field by field (merging per-thread counters). */
+void gdt_pred_stats_add(gdt_pred_stats *dst, const gdt_pred_stats *src);
+
+/* +1 if a, b, c turn counter-clockwise, -1 clockwise, 0 collinear. */
+int gdt_orient2d(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c);
+
+/* For a, b, c counter-clockwise: +1 if d lies strictly inside their
+ * circumcircle, 0 on it, -1 outside.  (For clockwise a, b, c the sign flips.) */
+int gdt_incircle(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c, gdt_ipt d);
+
+/* Tie-break between the diagonals e = e1 - e0 and f = f1 - f0 (given as
+ * integer vectors with components in [-GDT_COORD_MAX, GDT_COORD_MAX]):
+ * returns +1 if e wins, -1 if f wins, 0 only if e and f are parallel. */
+int gdt_prefer_diagonal(gdt_pred_stats *st, gdt_ipt e, gdt_ipt f);
+
+/* The Lawson test with the tie-break, for the edge a-b shared by the
+ * counter-clockwise triangles (a, b, c) and (b, a, d):
+ * returns 1 if the edge must be flipped to c-d, i.e. d is strictly inside
+ * circle(a, b, c), or d is on it and the quad a-d-b-c is strictly convex and
+ * the diagonal c-d wins the tie-break over a-b.  Returns 0 if a-b is locally
+ * optimal. */
+int gdt_edge_needs_flip(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c, gdt_ipt d);
+
+/* Faults found by gdt_predicates_selftest (bit mask). */
+#define GDT_FPENV_CONTRACTION 0x1u /* a*b - c was fused into one rounding (FMA) */
+#define GDT_FPENV_REASSOC 0x2u     /* (a + b) - a was simplified, or extended precision */
+#define GDT_FPENV_ROUNDING 0x4u    /* rounding mode is not round-to-nearest */
+#define GDT_FPENV_FILTER 0x8u      /* the filter contradicted the integer path */
+#define GDT_FPENV_INT128 0x10u     /* the integer path gave a wrong known answer */
+
+/* Checks that the floating-point environment this module was compiled and
+ * runs with matches the assumptions of the filter's error analysis (binary64,
+ * round to nearest, no contraction, no reassociation, no extended
+ * intermediates), and that the filter and the integer path agree on a set of
+ * near-degenerate cases at extreme coordinates.  Call once at start-up,
+ * before trusting any predicate.
+ * returns: GDT_OK, or GDT_EINTERNAL (message GDT-7601) naming the faults.
+ * faults (may be NULL) receives the GDT_FPENV_* mask, 0 when all is well.
+ * notes: the checks use volatile operands so the compiler cannot fold them;
+ *   they detect what the build actually did (e.g. -ffast-math,
+ *   -ffp-contract=fast), whatever the flags claim. */
+gdt_status gdt_predicates_selftest(unsigned *faults, gdt_error *err);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,223 @@
+/* predicates.c — host entry points of the exact predicates.
+ *
+ * All arithmetic lives in kernels/gdt_exact.clh, shared with the OpenCL
+ * kernels; this file adds the counters, the precondition checks of debug
+ * builds and the floating-point environment self-test.
+ */
+#include "gdt_predicates.h"
+
+#include <assert.h>
+#include <stddef.h>
+
+#include "../kernels/gdt_exact.clh"
+
+#define PRED_IN_RANGE(p) ((p).x >= 0 && (p).x <= GDT_COORD_MAX && (p).y >= 0 && (p).y <= GDT_COORD_MAX)
+#define PRED_VEC_IN_RANGE(v)                                                                  \
+    ((v).x >= -GDT_COORD_MAX && (v).x <= GDT_COORD_MAX && (v).y >= -GDT_COORD_MAX           \
+     && (v).y <= GDT_COORD_MAX)
+
+void gdt_pred_stats_add(gdt_pred_stats *dst, const gdt_pred_stats *src)
+{
+    dst->orient_calls += src->orient_calls;
+    dst->incircle_calls += src->incircle_calls;
+    dst->incircle_exact += src->incircle_exact;
+    dst->tiebreak_calls += src->tiebreak_calls;
+}
+
+int gdt_orient2d(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c)
+{
+    assert(PRED_IN_RANGE(a) && PRED_IN_RANGE(b) && PRED_IN_RANGE(c));
+    if (st != NULL)
+        st->orient_calls++;
+    return gdt_x_orient2d(a.x, a.y, b.x, b.y, c.x, c.y);
+}
+
+int gdt_incircle(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c, gdt_ipt d)
+{
+    assert(PRED_IN_RANGE(a) && PRED_IN_RANGE(b) && PRED_IN_RANGE(c) && PRED_IN_RANGE(d));
+    int used_exact = 0;
+    int s = gdt_x_incircle(a.x, a.y, b.x, b.y, c.x, c.y, d.x, d.y, &used_exact);
+    if (st != NULL) {
+        st->incircle_calls++;
+        st->incircle_exact += (uint64_t)used_exact;
+    }
+    return s;
+}
+
+int gdt_prefer_diagonal(gdt_pred_stats *st, gdt_ipt e, gdt_ipt f)
+{
+    assert(PRED_VEC_IN_RANGE(e) && PRED_VEC_IN_RANGE(f));
+    if (st != NULL)
+        st->tiebreak_calls++;
+    return gdt_x_prefer_diagonal(e.x, e.y, f.x, f.y);
+}
+
+int gdt_edge_needs_flip(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c, gdt_ipt d)
+{
+    assert(PRED_IN_RANGE(a) && PRED_IN_RANGE(b) && PRED_IN_RANGE(c) && PRED_IN_RANGE(d));
+    unsigned code = gdt_x_edge_flip_code(a.x, a.y, b.x, b.y, c.x, c.y, d.x, d.y);
+    if (st != NULL) {
+        st->incircle_calls++;
+        if (code & GDT_X_USED_EXACT)
+            st->incircle_exact++;
+        if (code & GDT_X_USED_CONVEX)
+            st->orient_calls += 2;
+        if (code & GDT_X_USED_TIEBREAK)
+            st->tiebreak_calls++;
+    }
+    return (code & GDT_X_FLIP) != 0;
+}
+
+/* ---------------------------------------------------------------------
+ * Floating-point environment self-test.
+ *
+ * Every probe reads its operands through volatile objects, so the compiler
+ * must emit the arithmetic exactly as the flags of this translation unit
+ * allow; algebraic rewriting (fast-math) and fusing (contraction) then show
+ * up as wrong values at run time.
+ * ------------------------------------------------------------------- */
+
+/* a*b - c with c = fl(a*b): 0 when a*b is rounded on its own, the rounding
+ * error 2^-60 when the product is fused into the subtraction.  Tried in the
+ * one-expression form and in the named-temporaries form the filter uses. */
+static unsigned probe_contraction(void)
+{
+    volatile double va = 1.0 + 0x1p-30, vb = 1.0 + 0x1p-30;
+    volatile double vc = va * vb;
+    double a = va, b = vb, c = vc;
+    double r1 = a * b - c;
+    double x = va, y = vb, z = va, w = vb;
+    double p = x * y, q = z * w;
+    double r2 = p - q;
+    return (r1 != 0.0 || r2 != 0.0) ? GDT_FPENV_CONTRACTION : 0u;
+}
+
+/* (1 + 2^-60) - 1 is 0 in binary64; reassociation gives 2^-60 (so do
+ * extended-precision intermediates).  The two-sum error-free transform of
+ * 1 + 3 2^-54 must give s = 1 + 2^-52, err = -2^-54 exactly; simplifying
+ * (x + y) - x to y destroys err. */
+static unsigned probe_reassociation(void)
+{
+    volatile double vone = 1.0, vtiny = 0x1p-60;
+    double one = vone, tiny = vtiny;
+    double r = (one + tiny) - one;
+
+    volatile double vx = 1.0, vy = 3.0 * 0x1p-54;
+    double x = vx, y = vy;
+    double s = x + y;
+    double bv = s - x;
+    double av = s - bv;
+    double err = (x - av) + (y - bv);
+
+    volatile double veps = 1.0;
+    double eps = veps, check = 1.0, last;
+    /* Halve until 1 + eps is no longer distinguishable from 1: in binary64
+     * with round to nearest this stops at eps = 2^-53. */
+    do {
+        last = check;
+        eps *= 0.5;
+        check = vone + eps;
+    } while (check != 1.0 && check != last);
+
+    int bad = r != 0.0 || s != 1.0 + 0x1p-52 || err != -0x1p-54 || eps != 0x1p-53;
+    return bad ? GDT_FPENV_REASSOC : 0u;
+}
+
+/* Round to nearest (ties to even) is assumed by the error bound. */
+static unsigned probe_rounding(void)
+{
+    volatile double vone = 1.0, vabove = 0x1p-53 + 0x1p-60, vhalf = 0x1p-53;
+    double one = vone, above = vabove, half = vhalf;
+    double up = one + above;   /* nearest: 1 + 2^-52; towards zero or down: 1 */
+    double down = -one - above; /* nearest: -(1 + 2^-52); towards zero or up: -1 */
+    double tie = one + half;    /* ties to even: 1 */
+    int bad = up != 1.0 + 0x1p-52 || down != -(1.0 + 0x1p-52) || tie != 1.0;
+    return bad ? GDT_FPENV_ROUNDING : 0u;
+}
+
+/* Known 128-bit products, computed through the portable halves. */
+static unsigned probe_int128(void)
+{
+    volatile gdt_x_u64 vmax = ~(gdt_x_u64)0;
+    volatile gdt_x_u64 vg = UINT64_C(0x9e3779b97f4a7c15), vh = UINT64_C(0xc2b2ae3d27d4eb4f);
+    volatile gdt_x_i64 vs = -((INT64_C(1) << 62) + 3), vt = (INT64_C(1) << 62) + 5;
+    gdt_x128 m = gdt_x128_umul(vmax, vmax);
+    gdt_x128 g = gdt_x128_umul(vg, vh);
+    gdt_x128 s = gdt_x128_smul(vs, vt);
+    int bad = m.hi != UINT64_C(0xfffffffffffffffe) || m.lo != 1
+              || g.hi != UINT64_C(0x78547880b6031473) || g.lo != UINT64_C(0xf58d71ae9c47917b)
+              || s.hi != UINT64_C(0xeffffffffffffffd) || s.lo != UINT64_C(0xfffffffffffffff1)
+              || gdt_x128_sign(s) != -1;
+    return bad ? GDT_FPENV_INT128 : 0u;
+}
+
+/* Near-degenerate in-circle cases at extreme coordinates: exactly
+ * co-circular quads (box corners, Pythagorean points on circles of radius
+ * about 2^30) and their +-1 perturbations, with their known signs.  The
+ * integer path must give the known sign; the filter must either give it
+ * too or stay undecided. */
+#define PRED_L INT64_C(2147483647)
+#define PRED_C (INT64_C(1) << 30)
+#define PRED_K INT64_C(200000000)
+#define PRED_M INT64_C(37000000)
+static const gdt_x_i64 probe_cases[][9] = {
+    {0, 0, PRED_L, 0, PRED_L, PRED_L, 0, PRED_L, 0},
+    {0, 0, PRED_L, 0, PRED_L, PRED_L, 0, PRED_L - 1, 1},
+    {0, 0, PRED_L, 0, PRED_L, PRED_L, 1, PRED_L, 1},
+    {1, 1, PRED_L, 0, PRED_L, PRED_L, 0, PRED_L, -1},
+    {0, 1, PRED_L, 0, PRED_L, PRED_L, 0, PRED_L, -1},
+    {PRED_C + 3 * PRED_K, PRED_C + 4 * PRED_K, PRED_C - 4 * PRED_K, PRED_C + 3 * PRED_K,
+     PRED_C - 5 * PRED_K, PRED_C, PRED_C, PRED_C - 5 * PRED_K, 0},
+    {PRED_C + 3 * PRED_K, PRED_C + 4 * PRED_K, PRED_C - 4 * PRED_K, PRED_C + 3 * PRED_K,
+     PRED_C - 5 * PRED_K, PRED_C, PRED_C, PRED_C - 5 * PRED_K + 1, 1},
+    {PRED_C + 3 * PRED_K, PRED_C + 4 * PRED_K, PRED_C - 4 * PRED_K, PRED_C + 3 * PRED_K,
+     PRED_C - 5 * PRED_K, PRED_C, PRED_C, PRED_C - 5 * PRED_K - 1, -1},
+    {PRED_C + 20 * PRED_M, PRED_C + 21 * PRED_M, PRED_C - 21 * PRED_M, PRED_C + 20 * PRED_M,
+     PRED_C - 20 * PRED_M, PRED_C - 21 * PRED_M, PRED_C + 21 * PRED_M, PRED_C - 20 * PRED_M, 0},
+    {PRED_C + 20 * PRED_M, PRED_C + 21 * PRED_M, PRED_C - 21 * PRED_M, PRED_C + 20 * PRED_M,
+     PRED_C - 20 * PRED_M, PRED_C - 21 * PRED_M, PRED_C + 21 * PRED_M - 1, PRED_C - 20 * PRED_M, 1},
+    {PRED_C + 20 * PRED_M, PRED_C + 21 * PRED_M, PRED_C - 21 * PRED_M, PRED_C + 20 * PRED_M,
+     PRED_C - 20 * PRED_M, PRED_C - 21 * PRED_M, PRED_C + 21 * PRED_M + 1, PRED_C - 20 * PRED_M, -1},
+    {PRED_C + 20 * PRED_M + 1, PRED_C + 21 * PRED_M, PRED_C - 21 * PRED_M, PRED_C + 20 * PRED_M,
+     PRED_C - 20 * PRED_M, PRED_C - 21 * PRED_M, PRED_C + 21 * PRED_M, PRED_C - 20 * PRED_M, 1},
+};
+
+static unsigned probe_filter(void)
+{
+    unsigned faults = 0;
+    size_t n = sizeof probe_cases / sizeof probe_cases[0];
+    for (size_t i = 0; i < n; i++) {
+        volatile const gdt_x_i64 *v = probe_cases[i];
+        gdt_x_i64 adx = v[0] - v[6], ady = v[1] - v[7];
+        gdt_x_i64 bdx = v[2] - v[6], bdy = v[3] - v[7];
+        gdt_x_i64 cdx = v[4] - v[6], cdy = v[5] - v[7];
+        int want = (int)v[8];
+        int exact = gdt_x_incircle_exact_d(adx, ady, bdx, bdy, cdx, cdy);
+        int filt = gdt_x_incircle_filter_d(adx, ady, bdx, bdy, cdx, cdy);
+        if (exact != want)
+            faults |= GDT_FPENV_INT128;
+        if (filt != GDT_X_UNDECIDED && filt != want)
+            faults |= GDT_FPENV_FILTER;
+    }
+    return faults;
+}
+
+gdt_status gdt_predicates_selftest(unsigned *faults, gdt_error *err)
+{
+    unsigned f = probe_contraction() | probe_reassociation() | probe_rounding() | probe_int128()
+                 | probe_filter();
+    if (faults != NULL)
+        *faults = f;
+    if (f != 0)
+        return gdt_error_set(
+            err, GDT_EINTERNAL, 7601,
+            "core/predicates.c: floating-point environment breaks the exact predicates "
+            "(faults 0x%x:%s%s%s%s%s); rebuild without -ffast-math / -ffp-contract=fast and "
+            "run with the default rounding mode",
+            f, (f & GDT_FPENV_CONTRACTION) ? " contraction" : "",
+            (f & GDT_FPENV_REASSOC) ? " reassociation-or-extended-precision" : "",
+            (f & GDT_FPENV_ROUNDING) ? " rounding-mode" : "",
+            (f & GDT_FPENV_FILTER) ? " filter-disagrees" : "",
+            (f & GDT_FPENV_INT128) ? " integer-arithmetic" : "");
+    return GDT_OK;
+}

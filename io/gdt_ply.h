@@ -1,0 +1,129 @@
+/* gdt_ply.h — streaming writer of the output mesh.
+ *
+ * Format: binary_little_endian 1.0, whatever the host byte order.  The header
+ * is, line by line (every line ends with a single '\n'):
+ *   ply
+ *   format binary_little_endian 1.0
+ *   comment generator gdt-tile <version>
+ *   comment crs <EPSG:n | WKT on one line | unknown>
+ *   comment lattice <sx> <sy> <ox> <oy>        (%.17g: exact round trip)
+ *   comment <extra>                            (meta->comments, in order)
+ *   element vertex <V>                         (V in a 20-character field)
+ *   property double x
+ *   property double y
+ *   property double z
+ *   element face <F>                           (F in a 20-character field)
+ *   property list uchar int vertex_indices
+ *   end_header
+ * then V records of 24 bytes (x, y, z as IEEE-754 doubles) and F records of
+ * 13 bytes (the byte 3, then three int32 vertex indices).  The file size is
+ * therefore exactly header + 24 V + 13 F.
+ *
+ * Faces are counter-clockwise.  Vertices come first, then faces; neither is
+ * held in memory: records go through one bounded buffer (GDT_PLY_BUFFER_BYTES).
+ * V and F are written left-aligned and space-padded in fixed-width fields, so
+ * the header length does not depend on them, and are patched in place by
+ * gdt_ply_finish.  The numbers in the lattice line do not depend on the
+ * C locale.
+ *
+ * File safety: the file is written as "<path>.tmp-<pid>" in the directory of
+ * <path> (an existing file of that name, left by a killed process whose pid
+ * is reused, is overwritten).  gdt_ply_finish flushes, patches the counts,
+ * fsyncs the file, renames it to <path> (atomically replacing any file
+ * there) and fsyncs the directory.  A PLY at the final path is therefore
+ * always complete; a failed or aborted writer leaves no temporary behind
+ * (a killed process does leave its temporary, never a file at <path>).
+ *
+ * Errors are sticky: after any failure the temporary file is removed at once
+ * and every later call on the writer returns the first error again, so a
+ * caller that goes on regardless can never rename an incomplete file.
+ *
+ * Message numbers: 3701 (too many vertices), 47xx (I/O: create, write, sync,
+ * rename), 77xx (precondition violated by the caller), 7001 (out of memory).
+ *
+ * Not thread-safe per instance; separate instances (with different paths)
+ * are independent.
+ */
+#ifndef GDT_PLY_H
+#define GDT_PLY_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "gdt_cloud.h"
+#include "gdt_error.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* Size of the writer's internal buffer. */
+#define GDT_PLY_BUFFER_BYTES ((size_t)1 << 20)
+/* Width of the fixed count fields of the element lines. */
+#define GDT_PLY_COUNT_WIDTH 20
+/* Vertex indices are PLY "int": at most INT32_MAX vertices. */
+#define GDT_PLY_MAX_VERTICES ((uint64_t)INT32_MAX)
+
+typedef struct gdt_ply_meta {
+    gdt_lattice lattice;         /* sx, sy finite and > 0; ox, oy finite */
+    int epsg;                    /* > 0: "EPSG:n"; 0 = not known as a code */
+    const char *crs_wkt;         /* used when epsg == 0; may be NULL or "" ("unknown").
+                                  * Control characters (line breaks, tabs) become
+                                  * spaces and bytes >= 0x80 become '?', so the
+                                  * header stays printable ASCII on one line. */
+    const char *const *comments; /* extra comment lines, may be NULL when
+                                  * ncomments == 0.  Each must be printable
+                                  * ASCII (0x20..0x7e, or tab): a line break
+                                  * or any other byte is refused. */
+    size_t ncomments;
+} gdt_ply_meta;
+
+typedef struct gdt_ply_writer gdt_ply_writer;
+
+/* Validates meta, creates "<path>.tmp-<pid>" and writes the header.
+ * returns: GDT_OK and *out set; else *out = NULL and nothing is left on disk:
+ *   GDT_EINTERNAL 7701 (NULL/empty argument, negative epsg), 7702 (bad
+ *   comment byte), 7703 (lattice not finite or spacing <= 0);
+ *   GDT_EIO 4707 (path names a directory), 4701 (temporary cannot be created).
+ * Ownership: *out must be ended by gdt_ply_finish or gdt_ply_abort; meta and
+ * its strings are only read during the call. */
+gdt_status gdt_ply_create(gdt_ply_writer **out, const char *path, const gdt_ply_meta *meta,
+                          gdt_error *err);
+
+/* Appends n vertices; xyz holds 3n doubles (x, y, z in CRS units), each
+ * finite.  Only before the first face (even with n == 0).
+ * returns: GDT_EINTERNAL 7704 (after faces), 7707 (non-finite value, NULL
+ *   xyz); GDT_EINPUT 3701 (the total would exceed GDT_PLY_MAX_VERTICES; this
+ *   is checked before xyz is read); GDT_EIO 4702 (write failed). */
+gdt_status gdt_ply_write_vertices(gdt_ply_writer *w, const double *xyz, size_t n, gdt_error *err);
+
+/* Appends n faces; tri holds 3n vertex indices (CCW).  Every index must be
+ * in [0, number of vertices written so far) and the three indices of a face
+ * must differ.
+ * returns: GDT_EINTERNAL 7705 (index out of range), 7706 (repeated index),
+ *   7701 (NULL tri); GDT_EIO 4702 (write failed). */
+gdt_status gdt_ply_write_faces(gdt_ply_writer *w, const int32_t *tri, size_t n, gdt_error *err);
+
+/* Records accepted so far. */
+uint64_t gdt_ply_vertex_count(const gdt_ply_writer *w);
+uint64_t gdt_ply_face_count(const gdt_ply_writer *w);
+
+/* Name of the temporary file ("<path>.tmp-<pid>"), owned by w. */
+const char *gdt_ply_temp_path(const gdt_ply_writer *w);
+
+/* Flushes, patches the counts, fsyncs, renames to the final path, fsyncs the
+ * directory and frees w, also on failure.
+ * returns: GDT_OK: the complete file is at the final path.  Otherwise the
+ *   first error of the writer, or GDT_EIO 4702/4703/4704/4705 (flush, fsync,
+ *   close, rename), and the temporary has been removed; GDT_EIO 4706 (the
+ *   directory could not be synced: the complete file is at the final path
+ *   but its name may not survive a power loss).  w == NULL: GDT_EINTERNAL. */
+gdt_status gdt_ply_finish(gdt_ply_writer *w, gdt_error *err);
+
+/* Removes the temporary file and frees w; w may be NULL. */
+void gdt_ply_abort(gdt_ply_writer *w);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

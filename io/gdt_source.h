@@ -1,0 +1,96 @@
+/* gdt_source.h — streaming point sources (LAS, PCD).
+ *
+ * A source yields the points of one input file in file order, in chunks the
+ * caller sizes; it never holds more than one bounded read buffer, whatever
+ * the file size.  Every header field that could lie is checked against the
+ * file before the first point is returned; a file that ends early or holds a
+ * different number of points than it claims is a GDT_EINPUT error when the
+ * discrepancy is met.
+ *
+ * Not thread-safe per instance; separate instances are independent.
+ */
+#ifndef GDT_SOURCE_H
+#define GDT_SOURCE_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "gdt_error.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef enum gdt_format {
+    GDT_FORMAT_UNKNOWN = 0,
+    GDT_FORMAT_LAS,
+    GDT_FORMAT_PCD
+} gdt_format;
+
+/* One point as stored in the file. */
+typedef struct gdt_src_point {
+    double x, y, z;     /* CRS units; for LAS x = X * scale_x + offset_x (in double) */
+    int32_t X, Y, Z;    /* LAS record integers (exact); 0 for formats without a lattice */
+} gdt_src_point;
+
+/* What the file's header says, after validation.  Strings are owned by the
+ * source and live until gdt_source_close. */
+typedef struct gdt_source_info {
+    gdt_format format;
+    char format_name[16];      /* "LAS", "PCD" */
+    char version[16];          /* "1.4", "0.7" */
+    char encoding[32];         /* LAS: "point format 3"; PCD: "ascii" / "binary" / "binary_compressed" */
+    uint64_t point_count;      /* header count, verified against the file size where possible */
+    int has_bounds;            /* header carries bounds (LAS) */
+    double min[3], max[3];
+    int has_lattice;           /* coordinates are integers with scale/offset (LAS) */
+    double scale[3], offset[3];
+    int z_is_float32;          /* PCD: z stored as F4 */
+    int xy_is_float32;         /* PCD: x/y stored as F4 (precision warning given) */
+    /* Coordinate reference system as found in the file: */
+    int epsg;                  /* EPSG code when known, else 0 */
+    const char *crs_wkt;       /* OGC WKT (LAS WKT VLR), or NULL */
+    int crs_geographic;        /* 1 when coordinates are longitude/latitude degrees */
+    const char *crs_desc;      /* short human description, never NULL (may be "") */
+    /* LAS details for --info */
+    unsigned point_format;     /* LAS point data format 0..10 */
+    unsigned record_length;    /* bytes per point record */
+    unsigned extra_bytes;      /* bytes per record beyond the standard format */
+    unsigned vlr_count;        /* VLRs actually read */
+    unsigned evlr_count;       /* EVLRs actually read */
+    uint64_t file_size;
+} gdt_source_info;
+
+typedef struct gdt_source gdt_source;
+
+typedef struct gdt_source_opts {
+    gdt_log *log;             /* warnings go here; may be NULL */
+    size_t buffer_bytes;      /* read-buffer size; 0 = default (1 MiB). Tests use tiny ones. */
+} gdt_source_opts;
+
+/* Opens path, sniffs its format from its content (not its name), reads and
+ * validates the header.  On success *out is a new source the caller must
+ * close with gdt_source_close.  On failure *out is NULL and err names the
+ * file and the reason. */
+gdt_status gdt_source_open(gdt_source **out, const char *path, const gdt_source_opts *opts,
+                           gdt_error *err);
+
+const gdt_source_info *gdt_source_get_info(const gdt_source *src);
+const char *gdt_source_path(const gdt_source *src);
+
+/* Reads up to cap points into buf; *n is the number read, 0 at the end of the
+ * points.  Once it has returned 0 it keeps returning 0.  A file that holds
+ * fewer points than its header says fails with GDT_EINPUT here. */
+gdt_status gdt_source_read(gdt_source *src, gdt_src_point *buf, size_t cap, size_t *n,
+                           gdt_error *err);
+
+/* Closes the file and frees everything; src may be NULL. */
+void gdt_source_close(gdt_source *src);
+
+/* Format sniffing only (reads at most the first 512 bytes). */
+gdt_status gdt_source_sniff(const char *path, gdt_format *fmt, gdt_error *err);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

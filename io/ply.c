@@ -1,0 +1,560 @@
+/* Streaming binary little-endian PLY writer (see gdt_ply.h). */
+#include "gdt_ply.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <inttypes.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#ifndef GDT_VERSION
+#error "GDT_VERSION must be defined by the build"
+#endif
+
+#define PLY_VERTEX_BYTES 24u
+#define PLY_FACE_BYTES 13u
+
+/* Invariants:
+ *  - the file holds `flushed` bytes, buf holds the next `fill` bytes;
+ *  - fd >= 0 and tmp_exists == 1 while the writer is usable;
+ *  - fail.status != GDT_OK once anything failed; the temporary is then
+ *    already closed and removed, and every call returns fail again;
+ *  - vcount_off/fcount_off are file offsets of the fixed-width count fields. */
+struct gdt_ply_writer {
+    char *path;
+    char *tmp_path;
+    char *dir_path;
+    int fd;
+    int tmp_exists;
+    unsigned char *buf;
+    size_t fill;
+    uint64_t flushed;
+    uint64_t nvert;
+    uint64_t nface;
+    uint64_t vcount_off;
+    uint64_t fcount_off;
+    int in_faces;
+    gdt_error fail;
+};
+
+/* Closes and removes the temporary, if still there. */
+static void ply_discard(gdt_ply_writer *w)
+{
+    if (w->fd >= 0) {
+        close(w->fd);
+        w->fd = -1;
+    }
+    if (w->tmp_exists) {
+        unlink(w->tmp_path);
+        w->tmp_exists = 0;
+    }
+}
+
+static void ply_free(gdt_ply_writer *w)
+{
+    free(w->buf);
+    free(w->path);
+    free(w->tmp_path);
+    free(w->dir_path);
+    free(w);
+}
+
+/* Records the writer's first failure, discards the temporary, and reports
+ * the first failure (the root cause) through err. */
+static gdt_status ply_fail(gdt_ply_writer *w, gdt_error *err, gdt_status st, int code,
+                           const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 5, 6)))
+#endif
+    ;
+
+static gdt_status ply_fail(gdt_ply_writer *w, gdt_error *err, gdt_status st, int code,
+                           const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    gdt_error_vset(&w->fail, st, code, fmt, ap);
+    va_end(ap);
+    ply_discard(w);
+    return gdt_error_set(err, w->fail.status, w->fail.code, "%s", w->fail.msg);
+}
+
+/* Returns the sticky failure of a writer that failed before. */
+static gdt_status ply_refail(const gdt_ply_writer *w, gdt_error *err)
+{
+    return gdt_error_set(err, w->fail.status, w->fail.code, "%s", w->fail.msg);
+}
+
+/* returns: 0, or an errno value.  Partial writes and EINTR are retried. */
+static int write_all(int fd, const unsigned char *p, size_t n)
+{
+    while (n > 0) {
+        ssize_t k = write(fd, p, n);
+        if (k < 0) {
+            if (errno == EINTR)
+                continue;
+            return errno;
+        }
+        if (k == 0)
+            return EIO;
+        p += (size_t)k;
+        n -= (size_t)k;
+    }
+    return 0;
+}
+
+static int pwrite_all(int fd, const unsigned char *p, size_t n, uint64_t off)
+{
+    while (n > 0) {
+        ssize_t k = pwrite(fd, p, n, (off_t)off);
+        if (k < 0) {
+            if (errno == EINTR)
+                continue;
+            return errno;
+        }
+        if (k == 0)
+            return EIO;
+        p += (size_t)k;
+        n -= (size_t)k;
+        off += (uint64_t)k;
+    }
+    return 0;
+}
+
+static gdt_status ply_flush(gdt_ply_writer *w, gdt_error *err)
+{
+    int e = write_all(w->fd, w->buf, w->fill);
+    if (e != 0)
+        return ply_fail(w, err, GDT_EIO, 4702, "%s: write failed (temporary %s removed): %s",
+                        w->path, w->tmp_path, strerror(e));
+    w->flushed += w->fill;
+    w->fill = 0;
+    return GDT_OK;
+}
+
+/* Appends raw bytes of any length through the buffer. */
+static gdt_status ply_put(gdt_ply_writer *w, const void *data, size_t n, gdt_error *err)
+{
+    const unsigned char *p = data;
+    while (n > 0) {
+        size_t room = GDT_PLY_BUFFER_BYTES - w->fill;
+        size_t k = n < room ? n : room;
+        memcpy(w->buf + w->fill, p, k);
+        w->fill += k;
+        p += k;
+        n -= k;
+        if (w->fill == GDT_PLY_BUFFER_BYTES && ply_flush(w, err) != GDT_OK)
+            return w->fail.status;
+    }
+    return GDT_OK;
+}
+
+static gdt_status ply_puts(gdt_ply_writer *w, const char *s, gdt_error *err)
+{
+    return ply_put(w, s, strlen(s), err);
+}
+
+static void put_le32(unsigned char *p, uint32_t v)
+{
+    p[0] = (unsigned char)(v & 0xffu);
+    p[1] = (unsigned char)((v >> 8) & 0xffu);
+    p[2] = (unsigned char)((v >> 16) & 0xffu);
+    p[3] = (unsigned char)((v >> 24) & 0xffu);
+}
+
+static void put_le64(unsigned char *p, uint64_t v)
+{
+    for (int i = 0; i < 8; i++)
+        p[i] = (unsigned char)((v >> (8 * i)) & 0xffu);
+}
+
+static void put_double(unsigned char *p, double d)
+{
+    uint64_t bits;
+    memcpy(&bits, &d, sizeof bits);
+    put_le64(p, bits);
+}
+
+/* Formats d with %.17g into out (>= 32 bytes) independently of LC_NUMERIC:
+ * whatever the locale uses as decimal point becomes '.'.  d is finite. */
+static void format_exact(char *out, size_t size, double d)
+{
+    char tmp[64];
+    size_t j = 0;
+    int in_point = 0;
+
+    snprintf(tmp, sizeof tmp, "%.17g", d);
+    for (size_t i = 0; tmp[i] != '\0' && j + 1 < size; i++) {
+        char c = tmp[i];
+        if ((c >= '0' && c <= '9') || c == '-' || c == '+' || c == 'e') {
+            out[j++] = c;
+            in_point = 0;
+        } else if (!in_point) {
+            out[j++] = '.';
+            in_point = 1;
+        }
+    }
+    out[j] = '\0';
+}
+
+/* A comment byte is acceptable when it is printable ASCII or a tab. */
+static int comment_byte_ok(unsigned char c)
+{
+    return c == '\t' || (c >= 0x20 && c < 0x7f);
+}
+
+static gdt_status check_meta(const char *path, const gdt_ply_meta *meta, gdt_error *err)
+{
+    const gdt_lattice *l = &meta->lattice;
+
+    if (meta->epsg < 0)
+        return gdt_error_set(err, GDT_EINTERNAL, 7701, "%s: negative EPSG code %d", path,
+                             meta->epsg);
+    if (!isfinite(l->sx) || !isfinite(l->sy) || !isfinite(l->ox) || !isfinite(l->oy) ||
+        !(l->sx > 0.0) || !(l->sy > 0.0))
+        return gdt_error_set(err, GDT_EINTERNAL, 7703,
+                             "%s: lattice (%g %g %g %g) must be finite with positive spacing", path,
+                             l->sx, l->sy, l->ox, l->oy);
+    if (meta->ncomments > 0 && meta->comments == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7701, "%s: %zu comments but no array", path,
+                             meta->ncomments);
+    for (size_t i = 0; i < meta->ncomments; i++) {
+        const unsigned char *c = (const unsigned char *)meta->comments[i];
+        if (c == NULL)
+            return gdt_error_set(err, GDT_EINTERNAL, 7701, "%s: comment %zu is NULL", path, i);
+        for (size_t k = 0; c[k] != '\0'; k++) {
+            if (!comment_byte_ok(c[k]))
+                return gdt_error_set(err, GDT_EINTERNAL, 7702,
+                                     "%s: comment %zu has byte 0x%02x at offset %zu (%s); "
+                                     "header comments must be one line of printable ASCII",
+                                     path, i, c[k], k,
+                                     c[k] == '\n' || c[k] == '\r' ? "line break"
+                                                                  : "not printable ASCII");
+        }
+    }
+    return GDT_OK;
+}
+
+/* Writes "comment crs ...\n". */
+static gdt_status put_crs(gdt_ply_writer *w, const gdt_ply_meta *meta, gdt_error *err)
+{
+    char line[64];
+
+    if (meta->epsg > 0) {
+        snprintf(line, sizeof line, "comment crs EPSG:%d\n", meta->epsg);
+        return ply_puts(w, line, err);
+    }
+    if (meta->crs_wkt == NULL || meta->crs_wkt[0] == '\0')
+        return ply_puts(w, "comment crs unknown\n", err);
+    if (ply_puts(w, "comment crs ", err) != GDT_OK)
+        return w->fail.status;
+    for (const unsigned char *p = (const unsigned char *)meta->crs_wkt; *p != '\0'; p++) {
+        char c = (char)*p;
+        if (*p >= 0x80)
+            c = '?';
+        else if (*p < 0x20 || *p == 0x7f)
+            c = ' ';
+        if (ply_put(w, &c, 1, err) != GDT_OK)
+            return w->fail.status;
+    }
+    return ply_puts(w, "\n", err);
+}
+
+/* Writes "<prefix><count field>\n" and records the field's file offset. */
+static gdt_status put_count_line(gdt_ply_writer *w, const char *prefix, uint64_t *off,
+                                 gdt_error *err)
+{
+    char field[GDT_PLY_COUNT_WIDTH + 2];
+
+    if (ply_puts(w, prefix, err) != GDT_OK)
+        return w->fail.status;
+    *off = w->flushed + w->fill;
+    snprintf(field, sizeof field, "%-*d\n", GDT_PLY_COUNT_WIDTH, 0);
+    return ply_puts(w, field, err);
+}
+
+static gdt_status put_header(gdt_ply_writer *w, const gdt_ply_meta *meta, gdt_error *err)
+{
+    char num[4][40];
+    char line[256];
+
+    if (ply_puts(w,
+                 "ply\nformat binary_little_endian 1.0\n"
+                 "comment generator gdt-tile " GDT_VERSION "\n",
+                 err) != GDT_OK ||
+        put_crs(w, meta, err) != GDT_OK)
+        return w->fail.status;
+    format_exact(num[0], sizeof num[0], meta->lattice.sx);
+    format_exact(num[1], sizeof num[1], meta->lattice.sy);
+    format_exact(num[2], sizeof num[2], meta->lattice.ox);
+    format_exact(num[3], sizeof num[3], meta->lattice.oy);
+    snprintf(line, sizeof line, "comment lattice %s %s %s %s\n", num[0], num[1], num[2], num[3]);
+    if (ply_puts(w, line, err) != GDT_OK)
+        return w->fail.status;
+    for (size_t i = 0; i < meta->ncomments; i++) {
+        if (ply_puts(w, "comment ", err) != GDT_OK ||
+            ply_puts(w, meta->comments[i], err) != GDT_OK || ply_puts(w, "\n", err) != GDT_OK)
+            return w->fail.status;
+    }
+    if (put_count_line(w, "element vertex ", &w->vcount_off, err) != GDT_OK ||
+        ply_puts(w, "property double x\nproperty double y\nproperty double z\n", err) != GDT_OK ||
+        put_count_line(w, "element face ", &w->fcount_off, err) != GDT_OK ||
+        ply_puts(w, "property list uchar int vertex_indices\nend_header\n", err) != GDT_OK)
+        return w->fail.status;
+    return GDT_OK;
+}
+
+/* Directory part of path: "." when it has no slash, "/" for "/name". */
+static char *dir_of(const char *path)
+{
+    const char *slash = strrchr(path, '/');
+    char *d;
+    size_t n;
+
+    if (slash == NULL)
+        return strdup(".");
+    n = slash == path ? 1 : (size_t)(slash - path);
+    d = malloc(n + 1);
+    if (d == NULL)
+        return NULL;
+    memcpy(d, path, n);
+    d[n] = '\0';
+    return d;
+}
+
+gdt_status gdt_ply_create(gdt_ply_writer **out, const char *path, const gdt_ply_meta *meta,
+                          gdt_error *err)
+{
+    gdt_ply_writer *w = NULL;
+    gdt_status st;
+    struct stat sb;
+    size_t len;
+
+    if (out == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7701, "PLY writer: NULL output argument");
+    *out = NULL;
+    if (path == NULL || path[0] == '\0' || meta == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7701, "PLY writer: %s",
+                             meta == NULL ? "NULL metadata" : "empty output path");
+    st = check_meta(path, meta, err);
+    if (st != GDT_OK)
+        return st;
+    len = strlen(path);
+    if (path[len - 1] == '/' || (stat(path, &sb) == 0 && S_ISDIR(sb.st_mode)))
+        return gdt_error_set(err, GDT_EIO, 4707, "%s: is a directory, not a file name", path);
+
+    w = calloc(1, sizeof *w);
+    if (w == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    w->fd = -1;
+    gdt_error_clear(&w->fail);
+    w->path = strdup(path);
+    w->dir_path = dir_of(path);
+    w->tmp_path = malloc(len + 32);
+    w->buf = malloc(GDT_PLY_BUFFER_BYTES);
+    if (w->path == NULL || w->dir_path == NULL || w->tmp_path == NULL || w->buf == NULL) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        goto fail;
+    }
+    snprintf(w->tmp_path, len + 32, "%s.tmp-%ld", path, (long)getpid());
+
+    w->fd = open(w->tmp_path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
+    if (w->fd < 0) {
+        st = gdt_error_set(err, GDT_EIO, 4701, "%s: cannot create temporary file %s: %s", path,
+                           w->tmp_path, strerror(errno));
+        goto fail;
+    }
+    w->tmp_exists = 1;
+    st = put_header(w, meta, err);
+    if (st != GDT_OK)
+        goto fail;
+    *out = w;
+    return GDT_OK;
+
+fail:
+    ply_discard(w);
+    ply_free(w);
+    return st;
+}
+
+gdt_status gdt_ply_write_vertices(gdt_ply_writer *w, const double *xyz, size_t n, gdt_error *err)
+{
+    if (w == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7701, "PLY writer: NULL writer");
+    if (w->fail.status != GDT_OK)
+        return ply_refail(w, err);
+    if (w->in_faces)
+        return ply_fail(w, err, GDT_EINTERNAL, 7704,
+                        "%s: vertices written after the first face (%" PRIu64 " faces so far)",
+                        w->path, w->nface);
+    if ((uint64_t)n > GDT_PLY_MAX_VERTICES - w->nvert)
+        return ply_fail(w, err, GDT_EINPUT, 3701,
+                        "%s: %" PRIu64 " + %zu vertices exceed the PLY limit of %" PRIu64
+                        " (vertex indices are 32-bit signed integers)",
+                        w->path, w->nvert, n, GDT_PLY_MAX_VERTICES);
+    if (n > 0 && xyz == NULL)
+        return ply_fail(w, err, GDT_EINTERNAL, 7701, "%s: NULL vertex array", w->path);
+    for (size_t i = 0; i < n; i++) {
+        const double *v = xyz + 3 * i;
+        unsigned char *p;
+        if (!isfinite(v[0]) || !isfinite(v[1]) || !isfinite(v[2]))
+            return ply_fail(w, err, GDT_EINTERNAL, 7707,
+                            "%s: vertex %" PRIu64 " is not finite (%g %g %g)", w->path,
+                            w->nvert + i, v[0], v[1], v[2]);
+        if (GDT_PLY_BUFFER_BYTES - w->fill < PLY_VERTEX_BYTES && ply_flush(w, err) != GDT_OK)
+            return w->fail.status;
+        p = w->buf + w->fill;
+        put_double(p, v[0]);
+        put_double(p + 8, v[1]);
+        put_double(p + 16, v[2]);
+        w->fill += PLY_VERTEX_BYTES;
+    }
+    w->nvert += n;
+    return GDT_OK;
+}
+
+gdt_status gdt_ply_write_faces(gdt_ply_writer *w, const int32_t *tri, size_t n, gdt_error *err)
+{
+    if (w == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7701, "PLY writer: NULL writer");
+    if (w->fail.status != GDT_OK)
+        return ply_refail(w, err);
+    if (n > 0 && tri == NULL)
+        return ply_fail(w, err, GDT_EINTERNAL, 7701, "%s: NULL face array", w->path);
+    w->in_faces = 1;
+    for (size_t i = 0; i < n; i++) {
+        const int32_t *t = tri + 3 * i;
+        unsigned char *p;
+        for (int k = 0; k < 3; k++) {
+            if (t[k] < 0 || (uint64_t)t[k] >= w->nvert)
+                return ply_fail(w, err, GDT_EINTERNAL, 7705,
+                                "%s: face %" PRIu64 " (%" PRId32 " %" PRId32 " %" PRId32
+                                ") has an index outside [0, %" PRIu64 ")",
+                                w->path, w->nface + i, t[0], t[1], t[2], w->nvert);
+        }
+        if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2])
+            return ply_fail(w, err, GDT_EINTERNAL, 7706,
+                            "%s: face %" PRIu64 " (%" PRId32 " %" PRId32 " %" PRId32
+                            ") repeats a vertex",
+                            w->path, w->nface + i, t[0], t[1], t[2]);
+        if (GDT_PLY_BUFFER_BYTES - w->fill < PLY_FACE_BYTES && ply_flush(w, err) != GDT_OK)
+            return w->fail.status;
+        p = w->buf + w->fill;
+        p[0] = 3;
+        put_le32(p + 1, (uint32_t)t[0]);
+        put_le32(p + 5, (uint32_t)t[1]);
+        put_le32(p + 9, (uint32_t)t[2]);
+        w->fill += PLY_FACE_BYTES;
+    }
+    w->nface += n;
+    return GDT_OK;
+}
+
+uint64_t gdt_ply_vertex_count(const gdt_ply_writer *w)
+{
+    return w != NULL ? w->nvert : 0;
+}
+
+uint64_t gdt_ply_face_count(const gdt_ply_writer *w)
+{
+    return w != NULL ? w->nface : 0;
+}
+
+const char *gdt_ply_temp_path(const gdt_ply_writer *w)
+{
+    return w != NULL ? w->tmp_path : NULL;
+}
+
+static gdt_status patch_count(gdt_ply_writer *w, uint64_t off, uint64_t count, gdt_error *err)
+{
+    char field[GDT_PLY_COUNT_WIDTH + 1];
+    int e;
+
+    snprintf(field, sizeof field, "%-*" PRIu64, GDT_PLY_COUNT_WIDTH, count);
+    e = pwrite_all(w->fd, (const unsigned char *)field, GDT_PLY_COUNT_WIDTH, off);
+    if (e != 0)
+        return ply_fail(w, err, GDT_EIO, 4702,
+                        "%s: writing the element counts failed (temporary %s removed): %s", w->path,
+                        w->tmp_path, strerror(e));
+    return GDT_OK;
+}
+
+/* fsync of the directory entry; file systems that cannot sync a directory
+ * (EINVAL) are accepted as they are. */
+static int sync_dir(const char *dir)
+{
+    int e = 0;
+    int fd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (fd < 0)
+        return errno;
+    if (fsync(fd) != 0 && errno != EINVAL)
+        e = errno;
+    close(fd);
+    return e;
+}
+
+gdt_status gdt_ply_finish(gdt_ply_writer *w, gdt_error *err)
+{
+    gdt_status st;
+    int e;
+
+    if (w == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7701, "PLY writer: NULL writer");
+    if (w->fail.status != GDT_OK) {
+        st = ply_refail(w, err);
+        goto fail;
+    }
+    st = ply_flush(w, err);
+    if (st != GDT_OK)
+        goto fail;
+    st = patch_count(w, w->vcount_off, w->nvert, err);
+    if (st != GDT_OK)
+        goto fail;
+    st = patch_count(w, w->fcount_off, w->nface, err);
+    if (st != GDT_OK)
+        goto fail;
+    if (fsync(w->fd) != 0) {
+        st = ply_fail(w, err, GDT_EIO, 4703, "%s: fsync failed (temporary %s removed): %s", w->path,
+                      w->tmp_path, strerror(errno));
+        goto fail;
+    }
+    e = close(w->fd);
+    w->fd = -1;
+    if (e != 0) {
+        st = ply_fail(w, err, GDT_EIO, 4704, "%s: close failed (temporary %s removed): %s", w->path,
+                      w->tmp_path, strerror(errno));
+        goto fail;
+    }
+    if (rename(w->tmp_path, w->path) != 0) {
+        st = ply_fail(w, err, GDT_EIO, 4705, "%s: cannot rename %s to it (temporary removed): %s",
+                      w->path, w->tmp_path, strerror(errno));
+        goto fail;
+    }
+    w->tmp_exists = 0;
+    e = sync_dir(w->dir_path);
+    if (e != 0) {
+        st = gdt_error_set(err, GDT_EIO, 4706,
+                           "%s: written, but syncing its directory %s failed: %s", w->path,
+                           w->dir_path, strerror(e));
+        goto fail;
+    }
+    ply_free(w);
+    return GDT_OK;
+
+fail:
+    ply_discard(w);
+    ply_free(w);
+    return st;
+}
+
+void gdt_ply_abort(gdt_ply_writer *w)
+{
+    if (w == NULL)
+        return;
+    ply_discard(w);
+    ply_free(w);
+}

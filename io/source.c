@@ -1,0 +1,105 @@
+/* Format dispatch for point sources. */
+#include "gdt_source.h"
+#include "private/source_impl.h"
+
+#include <errno.h>
+#include <stdlib.h>
+#include <string.h>
+
+gdt_status gdt_source_sniff(const char *path, gdt_format *fmt, gdt_error *err)
+{
+    unsigned char head[512];
+    size_t n;
+    FILE *f = fopen(path, "rb");
+
+    *fmt = GDT_FORMAT_UNKNOWN;
+    if (f == NULL) {
+        return gdt_error_set(err, errno == ENOENT || errno == EACCES || errno == EISDIR
+                                      ? GDT_EINPUT : GDT_EIO,
+                             3001, "%s: cannot open: %s", path, strerror(errno));
+    }
+    n = fread(head, 1, sizeof head, f);
+    fclose(f);
+    if (n >= 4 && memcmp(head, "LASF", 4) == 0) {
+        *fmt = GDT_FORMAT_LAS;
+        return GDT_OK;
+    }
+    /* PCD: optional comment lines starting with '#', then "VERSION" or "FIELDS". */
+    {
+        size_t i = 0;
+        while (i < n && (head[i] == '#' || head[i] == ' ' || head[i] == '\t' ||
+                         head[i] == '\r' || head[i] == '\n')) {
+            if (head[i] == '#') {
+                while (i < n && head[i] != '\n')
+                    i++;
+            } else {
+                i++;
+            }
+        }
+        if (i + 7 <= n && (memcmp(head + i, "VERSION", 7) == 0 ||
+                           memcmp(head + i, "FIELDS ", 7) == 0)) {
+            *fmt = GDT_FORMAT_PCD;
+            return GDT_OK;
+        }
+    }
+    if (n == 0)
+        return gdt_error_set(err, GDT_EINPUT, 3002, "%s: file is empty", path);
+    return gdt_error_set(err, GDT_EINPUT, 3003,
+                         "%s: unknown format (neither LAS nor PCD by its content)", path);
+}
+
+gdt_status gdt_source_open(gdt_source **out, const char *path, const gdt_source_opts *opts,
+                           gdt_error *err)
+{
+    gdt_format fmt;
+    gdt_status st;
+    gdt_source *src = NULL;
+
+    *out = NULL;
+    st = gdt_source_sniff(path, &fmt, err);
+    if (st != GDT_OK)
+        return st;
+    src = calloc(1, sizeof *src);
+    if (src == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    src->path = strdup(path);
+    if (src->path == NULL) {
+        free(src);
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    }
+    if (opts != NULL)
+        src->opts = *opts;
+    if (src->opts.buffer_bytes == 0)
+        src->opts.buffer_bytes = (size_t)1 << 20;
+    st = fmt == GDT_FORMAT_LAS ? gdt_las_open(src, err) : gdt_pcd_open(src, err);
+    if (st != GDT_OK) {
+        free(src->path);
+        free(src);
+        return st;
+    }
+    *out = src;
+    return GDT_OK;
+}
+
+const gdt_source_info *gdt_source_get_info(const gdt_source *src) { return &src->info; }
+
+const char *gdt_source_path(const gdt_source *src) { return src->path; }
+
+gdt_status gdt_source_read(gdt_source *src, gdt_src_point *buf, size_t cap, size_t *n,
+                           gdt_error *err)
+{
+    *n = 0;
+    if (cap == 0)
+        return GDT_OK;
+    return src->vt->read(src, buf, cap, n, err);
+}
+
+void gdt_source_close(gdt_source *src)
+{
+    if (src == NULL)
+        return;
+    if (src->vt != NULL)
+        src->vt->close(src);
+    free(src->path);
+    free(src);
+}

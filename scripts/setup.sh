@@ -1,0 +1,62 @@
+#!/usr/bin/env bash
+# Installs what is missing on a Debian 12 machine, then configures and builds.
+#
+#   scripts/setup.sh [--asan]
+#
+# System packages come from apt (installed only when missing); the Python
+# test tools go into a project-local virtual environment (.venv), because
+# Debian 12's system Python refuses pip installs.  --asan also builds the
+# AddressSanitizer + UndefinedBehaviorSanitizer tree in build-asan/.
+set -euo pipefail
+
+ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+cd "$ROOT"
+
+ASAN=0
+for a in "$@"; do
+  case "$a" in
+    --asan) ASAN=1 ;;
+    *) echo "usage: scripts/setup.sh [--asan]" >&2; exit 2 ;;
+  esac
+done
+
+APT_PACKAGES=(
+  build-essential cmake pkg-config python3 python3-venv
+  pocl-opencl-icd ocl-icd-opencl-dev opencl-headers clinfo
+  libpcl-dev libopenvdb-dev libgeographiclib-dev libsqlite3-dev libcgal-dev
+)
+
+missing=()
+for p in "${APT_PACKAGES[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$p")
+  fi
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "setup: installing Debian packages: ${missing[*]}"
+  SUDO=""
+  if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends \
+    "${missing[@]}" >/dev/null
+fi
+
+# Python test tools in .venv; reinstalled only when the requirements change.
+REQ="$ROOT/scripts/requirements.txt"
+if [ ! -x .venv/bin/python ]; then
+  python3 -m venv .venv
+fi
+if ! cmp -s "$REQ" .venv/.requirements.installed 2>/dev/null; then
+  echo "setup: installing Python test tools into .venv"
+  .venv/bin/python -m pip install -q --upgrade pip >/dev/null
+  .venv/bin/python -m pip install -q -r "$REQ"
+  cp "$REQ" .venv/.requirements.installed
+fi
+
+JOBS=$(nproc 2>/dev/null || echo 2)
+cmake -S . -B build -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+cmake --build build -j"$JOBS"
+if [ "$ASAN" -eq 1 ]; then
+  cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=Debug -DGDT_SANITIZE=ON >/dev/null
+  cmake --build build-asan -j"$JOBS"
+fi

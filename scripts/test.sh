@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# The whole test suite: set-up (packages, .venv, both builds), then CTest and
+# pytest on the release build, and the sanitizer-marked tests again on the
+# ASan+UBSan build.
+#
+#   scripts/test.sh
+set -euo pipefail
+
+ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+cd "$ROOT"
+
+scripts/setup.sh --asan
+
+JOBS=$(nproc 2>/dev/null || echo 2)
+export ASAN_OPTIONS=${ASAN_OPTIONS:-abort_on_error=0:detect_leaks=1}
+export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
+
+echo "== ctest (release build)"
+ctest --test-dir build --output-on-failure -j"$JOBS"
+echo "== ctest (ASan+UBSan build)"
+ctest --test-dir build-asan --output-on-failure -j"$JOBS" -LE 'nosanitize|unsafe_fp'
+echo "== pytest (release build)"
+GDT_BUILD_DIR="$ROOT/build" .venv/bin/python -m pytest -q tests/python
+echo "== pytest, sanitize-marked tests (ASan+UBSan build)"
+GDT_BUILD_DIR="$ROOT/build-asan" .venv/bin/python -m pytest -q -m sanitize tests/python
+echo "== all tests passed"

@@ -1,0 +1,56 @@
+"""Shared fixtures for the Python test suite.
+
+The build directory under test is $GDT_BUILD_DIR (default: build/ at the
+repository root).  Real LiDAR samples live in ../shared/data beside the
+repository; tests that need them skip with a message where it is absent.
+"""
+import os
+import pathlib
+import subprocess
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+DATA = pathlib.Path(os.environ.get("GDT_TEST_DATA_DIR", ROOT.parent / "shared" / "data"))
+
+
+def build_dir() -> pathlib.Path:
+    return pathlib.Path(os.environ.get("GDT_BUILD_DIR", ROOT / "build")).resolve()
+
+
+@pytest.fixture(scope="session")
+def root() -> pathlib.Path:
+    return ROOT
+
+
+@pytest.fixture(scope="session")
+def gdt_bin() -> pathlib.Path:
+    exe = build_dir() / "tiler" / "gdt-tile"
+    if not exe.exists():
+        pytest.fail(f"gdt-tile not built at {exe} (set GDT_BUILD_DIR)")
+    return exe
+
+
+@pytest.fixture(scope="session")
+def tools_dir() -> pathlib.Path:
+    return build_dir() / "tests"
+
+
+@pytest.fixture(scope="session")
+def data_dir() -> pathlib.Path:
+    if not DATA.is_dir():
+        pytest.skip(f"real LiDAR samples not found at {DATA} (../shared/data)")
+    return DATA
+
+
+def run(cmd, **kw):
+    """Runs a command, returns CompletedProcess with text output; never raises on exit status."""
+    kw.setdefault("capture_output", True)
+    kw.setdefault("text", True)
+    kw.setdefault("timeout", 600)
+    return subprocess.run([str(c) for c in cmd], **kw)
+
+
+@pytest.fixture(scope="session")
+def runner():
+    return run

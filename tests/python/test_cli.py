@@ -1,0 +1,151 @@
+"""Command-line contract: strict parsing, help, version, exit codes."""
+import json
+import re
+
+import pytest
+
+BAD_VALUES = [
+    ["--tile", "12abc"],
+    ["--tile", "4095"],          # not a power of two
+    ["--tile", "32"],            # below range
+    ["--tile", "32768"],         # above range
+    ["--tile", ""],
+    ["--tile", "+64"],
+    ["--tile=1e3"],
+    ["--cell", "0"],
+    ["--cell", "-1"],
+    ["--cell", "nan"],
+    ["--cell", "1.5x"],
+    ["--halo", "-1"],
+    ["--halo", "3.5"],
+    ["--threads", "0"],
+    ["--threads", "two"],
+    ["--mem-budget", "12Q"],
+    ["--mem-budget", "100"],     # below 1M
+    ["--mem-budget", "-4G"],
+    ["--quantum", "0"],
+    ["--quantum", "inf"],
+    ["--dup", "last"],
+    ["--device", ""],
+    ["--no-such-option"],
+    ["--check=yes"],
+]
+
+
+@pytest.mark.parametrize("args", BAD_VALUES, ids=lambda a: " ".join(a) or "empty")
+def test_bad_values_are_usage_errors(gdt_bin, runner, tmp_path, args):
+    cloud = tmp_path / "c.las"
+    cloud.write_bytes(b"")
+    r = runner([gdt_bin, cloud, *args])
+    assert r.returncode == 2, r.stderr
+    assert "gdt-tile: error GDT-2" in r.stderr
+
+
+def test_missing_value(gdt_bin, runner):
+    r = runner([gdt_bin, "x.las", "--tile"])
+    assert r.returncode == 2
+    assert "--tile needs a value" in r.stderr
+
+
+def test_no_input(gdt_bin, runner):
+    r = runner([gdt_bin])
+    assert r.returncode == 2
+    assert "no input" in r.stderr
+
+
+def test_conflicting_modes(gdt_bin, runner):
+    r = runner([gdt_bin, "x.las", "--info", "--reference"])
+    assert r.returncode == 2
+    assert "cannot be combined" in r.stderr
+
+
+def test_help_lists_every_option_and_exit_code(gdt_bin, runner):
+    r = runner([gdt_bin, "--help"])
+    assert r.returncode == 0
+    for opt in ["-o", "--tile", "--cell", "--halo", "--job", "--restart", "--resume",
+                "--device", "--threads", "--mem-budget", "--quantum", "--dup", "--check",
+                "--json", "-q", "-v", "--info", "--reference", "--version"]:
+        assert re.search(r"(^|[ ,])" + re.escape(opt) + r"\b", r.stdout), opt
+    for code in ["0", "2", "3", "4", "5", "6", "7", "130"]:
+        assert re.search(r"^\s+" + code + r"\s+\S", r.stdout, re.M), code
+
+
+def test_version(gdt_bin, runner):
+    r = runner([gdt_bin, "--version"])
+    assert r.returncode == 0
+    assert re.match(r"gdt-tile \d+\.\d+\.\d+\n", r.stdout)
+
+
+@pytest.mark.parametrize("args", [
+    ["--resume", "somejob"],
+    ["IN", "--job", "j"],
+    ["IN", "--restart", "--reference"],
+    ["IN", "-o", "out.ply"],
+    ["IN", "--info", "--tile", "1024"],
+])
+def test_unavailable_stages_say_so(gdt_bin, runner, tmp_path, args):
+    src = tmp_path / "in.las"
+    src.write_bytes(b"LASF")
+    args = [str(src) if a == "IN" else a for a in args]
+    r = runner([gdt_bin, *args], cwd=tmp_path)
+    assert r.returncode == 2, r.stderr
+    assert "not available" in r.stderr
+    assert not (tmp_path / "out.ply").exists()
+
+
+@pytest.mark.sanitize
+def test_missing_input_is_bad_input(gdt_bin, runner, tmp_path):
+    r = runner([gdt_bin, tmp_path / "nope.las", "--info"])
+    assert r.returncode == 3
+    assert "nope.las" in r.stderr
+
+
+@pytest.mark.sanitize
+def test_unknown_format_is_bad_input(gdt_bin, runner, tmp_path):
+    f = tmp_path / "cloud.xyz"
+    f.write_text("1 2 3\n4 5 6\n")
+    r = runner([gdt_bin, f, "--info"])
+    assert r.returncode == 3
+    assert "cloud.xyz" in r.stderr and "unknown format" in r.stderr
+
+
+@pytest.mark.sanitize
+def test_empty_file_is_bad_input(gdt_bin, runner, tmp_path):
+    f = tmp_path / "empty.las"
+    f.write_bytes(b"")
+    r = runner([gdt_bin, f, "--info"])
+    assert r.returncode == 3
+    assert "empty" in r.stderr
+
+
+def test_info_on_real_las(gdt_bin, runner, data_dir, tmp_path):
+    import laspy
+    path = data_dir / "autzen_trim.las"
+    js = tmp_path / "info.json"
+    r = runner([gdt_bin, path, "--info", "--json", js])
+    assert r.returncode == 0, r.stderr
+    las = laspy.read(path)
+    assert f"points       : {len(las.points)}" in r.stdout
+    assert "LAS 1.2, point format 3" in r.stdout
+    info = json.loads(js.read_text())
+    assert info["points"] == len(las.points)
+    xy = set(zip(las.X.tolist(), las.Y.tolist()))
+    assert info["distinct_xy"] == len(xy)
+    assert info["duplicates"] == len(las.points) - len(xy)
+    assert info["lattice"] == [las.header.scales[0], las.header.scales[1],
+                               las.header.offsets[0], las.header.offsets[1]]
+    assert info["lattice_box"] == [int(las.X.min()), int(las.Y.min()),
+                                   int(las.X.max()), int(las.Y.max())]
+
+
+def test_info_several_inputs_are_one_cloud(gdt_bin, runner, data_dir, tmp_path):
+    path = data_dir / "autzen_trim.las"
+    js = tmp_path / "info.json"
+    r = runner([gdt_bin, path, path, "--info", "--json", js])
+    assert r.returncode == 0, r.stderr
+    info = json.loads(js.read_text())
+    one = json.loads(runner([gdt_bin, path, "--info", "--json", tmp_path / "one.json"]) and
+                     (tmp_path / "one.json").read_text())
+    assert info["points"] == 2 * one["points"]
+    assert info["distinct_xy"] == one["distinct_xy"]
+    assert info["duplicates"] == info["points"] - one["distinct_xy"]

@@ -1,0 +1,2 @@
+# Test tools shared by several Python test files.
+gdt_add_test_exe(gdt_dump ${CMAKE_CURRENT_SOURCE_DIR}/tools/gdt_dump.c)

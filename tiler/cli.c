@@ -1,0 +1,407 @@
+/* Command-line parsing, help text and the top-level dispatch of gdt-tile. */
+#include "gdt_cli.h"
+#include "gdt_predicates.h"
+#include "private/cli_modes.h"
+
+#include <errno.h>
+#include <limits.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#ifndef GDT_VERSION
+#define GDT_VERSION "0.0.0"
+#endif
+
+typedef enum opt_id {
+    OPT_OUTPUT, OPT_TILE, OPT_CELL, OPT_HALO, OPT_JOB, OPT_RESTART, OPT_RESUME, OPT_DEVICE,
+    OPT_THREADS, OPT_MEM, OPT_QUANTUM, OPT_DUP, OPT_CHECK, OPT_JSON, OPT_QUIET, OPT_VERBOSE,
+    OPT_INFO, OPT_REFERENCE, OPT_HELP, OPT_VERSION
+} opt_id;
+
+/* The option table: every option once, with its argument, default and help. */
+typedef struct opt_spec {
+    opt_id id;
+    const char *lng;   /* "--tile" */
+    const char *shrt;  /* "-o" or NULL */
+    const char *arg;   /* argument name, NULL for flags */
+    const char *dflt;  /* default as shown in --help, NULL if none */
+    const char *help;
+} opt_spec;
+
+static const opt_spec OPTIONS[] = {
+    {OPT_OUTPUT, "--output", "-o", "OUT.ply", "out.ply",
+     "output mesh (binary little-endian PLY)"},
+    {OPT_TILE, "--tile", NULL, "N", "4096",
+     "tile size in texels per side: a power of two, 64..16384"},
+    {OPT_CELL, "--cell", NULL, "S", "auto",
+     "texel size in CRS units (auto: about N*N/4 points per tile)"},
+    {OPT_HALO, "--halo", NULL, "H", "auto", "halo width in texels around each tile (0 is legal)"},
+    {OPT_JOB, "--job", NULL, "DIR", "OUT.ply.gdt-job", "job directory (state for resuming)"},
+    {OPT_RESTART, "--restart", NULL, NULL, NULL,
+     "discard an existing job directory that does not match and start again"},
+    {OPT_RESUME, "--resume", NULL, "DIR", NULL, "resume the job in DIR (needs nothing else)"},
+    {OPT_DEVICE, "--device", NULL, "SPEC", "first device",
+     "OpenCL device: index, PLATFORM:DEVICE, 'cpu' or 'gpu'"},
+    {OPT_THREADS, "--threads", NULL, "K", "all cores", "host worker threads, 1..1024"},
+    {OPT_MEM, "--mem-budget", NULL, "SIZE", "auto",
+     "memory budget, e.g. 512M or 4G (binary units)"},
+    {OPT_QUANTUM, "--quantum", NULL, "Q", "0.001",
+     "lattice step for float and projected input, CRS units"},
+    {OPT_DUP, "--dup", NULL, "first|min-z|max-z", "first",
+     "which z to keep for points with the same (x, y)"},
+    {OPT_CHECK, "--check", NULL, NULL, NULL, "validate the written mesh exactly"},
+    {OPT_JSON, "--json", NULL, "FILE", NULL, "write a machine-readable run summary"},
+    {OPT_QUIET, "--quiet", "-q", NULL, NULL, "no progress and no warnings on stderr"},
+    {OPT_VERBOSE, "--verbose", "-v", NULL, NULL, "more detail (predicate counters, stages)"},
+    {OPT_INFO, "--info", NULL, NULL, NULL,
+     "describe the inputs (format, counts, bounds, CRS, lattice, duplicates) and stop"},
+    {OPT_REFERENCE, "--reference", NULL, NULL, NULL,
+     "triangulate in memory with the CPU reference (one tile; for testing)"},
+    {OPT_HELP, "--help", "-h", NULL, NULL, "show this help"},
+    {OPT_VERSION, "--version", NULL, NULL, NULL, "show the version"},
+};
+#define NOPTIONS (sizeof OPTIONS / sizeof OPTIONS[0])
+
+void gdt_cli_print_help(FILE *out)
+{
+    fprintf(out,
+            "gdt-tile %s — exact, seamless Delaunay triangulation (TIN) of huge point clouds\n\n"
+            "usage: gdt-tile INPUT [INPUT ...] [-o OUT.ply] [--tile N] [options]\n"
+            "       gdt-tile INPUT [INPUT ...] --info\n"
+            "       gdt-tile --resume DIR\n\n"
+            "INPUT: LAS 1.0-1.4 (point formats 0-10) or PCD (ascii, binary,\n"
+            "binary_compressed); several inputs form one cloud.\n\noptions:\n",
+            GDT_VERSION);
+    for (size_t i = 0; i < NOPTIONS; i++) {
+        const opt_spec *o = &OPTIONS[i];
+        char left[64];
+        if (o->shrt != NULL)
+            snprintf(left, sizeof left, "%s, %s%s%s", o->shrt, o->lng, o->arg ? " " : "",
+                     o->arg ? o->arg : "");
+        else
+            snprintf(left, sizeof left, "    %s%s%s", o->lng, o->arg ? " " : "",
+                     o->arg ? o->arg : "");
+        fprintf(out, "  %-32s %s", left, o->help);
+        if (o->dflt != NULL)
+            fprintf(out, " [default: %s]", o->dflt);
+        fputc('\n', out);
+    }
+    fprintf(out,
+            "\nexit codes:\n"
+            "  0    success\n"
+            "  2    usage error (bad option or value; a stage not available in this build)\n"
+            "  3    bad input (unreadable, corrupt or lying file, unknown format)\n"
+            "  4    I/O error (read/write failure, disk full)\n"
+            "  5    OpenCL device error\n"
+            "  6    job directory does not match the command (use --restart)\n"
+            "  7    internal error or failed validation\n"
+            "  130  interrupted (the job stays resumable)\n");
+}
+
+/* ---- strict value parsers ------------------------------------------------ */
+
+static gdt_status parse_long(const char *opt, const char *s, long lo, long hi, long *out,
+                             gdt_error *err)
+{
+    char *end = NULL;
+    long v;
+    errno = 0;
+    if (s[0] == '\0' || s[0] == ' ' || s[0] == '+')
+        goto bad;
+    v = strtol(s, &end, 10);
+    if (errno != 0 || end == s || *end != '\0')
+        goto bad;
+    if (v < lo || v > hi)
+        return gdt_error_set(err, GDT_EUSAGE, 2002, "%s %s: out of range (%ld..%ld)", opt, s,
+                             lo, hi);
+    *out = v;
+    return GDT_OK;
+bad:
+    return gdt_error_set(err, GDT_EUSAGE, 2001, "%s: '%s' is not an integer", opt, s);
+}
+
+static gdt_status parse_positive_double(const char *opt, const char *s, double *out,
+                                        gdt_error *err)
+{
+    char *end = NULL;
+    double v;
+    errno = 0;
+    if (s[0] == '\0' || s[0] == ' ')
+        goto bad;
+    v = strtod(s, &end);
+    if (errno != 0 || end == s || *end != '\0' || !isfinite(v))
+        goto bad;
+    if (!(v > 0.0))
+        return gdt_error_set(err, GDT_EUSAGE, 2002, "%s %s: must be positive", opt, s);
+    *out = v;
+    return GDT_OK;
+bad:
+    return gdt_error_set(err, GDT_EUSAGE, 2001, "%s: '%s' is not a finite number", opt, s);
+}
+
+/* Sizes: a number with an optional binary suffix K, M, G or T (optionally
+ * followed by "B" or "iB"); a plain number is bytes. */
+static gdt_status parse_size(const char *opt, const char *s, uint64_t *out, gdt_error *err)
+{
+    char *end = NULL;
+    double v, mult = 1.0;
+    errno = 0;
+    if (s[0] < '0' || s[0] > '9')
+        goto bad;
+    v = strtod(s, &end);
+    if (errno != 0 || end == s || !isfinite(v))
+        goto bad;
+    switch (*end) {
+    case 'k': case 'K': mult = 1024.0; end++; break;
+    case 'm': case 'M': mult = 1024.0 * 1024.0; end++; break;
+    case 'g': case 'G': mult = 1024.0 * 1024.0 * 1024.0; end++; break;
+    case 't': case 'T': mult = 1024.0 * 1024.0 * 1024.0 * 1024.0; end++; break;
+    default: break;
+    }
+    if (mult > 1.0 && (strcmp(end, "B") == 0 || strcmp(end, "iB") == 0))
+        end += strlen(end);
+    else if (mult == 1.0 && strcmp(end, "B") == 0)
+        end++;
+    if (*end != '\0')
+        goto bad;
+    v *= mult;
+    if (v < 1024.0 * 1024.0 || v > 1.0e18)
+        return gdt_error_set(err, GDT_EUSAGE, 2002, "%s %s: out of range (1M..1e18 bytes)", opt,
+                             s);
+    *out = (uint64_t)v;
+    return GDT_OK;
+bad:
+    return gdt_error_set(err, GDT_EUSAGE, 2001,
+                         "%s: '%s' is not a size (examples: 512M, 4G, 1073741824)", opt, s);
+}
+
+static const opt_spec *find_option(const char *name, size_t len)
+{
+    for (size_t i = 0; i < NOPTIONS; i++) {
+        const opt_spec *o = &OPTIONS[i];
+        if ((strlen(o->lng) == len && strncmp(o->lng, name, len) == 0) ||
+            (o->shrt != NULL && strlen(o->shrt) == len && strncmp(o->shrt, name, len) == 0))
+            return o;
+    }
+    return NULL;
+}
+
+static gdt_status set_mode(gdt_options *opts, gdt_mode m, const char *name, gdt_error *err)
+{
+    if (opts->mode != GDT_MODE_RUN && opts->mode != m)
+        return gdt_error_set(err, GDT_EUSAGE, 2004, "%s cannot be combined with the other mode "
+                             "options (--info, --reference, --resume)", name);
+    opts->mode = m;
+    return GDT_OK;
+}
+
+static gdt_status apply(gdt_options *opts, const opt_spec *o, const char *val, gdt_error *err)
+{
+    long l;
+    gdt_status st = GDT_OK;
+
+    switch (o->id) {
+    case OPT_OUTPUT: opts->output = val; break;
+    case OPT_TILE:
+        st = parse_long(o->lng, val, 64, 16384, &l, err);
+        if (st == GDT_OK && (l & (l - 1)) != 0)
+            st = gdt_error_set(err, GDT_EUSAGE, 2003, "--tile %s: must be a power of two", val);
+        opts->tile = (int)l;
+        opts->tile_set = 1;
+        break;
+    case OPT_CELL: st = parse_positive_double(o->lng, val, &opts->cell, err); break;
+    case OPT_HALO:
+        st = parse_long(o->lng, val, 0, 1L << 20, &l, err);
+        opts->halo = l;
+        break;
+    case OPT_JOB: opts->job = val; break;
+    case OPT_RESTART: opts->restart = 1; break;
+    case OPT_RESUME:
+        st = set_mode(opts, GDT_MODE_RESUME, o->lng, err);
+        opts->resume = val;
+        break;
+    case OPT_DEVICE:
+        if (val[0] == '\0')
+            st = gdt_error_set(err, GDT_EUSAGE, 2001, "--device: empty device specification");
+        opts->device = val;
+        break;
+    case OPT_THREADS:
+        st = parse_long(o->lng, val, 1, 1024, &l, err);
+        opts->threads = (int)l;
+        break;
+    case OPT_MEM: st = parse_size(o->lng, val, &opts->mem_budget, err); break;
+    case OPT_QUANTUM:
+        st = parse_positive_double(o->lng, val, &opts->quantum, err);
+        if (st == GDT_OK && (opts->quantum < 1e-9 || opts->quantum > 1e6))
+            st = gdt_error_set(err, GDT_EUSAGE, 2002, "--quantum %s: out of range (1e-9..1e6)",
+                               val);
+        break;
+    case OPT_DUP:
+        if (strcmp(val, "first") == 0)
+            opts->dup = GDT_DUP_FIRST;
+        else if (strcmp(val, "min-z") == 0)
+            opts->dup = GDT_DUP_MIN_Z;
+        else if (strcmp(val, "max-z") == 0)
+            opts->dup = GDT_DUP_MAX_Z;
+        else
+            st = gdt_error_set(err, GDT_EUSAGE, 2001,
+                               "--dup: '%s' is not one of first, min-z, max-z", val);
+        break;
+    case OPT_CHECK: opts->check = 1; break;
+    case OPT_JSON: opts->json = val; break;
+    case OPT_QUIET: opts->verbosity = -1; break;
+    case OPT_VERBOSE: opts->verbosity = opts->verbosity < 1 ? 1 : opts->verbosity + 1; break;
+    case OPT_INFO: st = set_mode(opts, GDT_MODE_INFO, o->lng, err); break;
+    case OPT_REFERENCE: st = set_mode(opts, GDT_MODE_REFERENCE, o->lng, err); break;
+    case OPT_HELP: opts->mode = GDT_MODE_HELP; break;
+    case OPT_VERSION: if (opts->mode != GDT_MODE_HELP) opts->mode = GDT_MODE_VERSION; break;
+    }
+    return st;
+}
+
+gdt_status gdt_cli_parse(gdt_options *opts, int argc, char **argv, gdt_error *err)
+{
+    int only_inputs = 0;
+
+    memset(opts, 0, sizeof *opts);
+    opts->tile = 4096;
+    opts->halo = -1;
+    opts->quantum = 0.001;
+    opts->dup = GDT_DUP_FIRST;
+    opts->inputs = calloc((size_t)(argc > 0 ? argc : 1), sizeof *opts->inputs);
+    if (opts->inputs == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i];
+        const char *eq, *val = NULL;
+        const opt_spec *o;
+        size_t len;
+        gdt_status st;
+
+        if (only_inputs || a[0] != '-' || strcmp(a, "-") == 0) {
+            opts->inputs[opts->ninputs++] = a;
+            continue;
+        }
+        if (strcmp(a, "--") == 0) {
+            only_inputs = 1;
+            continue;
+        }
+        if (strcmp(a, "-vv") == 0) {
+            opts->verbosity = 2;
+            continue;
+        }
+        eq = strncmp(a, "--", 2) == 0 ? strchr(a, '=') : NULL;
+        len = eq != NULL ? (size_t)(eq - a) : strlen(a);
+        o = find_option(a, len);
+        if (o == NULL)
+            return gdt_error_set(err, GDT_EUSAGE, 2000, "unknown option '%.*s' (see --help)",
+                                 (int)len, a);
+        if (o->arg != NULL) {
+            if (eq != NULL)
+                val = eq + 1;
+            else if (i + 1 < argc)
+                val = argv[++i];
+            else
+                return gdt_error_set(err, GDT_EUSAGE, 2005, "%s needs a value (%s)", o->lng,
+                                     o->arg);
+        } else if (eq != NULL) {
+            return gdt_error_set(err, GDT_EUSAGE, 2006, "%s takes no value", o->lng);
+        }
+        st = apply(opts, o, val, err);
+        if (st != GDT_OK)
+            return st;
+    }
+    if (opts->mode == GDT_MODE_HELP || opts->mode == GDT_MODE_VERSION)
+        return GDT_OK;
+    if (opts->mode == GDT_MODE_RESUME) {
+        if (opts->ninputs > 0)
+            return gdt_error_set(err, GDT_EUSAGE, 2007,
+                                 "--resume DIR takes no inputs: the job directory has them");
+        return GDT_OK;
+    }
+    if (opts->ninputs == 0)
+        return gdt_error_set(err, GDT_EUSAGE, 2008, "no input given (see --help)");
+    if (opts->output == NULL)
+        opts->output = "out.ply";
+    return GDT_OK;
+}
+
+void gdt_options_free(gdt_options *opts)
+{
+    free((void *)opts->inputs);
+    opts->inputs = NULL;
+    opts->ninputs = 0;
+}
+
+/* Options that belong to stages this build does not have yet are refused
+ * rather than silently ignored. */
+static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
+{
+    if (opts->mode == GDT_MODE_RESUME || opts->restart || opts->job != NULL)
+        return gdt_error_set(err, GDT_EUSAGE, 2101,
+                             "resumable jobs (--job, --restart, --resume) are not available "
+                             "in this build yet");
+    if (opts->mode == GDT_MODE_RUN)
+        return gdt_error_set(err, GDT_EUSAGE, 2102,
+                             "the tiled pipeline is not available in this build yet; "
+                             "use --info, or --reference for an in-memory triangulation");
+    if (opts->device != NULL)
+        return gdt_error_set(err, GDT_EUSAGE, 2103,
+                             "--device: the OpenCL core is not available in this build yet");
+    if (opts->mode == GDT_MODE_INFO && opts->tile_set)
+        return gdt_error_set(err, GDT_EUSAGE, 2104,
+                             "--info --tile (the tile plan) needs the tiler, not available in "
+                             "this build yet");
+    if (opts->mode == GDT_MODE_INFO && (opts->cell > 0 || opts->halo >= 0))
+        return gdt_error_set(err, GDT_EUSAGE, 2104,
+                             "--cell and --halo belong to the tiler, not available in this "
+                             "build yet");
+    return GDT_OK;
+}
+
+int gdt_cli_main(int argc, char **argv)
+{
+    gdt_options opts;
+    gdt_error err;
+    gdt_status st;
+
+    gdt_error_clear(&err);
+    st = gdt_cli_parse(&opts, argc, argv, &err);
+    if (st != GDT_OK)
+        goto done;
+    switch (opts.mode) {
+    case GDT_MODE_HELP:
+        gdt_cli_print_help(stdout);
+        goto done;
+    case GDT_MODE_VERSION:
+        printf("gdt-tile %s\n", GDT_VERSION);
+        goto done;
+    default:
+        break;
+    }
+    st = refuse_unavailable(&opts, &err);
+    if (st != GDT_OK)
+        goto done;
+    if (opts.mode == GDT_MODE_INFO) {
+        st = gdt_cli_info(&opts, &err);
+    } else if (opts.mode == GDT_MODE_REFERENCE) {
+        /* The filters' error analysis assumes IEEE double without contraction
+         * or reassociation: refuse to compute anything in a build that breaks it. */
+        unsigned faults = 0;
+        st = gdt_predicates_selftest(&faults, &err);
+        if (st == GDT_OK)
+            st = gdt_cli_reference(&opts, &err);
+    }
+done:
+    if (st != GDT_OK) {
+        gdt_error_print(&err, stderr);
+        if (st == GDT_EUSAGE)
+            fprintf(stderr, "usage: gdt-tile INPUT [INPUT ...] [-o OUT.ply] [options]; "
+                            "see gdt-tile --help\n");
+    }
+    gdt_options_free(&opts);
+    return (int)st;
+}

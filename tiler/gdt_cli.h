@@ -1,0 +1,66 @@
+/* gdt_cli.h — the gdt-tile command line.
+ *
+ * Every option is declared once, with its help text and default, in the
+ * option table of cli.c.  Parsing is strict: malformed numbers, out-of-range
+ * values, unknown options and conflicting modes are usage errors (exit 2).
+ */
+#ifndef GDT_CLI_H
+#define GDT_CLI_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "gdt_cloud.h"
+#include "gdt_error.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef enum gdt_mode {
+    GDT_MODE_RUN = 0,   /* the tiled pipeline */
+    GDT_MODE_INFO,      /* --info */
+    GDT_MODE_REFERENCE, /* --reference: in-memory single-tile oracle */
+    GDT_MODE_RESUME,    /* --resume DIR */
+    GDT_MODE_HELP,
+    GDT_MODE_VERSION
+} gdt_mode;
+
+/* Parsed command line.  Strings point into argv (not owned). */
+typedef struct gdt_options {
+    gdt_mode mode;
+    const char **inputs;     /* owned: array of argv pointers */
+    size_t ninputs;
+    const char *output;      /* -o; NULL = default "out.ply" beside nothing: required for runs */
+    int tile;                /* --tile N: texels per tile side (power of two, 64..16384) */
+    int tile_set;
+    double cell;             /* --cell S; 0 = automatic */
+    long halo;               /* --halo H texels; -1 = automatic */
+    const char *job;         /* --job DIR; NULL = OUT.ply.gdt-job */
+    int restart;             /* --restart */
+    const char *resume;      /* --resume DIR */
+    const char *device;      /* --device SPEC; NULL = first device */
+    int threads;             /* --threads K; 0 = number of cores */
+    uint64_t mem_budget;     /* --mem-budget bytes; 0 = automatic */
+    double quantum;          /* --quantum Q (CRS units) */
+    gdt_dup_policy dup;      /* --dup */
+    int check;               /* --check */
+    const char *json;        /* --json FILE */
+    int verbosity;           /* -q = -1, default 0, -v = 1 (-vv = 2) */
+} gdt_options;
+
+/* Parses argv into opts.  Ownership: opts->inputs is allocated; release with
+ * gdt_options_free.  Returns GDT_EUSAGE with a message in err on any error. */
+gdt_status gdt_cli_parse(gdt_options *opts, int argc, char **argv, gdt_error *err);
+void gdt_options_free(gdt_options *opts);
+
+/* Prints the full help text (usage, options with defaults, exit codes). */
+void gdt_cli_print_help(FILE *stream);
+
+/* The whole program: parse, run the mode, print errors, return the exit code. */
+int gdt_cli_main(int argc, char **argv);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

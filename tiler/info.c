@@ -1,0 +1,221 @@
+/* gdt-tile INPUT... --info: what a surveyor wants to know about the inputs
+ * before a run — format, version, point counts, bounds, CRS, the exact
+ * lattice and how many points share an (x, y) lattice position.
+ *
+ * Headers are printed as read; then one streaming pass over all points
+ * (bounded buffers; duplicates counted out of core within the memory budget)
+ * gives the true counts and the lattice bounds. */
+#include "private/cli_modes.h"
+#include "private/json_out.h"
+
+#include <inttypes.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "gdt_cloud.h"
+#include "gdt_dupcount.h"
+
+#define INFO_CHUNK 65536
+
+typedef struct info_stats {
+    uint64_t points;
+    int64_t min_x, max_x, min_y, max_y;
+    double min_z, max_z;
+    gdt_dupcount_result dups;
+} info_stats;
+
+static void print_source(FILE *out, size_t i, const char *path, const gdt_source_info *s)
+{
+    fprintf(out, "input %zu: %s\n", i + 1, path);
+    fprintf(out, "  format       : %s %s, %s", s->format_name, s->version, s->encoding);
+    if (s->format == GDT_FORMAT_LAS)
+        fprintf(out, " (%u bytes/record, %u extra bytes)", s->record_length, s->extra_bytes);
+    fputc('\n', out);
+    fprintf(out, "  points       : %" PRIu64 "\n", s->point_count);
+    if (s->has_bounds)
+        fprintf(out, "  bounds       : x [%.17g, %.17g]  y [%.17g, %.17g]  z [%.17g, %.17g]\n",
+                s->min[0], s->max[0], s->min[1], s->max[1], s->min[2], s->max[2]);
+    if (s->has_lattice)
+        fprintf(out, "  scale        : %.17g %.17g %.17g\n  offset       : %.17g %.17g %.17g\n",
+                s->scale[0], s->scale[1], s->scale[2], s->offset[0], s->offset[1], s->offset[2]);
+    if (s->format == GDT_FORMAT_LAS)
+        fprintf(out, "  VLRs / EVLRs : %u / %u\n", s->vlr_count, s->evlr_count);
+    if (s->format == GDT_FORMAT_PCD && s->xy_is_float32)
+        fprintf(out, "  precision    : x/y stored as 32-bit floats\n");
+    fprintf(out, "  CRS          : %s\n", s->crs_desc != NULL && s->crs_desc[0] ? s->crs_desc
+                                                                                : "unknown");
+}
+
+static gdt_status scan_points(gdt_cloud *cloud, const gdt_options *opts, info_stats *st_out,
+                              gdt_log *log, gdt_error *err)
+{
+    gdt_point *buf = NULL;
+    gdt_dupcount *dc = NULL;
+    gdt_dupcount_opts dco;
+    gdt_status st;
+    info_stats s = {0};
+
+    memset(&s, 0, sizeof s);
+    s.min_x = s.min_y = INT64_MAX;
+    s.max_x = s.max_y = INT64_MIN;
+    memset(&dco, 0, sizeof dco);
+    dco.log = log;
+    /* --info keeps below ~100 MB whatever the input size: a 64 MiB budget
+     * for the duplicate counter unless the user asks for another. */
+    dco.mem_budget = opts->mem_budget != 0 ? (size_t)opts->mem_budget : GDT_DUPCOUNT_DEFAULT_BUDGET;
+    dco.temp_dir = NULL;
+    st = gdt_dupcount_create(&dc, &dco, err);
+    if (st != GDT_OK)
+        goto fail;
+    buf = malloc(INFO_CHUNK * sizeof *buf);
+    if (buf == NULL) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        goto fail;
+    }
+    for (;;) {
+        size_t n = 0;
+        st = gdt_cloud_read(cloud, buf, INFO_CHUNK, &n, err);
+        if (st != GDT_OK)
+            goto fail;
+        if (n == 0)
+            break;
+        for (size_t k = 0; k < n; k++) {
+            const gdt_point *p = &buf[k];
+            if (s.points == 0 && k == 0)
+                s.min_z = s.max_z = p->z;
+            if (p->x < s.min_x) s.min_x = p->x;
+            if (p->x > s.max_x) s.max_x = p->x;
+            if (p->y < s.min_y) s.min_y = p->y;
+            if (p->y > s.max_y) s.max_y = p->y;
+            if (p->z < s.min_z) s.min_z = p->z;
+            if (p->z > s.max_z) s.max_z = p->z;
+        }
+        s.points += n;
+        st = gdt_dupcount_add(dc, buf, n, err);
+        if (st != GDT_OK)
+            goto fail;
+    }
+    st = gdt_dupcount_finish(dc, &s.dups, err);
+    if (st != GDT_OK)
+        goto fail;
+    *st_out = s;
+fail:
+    free(buf);
+    gdt_dupcount_destroy(dc);
+    return st;
+}
+
+static void print_cloud(FILE *out, const gdt_cloud_info *ci, const info_stats *s)
+{
+    const gdt_lattice *L = &ci->lattice;
+    fprintf(out, "cloud:\n");
+    fprintf(out, "  inputs       : %zu\n", ci->ninputs);
+    fprintf(out, "  points       : %" PRIu64 "\n", s->points);
+    fprintf(out, "  CRS          : %s\n", ci->crs_desc[0] ? ci->crs_desc : "unknown");
+    fprintf(out, "  lattice      : %.17g %.17g %.17g %.17g (sx sy ox oy; %s)\n", L->sx, L->sy,
+            L->ox, L->oy, ci->lattice_native ? "the LAS integer lattice" : "snapped");
+    if (s->points > 0) {
+        fprintf(out, "  lattice box  : x [%" PRId64 ", %" PRId64 "]  y [%" PRId64 ", %" PRId64
+                     "]  (%" PRId64 " x %" PRId64 " steps)\n",
+                s->min_x, s->max_x, s->min_y, s->max_y, s->max_x - s->min_x,
+                s->max_y - s->min_y);
+        fprintf(out, "  bounds       : x [%.17g, %.17g]  y [%.17g, %.17g]  z [%.17g, %.17g]\n",
+                L->ox + L->sx * (double)s->min_x, L->ox + L->sx * (double)s->max_x,
+                L->oy + L->sy * (double)s->min_y, L->oy + L->sy * (double)s->max_y, s->min_z,
+                s->max_z);
+    }
+    fprintf(out, "  distinct xy  : %" PRIu64 "\n", s->dups.distinct);
+    fprintf(out, "  duplicates   : %" PRIu64 " (points sharing an (x, y) with an earlier one; "
+                 "largest group %" PRIu64 ")\n",
+            s->dups.duplicates, s->dups.max_multiplicity);
+}
+
+static gdt_status write_json(const char *path, gdt_cloud *cloud, const info_stats *s,
+                             gdt_error *err)
+{
+    const gdt_cloud_info *ci = gdt_cloud_get_info(cloud);
+    gdt_json j;
+    gdt_status st = gdt_json_open(&j, path, err);
+    if (st != GDT_OK)
+        return st;
+    gdt_json_begin_object(&j, NULL);
+    gdt_json_begin_array(&j, "inputs");
+    for (size_t i = 0; i < ci->ninputs; i++) {
+        const gdt_source_info *si = gdt_cloud_input_info(cloud, i);
+        gdt_json_begin_object(&j, NULL);
+        gdt_json_string(&j, "path", gdt_cloud_input_path(cloud, i));
+        gdt_json_string(&j, "format", si->format_name);
+        gdt_json_string(&j, "version", si->version);
+        gdt_json_string(&j, "encoding", si->encoding);
+        gdt_json_uint(&j, "points", si->point_count);
+        gdt_json_string(&j, "crs", si->crs_desc != NULL ? si->crs_desc : "");
+        gdt_json_int(&j, "epsg", si->epsg);
+        gdt_json_end_object(&j);
+    }
+    gdt_json_end_array(&j);
+    gdt_json_uint(&j, "points", s->points);
+    gdt_json_uint(&j, "distinct_xy", s->dups.distinct);
+    gdt_json_uint(&j, "duplicates", s->dups.duplicates);
+    gdt_json_uint(&j, "largest_duplicate_group", s->dups.max_multiplicity);
+    gdt_json_string(&j, "crs", ci->crs_desc);
+    gdt_json_int(&j, "epsg", ci->epsg);
+    gdt_json_begin_array(&j, "lattice");
+    gdt_json_double(&j, NULL, ci->lattice.sx);
+    gdt_json_double(&j, NULL, ci->lattice.sy);
+    gdt_json_double(&j, NULL, ci->lattice.ox);
+    gdt_json_double(&j, NULL, ci->lattice.oy);
+    gdt_json_end_array(&j);
+    if (s->points > 0) {
+        gdt_json_begin_array(&j, "lattice_box");
+        gdt_json_int(&j, NULL, s->min_x);
+        gdt_json_int(&j, NULL, s->min_y);
+        gdt_json_int(&j, NULL, s->max_x);
+        gdt_json_int(&j, NULL, s->max_y);
+        gdt_json_end_array(&j);
+        gdt_json_begin_array(&j, "z_range");
+        gdt_json_double(&j, NULL, s->min_z);
+        gdt_json_double(&j, NULL, s->max_z);
+        gdt_json_end_array(&j);
+    }
+    gdt_json_end_object(&j);
+    return gdt_json_close(&j, err);
+}
+
+gdt_status gdt_cli_info(const gdt_options *opts, gdt_error *err)
+{
+    gdt_cloud *cloud = NULL;
+    gdt_cloud_opts co;
+    gdt_log log;
+    info_stats s = {0};
+    gdt_status st;
+
+    gdt_log_init(&log, opts->verbosity);
+    memset(&co, 0, sizeof co);
+    co.log = &log;
+    co.quantum = opts->quantum;
+    st = gdt_cloud_open(&cloud, opts->inputs, opts->ninputs, &co, err);
+    if (st != GDT_OK)
+        goto fail;
+    {
+        const gdt_cloud_info *ci = gdt_cloud_get_info(cloud);
+        for (size_t i = 0; i < ci->ninputs; i++)
+            print_source(stdout, i, gdt_cloud_input_path(cloud, i),
+                         gdt_cloud_input_info(cloud, i));
+    }
+    fflush(stdout);
+    st = scan_points(cloud, opts, &s, &log, err);
+    if (st != GDT_OK)
+        goto fail;
+    print_cloud(stdout, gdt_cloud_get_info(cloud), &s);
+    if (opts->json != NULL) {
+        st = write_json(opts->json, cloud, &s, err);
+        if (st != GDT_OK)
+            goto fail;
+    }
+    if (fflush(stdout) != 0)
+        st = gdt_error_set(err, GDT_EIO, 4001, "cannot write to standard output");
+fail:
+    gdt_cloud_close(cloud);
+    return st;
+}
