@@ -13,6 +13,7 @@
  *    descriptor, whatever happens to the process.
  */
 #include "gdt_dupcount.h"
+#include "private/fd_io.h"
 
 #include <errno.h>
 #include <inttypes.h>
@@ -153,18 +154,11 @@ static void count_leaf(gdt_dupcount *dc)
 static gdt_status write_all(gdt_dupcount *dc, int fd, const void *buf, size_t len,
                             gdt_error *err)
 {
-    const char *p = buf;
-    while (len > 0) {
-        ssize_t w = write(fd, p, len);
-        if (w < 0 && errno == EINTR)
-            continue;
-        if (w <= 0)
-            return gdt_error_set(err, GDT_EIO, 4442,
-                                 "cannot write a duplicate-count spill file in %s: %s",
-                                 dc->temp_dir, w < 0 ? strerror(errno) : "no space written");
-        p += w;
-        len -= (size_t)w;
-    }
+    int e = gdt_fd_write_all(fd, buf, len, -1);
+    if (e != 0)
+        return gdt_error_set(err, GDT_EIO, 4442,
+                             "cannot write a duplicate-count spill file in %s: %s", dc->temp_dir,
+                             strerror(e));
     return GDT_OK;
 }
 

@@ -15,6 +15,7 @@
  *
  * Messages: GDT-31xx bad input, GDT-41xx I/O, GDT-3150.. warnings.
  */
+#include "private/bytes.h"
 #include "private/las_crs.h"
 #include "private/source_impl.h"
 
@@ -85,37 +86,6 @@ typedef struct las_crs_payloads {
     size_t wkt_len;
 } las_crs_payloads;
 
-static uint16_t le_u16(const unsigned char *p)
-{
-    return (uint16_t)(p[0] | (p[1] << 8));
-}
-
-static uint32_t le_u32(const unsigned char *p)
-{
-    return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24);
-}
-
-static uint64_t le_u64(const unsigned char *p)
-{
-    return (uint64_t)le_u32(p) | ((uint64_t)le_u32(p + 4) << 32);
-}
-
-static int32_t le_i32(const unsigned char *p)
-{
-    uint32_t u = le_u32(p);
-    /* Two's complement without implementation-defined conversions. */
-    return u <= (uint32_t)INT32_MAX ? (int32_t)u
-                                    : (int32_t)(u - (uint32_t)2147483648u) - INT32_MAX - 1;
-}
-
-static double le_f64(const unsigned char *p)
-{
-    uint64_t u = le_u64(p);
-    double d;
-    memcpy(&d, &u, sizeof d);
-    return d;
-}
-
 /* Reads exactly n bytes at offset off.  The caller has checked that the range
  * lies inside the file size seen at open, so a short read means the file
  * shrank: bad input.  what names the structure for the message. */
@@ -171,8 +141,8 @@ static gdt_status las_parse_header(const char *path, const unsigned char *b, siz
                              "%s: file is %" PRIu64 " bytes, too short"
                              " for a LAS header (at least %u bytes)",
                              path, file_size, LAS_HEADER_MIN);
-    h->global_encoding = le_u16(b + 6);
-    h->header_size = le_u16(b + 94);
+    h->global_encoding = gdt_le_get_u16(b + 6);
+    h->header_size = gdt_le_get_u16(b + 94);
     if (h->header_size < las_min_header[h->minor])
         return gdt_error_set(err, GDT_EINPUT, 3107,
                              "%s: header size %u is smaller than the"
@@ -183,8 +153,8 @@ static gdt_status las_parse_header(const char *path, const unsigned char *b, siz
                              "%s: header size is %u bytes but the file"
                              " holds only %" PRIu64 " (truncated?)",
                              path, h->header_size, file_size);
-    h->offset_to_points = le_u32(b + 96);
-    h->vlr_claimed = le_u32(b + 100);
+    h->offset_to_points = gdt_le_get_u32(b + 96);
+    h->vlr_claimed = gdt_le_get_u32(b + 100);
     unsigned fmt_byte = b[104];
     if (fmt_byte & 0xc0u)
         return gdt_error_set(err, GDT_EINPUT, 3109,
@@ -198,17 +168,17 @@ static gdt_status las_parse_header(const char *path, const unsigned char *b, siz
                              "%s: unknown point data format %u"
                              " (0 to 10 are defined)",
                              path, h->format);
-    h->record_length = le_u16(b + 105);
+    h->record_length = gdt_le_get_u16(b + 105);
     if (h->record_length < las_base_length[h->format])
         return gdt_error_set(err, GDT_EINPUT, 3111,
                              "%s: point record length %u is shorter"
                              " than the %u bytes of point format %u",
                              path, h->record_length, las_base_length[h->format], h->format);
     for (int k = 0; k < 3; k++) {
-        h->scale[k] = le_f64(b + 131 + 8 * k);
-        h->offset[k] = le_f64(b + 155 + 8 * k);
-        h->max[k] = le_f64(b + 179 + 16 * k);
-        h->min[k] = le_f64(b + 187 + 16 * k);
+        h->scale[k] = gdt_le_get_f64(b + 131 + 8 * k);
+        h->offset[k] = gdt_le_get_f64(b + 155 + 8 * k);
+        h->max[k] = gdt_le_get_f64(b + 179 + 16 * k);
+        h->min[k] = gdt_le_get_f64(b + 187 + 16 * k);
         if (!isfinite(h->scale[k]) || h->scale[k] == 0.0)
             return gdt_error_set(err, GDT_EINPUT, 3112,
                                  "%s: %c scale factor %.17g is not a"
@@ -220,14 +190,14 @@ static gdt_status las_parse_header(const char *path, const unsigned char *b, siz
                                  " number",
                                  path, axis[k], h->offset[k]);
     }
-    uint64_t legacy = le_u32(b + 107);
+    uint64_t legacy = gdt_le_get_u32(b + 107);
     h->point_count = legacy;
     if (h->minor >= 3)
-        h->waveform_start = le_u64(b + 227);
+        h->waveform_start = gdt_le_get_u64(b + 227);
     if (h->minor >= 4) {
-        uint64_t count64 = le_u64(b + 247);
-        h->evlr_start = le_u64(b + 235);
-        h->evlr_claimed = le_u32(b + 243);
+        uint64_t count64 = gdt_le_get_u64(b + 247);
+        h->evlr_start = gdt_le_get_u64(b + 235);
+        h->evlr_claimed = gdt_le_get_u32(b + 243);
         if (count64 != 0) {
             if (legacy != 0 && legacy != count64)
                 return gdt_error_set(err, GDT_EINPUT, 3114,
@@ -383,7 +353,7 @@ static gdt_status las_scan_vlrs(int fd, const char *path, const las_header *h, g
         st = las_pread(fd, path, vh, sizeof vh, pos, "VLR header", err);
         if (st != GDT_OK)
             return st;
-        uint64_t len = le_u16(vh + 20);
+        uint64_t len = gdt_le_get_u16(vh + 20);
         uint64_t body = pos + LAS_VLR_HEADER;
         if (len > h->offset_to_points - body)
             return gdt_error_set(
@@ -391,9 +361,9 @@ static gdt_status las_scan_vlrs(int fd, const char *path, const las_header *h, g
                 "%s: VLR %" PRIu32 " of %" PRIu32 " (record %u) at byte %" PRIu64
                 " ends at byte %" PRIu64 ", past the start of the point data at byte %" PRIu64
                 ": the VLR length or the offset to point data is wrong",
-                path, i + 1, h->vlr_claimed, le_u16(vh + 18), pos, body + len, h->offset_to_points);
+                path, i + 1, h->vlr_claimed, gdt_le_get_u16(vh + 18), pos, body + len, h->offset_to_points);
         if (las_is_projection(vh + 2)) {
-            st = las_keep_payload(fd, path, le_u16(vh + 18), body, (size_t)len, "VLR", pl, err);
+            st = las_keep_payload(fd, path, gdt_le_get_u16(vh + 18), body, (size_t)len, "VLR", pl, err);
             if (st != GDT_OK)
                 return st;
         }
@@ -423,7 +393,7 @@ static gdt_status las_scan_evlrs(int fd, const char *path, const las_header *h, 
         st = las_pread(fd, path, eh, sizeof eh, pos, "EVLR header", err);
         if (st != GDT_OK)
             return st;
-        uint64_t len = le_u64(eh + 20);
+        uint64_t len = gdt_le_get_u64(eh + 20);
         uint64_t body = pos + LAS_EVLR_HEADER;
         if (len > file_size - body)
             return gdt_error_set(err, GDT_EINPUT, 3121,
@@ -432,7 +402,7 @@ static gdt_status las_scan_evlrs(int fd, const char *path, const las_header *h, 
                                  " of the file (%" PRIu64 " bytes; truncated?)",
                                  path, i + 1, h->evlr_claimed, pos, len, file_size);
         if (las_is_projection(eh + 2)) {
-            unsigned rid = le_u16(eh + 18);
+            unsigned rid = gdt_le_get_u16(eh + 18);
             uint64_t limit = rid == 2112 ? LAS_WKT_MAX : 65535u;
             if (len > limit)
                 gdt_log_warn(log, 3152,
@@ -535,9 +505,9 @@ static gdt_status las_read(gdt_source *src, gdt_src_point *out, size_t cap, size
             rec = xyz;
         }
         gdt_src_point *p = &out[*n];
-        p->X = le_i32(rec);
-        p->Y = le_i32(rec + 4);
-        p->Z = le_i32(rec + 8);
+        p->X = gdt_le_get_i32(rec);
+        p->Y = gdt_le_get_i32(rec + 4);
+        p->Z = gdt_le_get_i32(rec + 8);
         p->x = (double)p->X * im->scale[0] + im->offset[0];
         p->y = (double)p->Y * im->scale[1] + im->offset[1];
         p->z = (double)p->Z * im->scale[2] + im->offset[2];
@@ -551,9 +521,9 @@ fail:
     return st;
 }
 
-static void las_close(gdt_source *src)
+/* Closes and frees im and everything it owns; NULL is allowed. */
+static void las_impl_free(las_impl *im)
 {
-    las_impl *im = src->impl;
     if (im == NULL)
         return;
     if (im->fd >= 0)
@@ -561,6 +531,11 @@ static void las_close(gdt_source *src)
     free(im->buf);
     free(im->wkt);
     free(im);
+}
+
+static void las_close(gdt_source *src)
+{
+    las_impl_free(src->impl);
     src->impl = NULL;
 }
 
@@ -692,11 +667,7 @@ gdt_status gdt_las_open(gdt_source *src, gdt_error *err)
 
 fail:
     las_payloads_free(&pl);
-    if (im->fd >= 0)
-        close(im->fd);
-    free(im->buf);
-    free(im->wkt);
-    free(im);
+    las_impl_free(im);
     src->vt = NULL;
     src->impl = NULL;
     return st;

@@ -30,6 +30,7 @@
  * every platform it supports); numbers in ascii data are parsed with strtod /
  * strtof in the "C" locale (the library never changes the locale).
  */
+#include "private/bytes.h"
 #include "private/pcd_lzf.h"
 #include "private/source_impl.h"
 
@@ -885,10 +886,8 @@ static gdt_status pcd_compressed_open(pcd_reader *r, size_t buffer_bytes, gdt_er
                              "%s: cannot read the PCD compressed "
                              "size prefix",
                              r->path);
-    r->csize =
-        (uint64_t)pre[0] | (uint64_t)pre[1] << 8 | (uint64_t)pre[2] << 16 | (uint64_t)pre[3] << 24;
-    r->usize =
-        (uint64_t)pre[4] | (uint64_t)pre[5] << 8 | (uint64_t)pre[6] << 16 | (uint64_t)pre[7] << 24;
+    r->csize = gdt_le_get_u32(pre);
+    r->usize = gdt_le_get_u32(pre + 4);
     expect = r->npoints * r->packed_size;
     if (r->usize != expect)
         return gdt_error_set(err, GDT_EINPUT, 3231,

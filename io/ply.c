@@ -1,5 +1,7 @@
 /* Streaming binary little-endian PLY writer (see gdt_ply.h). */
 #include "gdt_ply.h"
+#include "private/bytes.h"
+#include "private/fd_io.h"
 
 #include <errno.h>
 #include <fcntl.h>
@@ -89,45 +91,9 @@ static gdt_status ply_refail(const gdt_ply_writer *w, gdt_error *err)
     return gdt_error_set(err, w->fail.status, w->fail.code, "%s", w->fail.msg);
 }
 
-/* returns: 0, or an errno value.  Partial writes and EINTR are retried. */
-static int write_all(int fd, const unsigned char *p, size_t n)
-{
-    while (n > 0) {
-        ssize_t k = write(fd, p, n);
-        if (k < 0) {
-            if (errno == EINTR)
-                continue;
-            return errno;
-        }
-        if (k == 0)
-            return EIO;
-        p += (size_t)k;
-        n -= (size_t)k;
-    }
-    return 0;
-}
-
-static int pwrite_all(int fd, const unsigned char *p, size_t n, uint64_t off)
-{
-    while (n > 0) {
-        ssize_t k = pwrite(fd, p, n, (off_t)off);
-        if (k < 0) {
-            if (errno == EINTR)
-                continue;
-            return errno;
-        }
-        if (k == 0)
-            return EIO;
-        p += (size_t)k;
-        n -= (size_t)k;
-        off += (uint64_t)k;
-    }
-    return 0;
-}
-
 static gdt_status ply_flush(gdt_ply_writer *w, gdt_error *err)
 {
-    int e = write_all(w->fd, w->buf, w->fill);
+    int e = gdt_fd_write_all(w->fd, w->buf, w->fill, -1);
     if (e != 0)
         return ply_fail(w, err, GDT_EIO, 4702, "%s: write failed (temporary %s removed): %s",
                         w->path, w->tmp_path, strerror(e));
@@ -156,27 +122,6 @@ static gdt_status ply_put(gdt_ply_writer *w, const void *data, size_t n, gdt_err
 static gdt_status ply_puts(gdt_ply_writer *w, const char *s, gdt_error *err)
 {
     return ply_put(w, s, strlen(s), err);
-}
-
-static void put_le32(unsigned char *p, uint32_t v)
-{
-    p[0] = (unsigned char)(v & 0xffu);
-    p[1] = (unsigned char)((v >> 8) & 0xffu);
-    p[2] = (unsigned char)((v >> 16) & 0xffu);
-    p[3] = (unsigned char)((v >> 24) & 0xffu);
-}
-
-static void put_le64(unsigned char *p, uint64_t v)
-{
-    for (int i = 0; i < 8; i++)
-        p[i] = (unsigned char)((v >> (8 * i)) & 0xffu);
-}
-
-static void put_double(unsigned char *p, double d)
-{
-    uint64_t bits;
-    memcpy(&bits, &d, sizeof bits);
-    put_le64(p, bits);
 }
 
 /* Formats d with %.17g into out (>= 32 bytes) independently of LC_NUMERIC:
@@ -408,9 +353,9 @@ gdt_status gdt_ply_write_vertices(gdt_ply_writer *w, const double *xyz, size_t n
         if (GDT_PLY_BUFFER_BYTES - w->fill < PLY_VERTEX_BYTES && ply_flush(w, err) != GDT_OK)
             return w->fail.status;
         p = w->buf + w->fill;
-        put_double(p, v[0]);
-        put_double(p + 8, v[1]);
-        put_double(p + 16, v[2]);
+        gdt_le_put_f64(p, v[0]);
+        gdt_le_put_f64(p + 8, v[1]);
+        gdt_le_put_f64(p + 16, v[2]);
         w->fill += PLY_VERTEX_BYTES;
     }
     w->nvert += n;
@@ -445,9 +390,9 @@ gdt_status gdt_ply_write_faces(gdt_ply_writer *w, const int32_t *tri, size_t n, 
             return w->fail.status;
         p = w->buf + w->fill;
         p[0] = 3;
-        put_le32(p + 1, (uint32_t)t[0]);
-        put_le32(p + 5, (uint32_t)t[1]);
-        put_le32(p + 9, (uint32_t)t[2]);
+        gdt_le_put_u32(p + 1, (uint32_t)t[0]);
+        gdt_le_put_u32(p + 5, (uint32_t)t[1]);
+        gdt_le_put_u32(p + 9, (uint32_t)t[2]);
         w->fill += PLY_FACE_BYTES;
     }
     w->nface += n;
@@ -475,7 +420,7 @@ static gdt_status patch_count(gdt_ply_writer *w, uint64_t off, uint64_t count, g
     int e;
 
     snprintf(field, sizeof field, "%-*" PRIu64, GDT_PLY_COUNT_WIDTH, count);
-    e = pwrite_all(w->fd, (const unsigned char *)field, GDT_PLY_COUNT_WIDTH, off);
+    e = gdt_fd_write_all(w->fd, field, GDT_PLY_COUNT_WIDTH, (int64_t)off);
     if (e != 0)
         return ply_fail(w, err, GDT_EIO, 4702,
                         "%s: writing the element counts failed (temporary %s removed): %s", w->path,

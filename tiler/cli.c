@@ -46,7 +46,7 @@ static const opt_spec OPTIONS[] = {
      "OpenCL device: index, PLATFORM:DEVICE, 'cpu' or 'gpu'"},
     {OPT_THREADS, "--threads", NULL, "K", "all cores", "host worker threads, 1..1024"},
     {OPT_MEM, "--mem-budget", NULL, "SIZE", "auto",
-     "memory budget, e.g. 512M or 4G (binary units)"},
+     "memory budget, at least 16M, e.g. 512M or 4G (binary units)"},
     {OPT_QUANTUM, "--quantum", NULL, "Q", "0.001",
      "lattice step for float and projected input, CRS units"},
     {OPT_DUP, "--dup", NULL, "first|min-z|max-z", "first",
@@ -56,7 +56,8 @@ static const opt_spec OPTIONS[] = {
     {OPT_QUIET, "--quiet", "-q", NULL, NULL, "no progress and no warnings on stderr"},
     {OPT_VERBOSE, "--verbose", "-v", NULL, NULL, "more detail (predicate counters, stages)"},
     {OPT_INFO, "--info", NULL, NULL, NULL,
-     "describe the inputs (format, counts, bounds, CRS, lattice, duplicates) and stop"},
+     "describe the inputs (format, counts, bounds, CRS, lattice, duplicates) and stop; "
+     "with --tile/--cell/--halo also the tile plan"},
     {OPT_REFERENCE, "--reference", NULL, NULL, NULL,
      "triangulate in memory with the CPU reference (one tile; for testing)"},
     {OPT_HELP, "--help", "-h", NULL, NULL, "show this help"},
@@ -167,9 +168,9 @@ static gdt_status parse_size(const char *opt, const char *s, uint64_t *out, gdt_
     if (*end != '\0')
         goto bad;
     v *= mult;
-    if (v < 1024.0 * 1024.0 || v > 1.0e18)
-        return gdt_error_set(err, GDT_EUSAGE, 2002, "%s %s: out of range (1M..1e18 bytes)", opt,
-                             s);
+    if (v < 16.0 * 1024.0 * 1024.0 || v > 1.0e18)
+        return gdt_error_set(err, GDT_EUSAGE, 2002, "%s %s: out of range (16M..1e18 bytes)",
+                             opt, s);
     *out = (uint64_t)v;
     return GDT_OK;
 bad:
@@ -351,14 +352,6 @@ static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
     if (opts->device != NULL)
         return gdt_error_set(err, GDT_EUSAGE, 2103,
                              "--device: the OpenCL core is not available in this build yet");
-    if (opts->mode == GDT_MODE_INFO && opts->tile_set)
-        return gdt_error_set(err, GDT_EUSAGE, 2104,
-                             "--info --tile (the tile plan) needs the tiler, not available in "
-                             "this build yet");
-    if (opts->mode == GDT_MODE_INFO && (opts->cell > 0 || opts->halo >= 0))
-        return gdt_error_set(err, GDT_EUSAGE, 2104,
-                             "--cell and --halo belong to the tiler, not available in this "
-                             "build yet");
     return GDT_OK;
 }
 

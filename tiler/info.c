@@ -15,6 +15,7 @@
 
 #include "gdt_cloud.h"
 #include "gdt_dupcount.h"
+#include "gdt_tiler.h"
 
 #define INFO_CHUNK 65536
 
@@ -132,7 +133,7 @@ static void print_cloud(FILE *out, const gdt_cloud_info *ci, const info_stats *s
 }
 
 static gdt_status write_json(const char *path, gdt_cloud *cloud, const info_stats *s,
-                             gdt_error *err)
+                             const gdt_tile_plan *plan, gdt_error *err)
 {
     const gdt_cloud_info *ci = gdt_cloud_get_info(cloud);
     gdt_json j;
@@ -178,6 +179,23 @@ static gdt_status write_json(const char *path, gdt_cloud *cloud, const info_stat
         gdt_json_double(&j, NULL, s->max_z);
         gdt_json_end_array(&j);
     }
+    if (plan != NULL) {
+        gdt_json_begin_object(&j, "tile_plan");
+        gdt_json_int(&j, "tile", plan->tile);
+        gdt_json_int(&j, "cell_steps", plan->cell);
+        gdt_json_bool(&j, "cell_auto", plan->cell_auto);
+        gdt_json_int(&j, "halo_texels", plan->halo);
+        gdt_json_bool(&j, "halo_auto", plan->halo_auto);
+        gdt_json_int(&j, "tiles_x", plan->nx);
+        gdt_json_int(&j, "tiles_y", plan->ny);
+        gdt_json_uint(&j, "tiles", plan->tiles);
+        gdt_json_uint(&j, "empty_tiles", plan->empty_tiles);
+        gdt_json_uint(&j, "min_points", plan->min_points);
+        gdt_json_uint(&j, "median_points", plan->median_points);
+        gdt_json_uint(&j, "max_points", plan->max_points);
+        gdt_json_uint(&j, "mem_budget", plan->mem_budget);
+        gdt_json_end_object(&j);
+    }
     gdt_json_end_object(&j);
     return gdt_json_close(&j, err);
 }
@@ -188,8 +206,11 @@ gdt_status gdt_cli_info(const gdt_options *opts, gdt_error *err)
     gdt_cloud_opts co;
     gdt_log log;
     info_stats s = {0};
+    gdt_tile_plan plan;
+    int have_plan = 0;
     gdt_status st;
 
+    memset(&plan, 0, sizeof plan);
     gdt_log_init(&log, opts->verbosity);
     memset(&co, 0, sizeof co);
     co.log = &log;
@@ -208,8 +229,27 @@ gdt_status gdt_cli_info(const gdt_options *opts, gdt_error *err)
     if (st != GDT_OK)
         goto fail;
     print_cloud(stdout, gdt_cloud_get_info(cloud), &s);
+    /* The tile plan (pass 1 of the tiler) when a tiling option is given. */
+    if (opts->tile_set || opts->cell > 0 || opts->halo >= 0) {
+        gdt_tiler_opts to;
+        memset(&to, 0, sizeof to);
+        to.tile = opts->tile;
+        to.cell = opts->cell;
+        to.halo = opts->halo;
+        to.mem_budget = opts->mem_budget;
+        to.dup = opts->dup;
+        to.log = &log;
+        fflush(stdout);
+        st = gdt_cloud_rewind(cloud, err);
+        if (st == GDT_OK)
+            st = gdt_tiler_plan(&to, cloud, &plan, err);
+        if (st != GDT_OK)
+            goto fail;
+        gdt_tile_plan_print(stdout, &plan);
+        have_plan = 1;
+    }
     if (opts->json != NULL) {
-        st = write_json(opts->json, cloud, &s, err);
+        st = write_json(opts->json, cloud, &s, have_plan ? &plan : NULL, err);
         if (st != GDT_OK)
             goto fail;
     }

@@ -8,6 +8,8 @@
  */
 #include "las_crs.h"
 
+#include "bytes.h"
+
 #include <stdint.h>
 #include <stdio.h>
 #include <string.h>
@@ -325,7 +327,7 @@ int gdt_las_wkt_inspect(const char *wkt, size_t len, gdt_las_wkt_facts *out)
 
 static unsigned geokey_word(const unsigned char *p, size_t k)
 {
-    return (unsigned)p[2 * k] | ((unsigned)p[2 * k + 1] << 8);
+    return gdt_le_get_u16(p + 2 * k);
 }
 
 void gdt_las_geokeys_parse(const unsigned char *dir, size_t dir_len, const char *ascii,

@@ -36,6 +36,7 @@ import numpy as np
 
 from .las import Batch
 from .rng import Stream, derive_key, hash_indices, remix, unit16
+from .simple import patch_nodes
 
 FOV_HALF_DEG = 20.0
 CROSS_FRACTION = 0.04
@@ -677,17 +678,7 @@ class LidarSection:
 
     def _dem_batch(self, i0, i1):
         i = np.arange(i0, i1, dtype=np.int64)
-        k = np.searchsorted(self.dem_cum, i, side="right") - 1
-        li = i - self.dem_cum[k]
-        cols = np.array([p["cols"] for p in self.patches], dtype=np.int64)[k]
-        ox = np.array([p["origin"][0] for p in self.patches], dtype=np.int64)[k]
-        oy = np.array([p["origin"][1] for p in self.patches], dtype=np.int64)[k]
-        a = np.array([p["e1"][0] for p in self.patches], dtype=np.int64)[k]
-        bq = np.array([p["e1"][1] for p in self.patches], dtype=np.int64)[k]
-        ix = li % cols
-        iy = li // cols
-        X = ox + ix * a - iy * bq
-        Y = oy + ix * bq + iy * a
+        X, Y = patch_nodes(self.patches, self.dem_cum, i)
         z = self.terrain(X * self.sc, Y * self.sc)
         Z = np.rint(z * (1.0 / self.scz)).astype(np.int32)
         inten = np.full(len(i), 600, dtype=np.uint16)

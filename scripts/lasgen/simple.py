@@ -21,6 +21,24 @@ def _lattice_box(region, sc):
     return X0, Y0, X1, Y1
 
 
+
+def patch_nodes(patches, cum, i):
+    """Lattice integers (X, Y), int64 arrays, of the global indices i over
+    rotated-grid patches.  Patch k holds the indices cum[k] <= i < cum[k + 1]
+    row by row, "cols" nodes a row, from "origin" along e1 = (a, b) and
+    e2 = (-b, a)."""
+    k = np.searchsorted(cum, i, side="right") - 1
+    li = i - cum[k]
+    cols = np.array([p["cols"] for p in patches], dtype=np.int64)[k]
+    ox = np.array([p["origin"][0] for p in patches], dtype=np.int64)[k]
+    oy = np.array([p["origin"][1] for p in patches], dtype=np.int64)[k]
+    a = np.array([p["e1"][0] for p in patches], dtype=np.int64)[k]
+    b = np.array([p["e1"][1] for p in patches], dtype=np.int64)[k]
+    ix = li % cols
+    iy = li // cols
+    return ox + ix * a - iy * b, oy + ix * b + iy * a
+
+
 class _Section:
     def __init__(self, seed, index, region, count, scale, terrain):
         self.seed = seed
@@ -153,17 +171,7 @@ class DemSection(_Section):
         self.cum = np.concatenate([[0], np.cumsum(per)]).astype(np.int64)
 
     def _batch(self, i):
-        k = np.searchsorted(self.cum, i, side="right") - 1
-        li = i - self.cum[k]
-        cols = np.array([p["cols"] for p in self.patches], dtype=np.int64)[k]
-        ox = np.array([p["origin"][0] for p in self.patches], dtype=np.int64)[k]
-        oy = np.array([p["origin"][1] for p in self.patches], dtype=np.int64)[k]
-        a = np.array([p["e1"][0] for p in self.patches], dtype=np.int64)[k]
-        b = np.array([p["e1"][1] for p in self.patches], dtype=np.int64)[k]
-        ix = li % cols
-        iy = li // cols
-        X = ox + ix * a - iy * b
-        Y = oy + ix * b + iy * a
+        X, Y = patch_nodes(self.patches, self.cum, i)
         inten = np.full(len(i), 600, dtype=np.uint16)
         return Batch.simple(X.astype(np.int32), Y.astype(np.int32), self._z(X, Y), inten)
 

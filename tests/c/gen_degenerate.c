@@ -34,9 +34,14 @@ int64_t gen_range(gen_rng *r, int64_t lo, int64_t hi)
     return lo + (int64_t)gen_below(r, (uint64_t)(hi - lo) + 1);
 }
 
-static int in_range(int64_t x, int64_t y)
+/* Appends (x, y) to p[*m] when it lies in [0, GDT_COORD_MAX]^2; p has room. */
+static void push_in_range(gdt_ipt *p, size_t *m, int64_t x, int64_t y)
 {
-    return x >= 0 && x <= GDT_COORD_MAX && y >= 0 && y <= GDT_COORD_MAX;
+    if (x >= 0 && x <= GDT_COORD_MAX && y >= 0 && y <= GDT_COORD_MAX) {
+        p[*m].x = x;
+        p[*m].y = y;
+        (*m)++;
+    }
 }
 
 typedef struct keyed {
@@ -139,11 +144,7 @@ gdt_ipt *gen_rotated_grid(int64_t k, int64_t a, int64_t b, int64_t cx, int64_t c
     for (int64_t i = -k; i <= k; i++)
         for (int64_t j = -k; j <= k; j++) {
             int64_t x = cx + i * a - j * b, y = cy + i * b + j * a;
-            if (in_range(x, y)) {
-                p[m].x = x;
-                p[m].y = y;
-                m++;
-            }
+            push_in_range(p, &m, x, y);
         }
     *out_n = m;
     return p;
@@ -176,11 +177,7 @@ gdt_ipt *gen_circle(int64_t cx, int64_t cy, int64_t r, size_t *out_n)
                 p = np;
             }
             int64_t px = cx + cand[q][0], py = cy + cand[q][1];
-            if (in_range(px, py)) {
-                p[m].x = px;
-                p[m].y = py;
-                m++;
-            }
+            push_in_range(p, &m, px, py);
         }
     }
     *out_n = m;
@@ -200,11 +197,7 @@ gdt_ipt *gen_thin_circle(gen_rng *r, size_t n, int64_t cx, int64_t cy, int64_t r
         double rr = (double)(radius + gen_range(r, -width, width));
         int64_t x = cx + (int64_t)llround(rr * cos(th));
         int64_t y = cy + (int64_t)llround(rr * sin(th));
-        if (in_range(x, y)) {
-            p[m].x = x;
-            p[m].y = y;
-            m++;
-        }
+        push_in_range(p, &m, x, y);
     }
     *out_n = m;
     gen_dedup(p, out_n);
@@ -221,11 +214,7 @@ gdt_ipt *gen_collinear(gen_rng *r, size_t n, int64_t x0, int64_t y0, int64_t dx,
     for (size_t i = 0; i < n; i++) {
         int64_t t = gen_range(r, 0, span - 1);
         int64_t x = x0 + t * dx, y = y0 + t * dy;
-        if (in_range(x, y)) {
-            p[m].x = x;
-            p[m].y = y;
-            m++;
-        }
+        push_in_range(p, &m, x, y);
     }
     *out_n = m;
     gen_dedup(p, out_n);
@@ -369,10 +358,5 @@ int gen_check_all(tctx *t, const gdt_mesh *m, const char *label)
 
 int gen_finish(const tctx *t, const char *name)
 {
-    if (t->failed > 0) {
-        fprintf(stderr, "%s: %d of %d checks FAILED\n", name, t->failed, t->checks);
-        return 1;
-    }
-    printf("%s: all %d checks passed\n", name, t->checks);
-    return 0;
+    return gdt_check_finish(t, name);
 }

@@ -14,6 +14,7 @@
 #include <stdint.h>
 #include <stdio.h>
 
+#include "gdt_check.h"
 #include "gdt_mesh.h"
 #include "gdt_predicates.h"
 
@@ -66,21 +67,10 @@ void gen_shuffle(gen_rng *r, gdt_ipt *pts, size_t n, int64_t *perm);
 
 /* ---- test helpers ---- */
 
-typedef struct tctx {
-    int failed;
-    int checks;
-} tctx;
+/* The counts of a mesh test; CHECK(t, cond, fmt, ...) records one check. */
+typedef gdt_checks tctx;
 
-#define CHECK(t, cond, ...)                                                                        \
-    do {                                                                                           \
-        (t)->checks++;                                                                             \
-        if (!(cond)) {                                                                             \
-            (t)->failed++;                                                                         \
-            fprintf(stderr, "FAIL %s:%d: %s: ", __FILE__, __LINE__, #cond);                        \
-            fprintf(stderr, __VA_ARGS__);                                                          \
-            fputc('\n', stderr);                                                                   \
-        }                                                                                          \
-    } while (0)
+#define CHECK(t, cond, ...) GDT_CHECK(t, cond, __VA_ARGS__)
 
 /* Brute force: no point lies strictly inside the circumcircle of any
  * triangle (O(F n)).  Returns 0, or -1 after describing the first fault. */

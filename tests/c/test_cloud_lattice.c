@@ -6,30 +6,17 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "gdt_check.h"
 #include "gdt_cloud.h"
 #include "private/cloud_lattice.h"
 
-static int failures;
+static gdt_checks checks;
 
-#define CHECK(cond, ...)                                                                   \
-    do {                                                                                   \
-        if (!(cond)) {                                                                     \
-            failures++;                                                                    \
-            fprintf(stderr, "%s:%d: check failed: %s: ", __FILE__, __LINE__, #cond);       \
-            fprintf(stderr, __VA_ARGS__);                                                  \
-            fputc('\n', stderr);                                                           \
-        }                                                                                  \
-    } while (0)
+#define CHECK(cond, ...) GDT_CHECK(&checks, cond, __VA_ARGS__)
 
 static uint64_t rng_state = UINT64_C(0x2545f4914f6cdd1d);
 
-static uint64_t rng(void)
-{
-    uint64_t z = (rng_state += UINT64_C(0x9e3779b97f4a7c15));
-    z = (z ^ (z >> 30)) * UINT64_C(0xbf58476d1ce4e5b9);
-    z = (z ^ (z >> 27)) * UINT64_C(0x94d049bb133111eb);
-    return z ^ (z >> 31);
-}
+static uint64_t rng(void) { return gdt_splitmix64(&rng_state); }
 
 /* Uniform integer in [-r, r]. */
 static int64_t rng_int(int64_t r) { return (int64_t)(rng() % (uint64_t)(2 * r + 1)) - r; }
@@ -253,10 +240,5 @@ int main(void)
     test_relation_random();
     test_crs();
     test_policy_names();
-    if (failures != 0) {
-        fprintf(stderr, "test_cloud_lattice: %d check(s) failed\n", failures);
-        return 1;
-    }
-    printf("test_cloud_lattice: all checks passed\n");
-    return 0;
+    return gdt_check_finish(&checks, "test_cloud_lattice");
 }

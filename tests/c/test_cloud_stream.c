@@ -9,29 +9,16 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "gdt_check.h"
 #include "gdt_cloud.h"
 
-static int failures;
+static gdt_checks checks;
 
-#define CHECK(cond, ...)                                                                   \
-    do {                                                                                   \
-        if (!(cond)) {                                                                     \
-            failures++;                                                                    \
-            fprintf(stderr, "%s:%d: check failed: %s: ", __FILE__, __LINE__, #cond);       \
-            fprintf(stderr, __VA_ARGS__);                                                  \
-            fputc('\n', stderr);                                                           \
-        }                                                                                  \
-    } while (0)
+#define CHECK(cond, ...) GDT_CHECK(&checks, cond, __VA_ARGS__)
 
 static uint64_t rng_state = UINT64_C(0xbb67ae8584caa73b);
 
-static uint64_t rng(void)
-{
-    uint64_t z = (rng_state += UINT64_C(0x9e3779b97f4a7c15));
-    z = (z ^ (z >> 30)) * UINT64_C(0xbf58476d1ce4e5b9);
-    z = (z ^ (z >> 27)) * UINT64_C(0x94d049bb133111eb);
-    return z ^ (z >> 31);
-}
+static uint64_t rng(void) { return gdt_splitmix64(&rng_state); }
 
 static int32_t rng_i32(int32_t r) { return (int32_t)((int64_t)(rng() % (uint64_t)(2 * (int64_t)r + 1)) - r); }
 
@@ -590,10 +577,5 @@ int main(int argc, char **argv)
     for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
         unlink(tmp_path(names[i]));
     rmdir(dir);
-    if (failures != 0) {
-        fprintf(stderr, "test_cloud_stream: %d check(s) failed\n", failures);
-        return 1;
-    }
-    printf("test_cloud_stream: all checks passed\n");
-    return 0;
+    return gdt_check_finish(&checks, "test_cloud_stream");
 }

@@ -6,29 +6,16 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "gdt_check.h"
 #include "gdt_cloud.h"
 
-static int failures;
+static gdt_checks checks;
 
-#define CHECK(cond, ...)                                                                   \
-    do {                                                                                   \
-        if (!(cond)) {                                                                     \
-            failures++;                                                                    \
-            fprintf(stderr, "%s:%d: check failed: %s: ", __FILE__, __LINE__, #cond);       \
-            fprintf(stderr, __VA_ARGS__);                                                  \
-            fputc('\n', stderr);                                                           \
-        }                                                                                  \
-    } while (0)
+#define CHECK(cond, ...) GDT_CHECK(&checks, cond, __VA_ARGS__)
 
 static uint64_t rng_state = UINT64_C(0x853c49e6748fea9b);
 
-static uint64_t rng(void)
-{
-    uint64_t z = (rng_state += UINT64_C(0x9e3779b97f4a7c15));
-    z = (z ^ (z >> 30)) * UINT64_C(0xbf58476d1ce4e5b9);
-    z = (z ^ (z >> 27)) * UINT64_C(0x94d049bb133111eb);
-    return z ^ (z >> 31);
-}
+static uint64_t rng(void) { return gdt_splitmix64(&rng_state); }
 
 static void shuffle(gdt_point *p, size_t n)
 {
@@ -233,10 +220,5 @@ int main(void)
     test_small_group();
     test_random();
     test_large_degenerate();
-    if (failures != 0) {
-        fprintf(stderr, "test_dedup: %d check(s) failed\n", failures);
-        return 1;
-    }
-    printf("test_dedup: all checks passed\n");
-    return 0;
+    return gdt_check_finish(&checks, "test_dedup");
 }

@@ -11,29 +11,16 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "gdt_check.h"
 #include "gdt_dupcount.h"
 
-static int failures;
+static gdt_checks checks;
 
-#define CHECK(cond, ...)                                                                   \
-    do {                                                                                   \
-        if (!(cond)) {                                                                     \
-            failures++;                                                                    \
-            fprintf(stderr, "%s:%d: check failed: %s: ", __FILE__, __LINE__, #cond);       \
-            fprintf(stderr, __VA_ARGS__);                                                  \
-            fputc('\n', stderr);                                                           \
-        }                                                                                  \
-    } while (0)
+#define CHECK(cond, ...) GDT_CHECK(&checks, cond, __VA_ARGS__)
 
 static uint64_t rng_state = UINT64_C(0x6a09e667f3bcc909);
 
-static uint64_t rng(void)
-{
-    uint64_t z = (rng_state += UINT64_C(0x9e3779b97f4a7c15));
-    z = (z ^ (z >> 30)) * UINT64_C(0xbf58476d1ce4e5b9);
-    z = (z ^ (z >> 27)) * UINT64_C(0x94d049bb133111eb);
-    return z ^ (z >> 31);
-}
+static uint64_t rng(void) { return gdt_splitmix64(&rng_state); }
 
 static int key_cmp(const void *pa, const void *pb)
 {
@@ -239,10 +226,5 @@ int main(int argc, char **argv)
     test_degenerate(dir);
     test_errors(dir);
     rmdir(dir);
-    if (failures != 0) {
-        fprintf(stderr, "test_dedup_count: %d check(s) failed\n", failures);
-        return 1;
-    }
-    printf("test_dedup_count: all checks passed\n");
-    return 0;
+    return gdt_check_finish(&checks, "test_dedup_count");
 }

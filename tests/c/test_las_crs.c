@@ -5,17 +5,12 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "gdt_check.h"
 #include "private/las_crs.h"
 
-static int failures;
+static gdt_checks checks;
 
-#define CHECK(cond)                                                                                \
-    do {                                                                                           \
-        if (!(cond)) {                                                                             \
-            fprintf(stderr, "%s:%d: check failed: %s\n", __FILE__, __LINE__, #cond);               \
-            failures++;                                                                            \
-        }                                                                                          \
-    } while (0)
+#define CHECK(cond) GDT_CHECK(&checks, cond, "%s", "")
 
 /* Builds a key directory of n entries (4 words each) into out (little-endian). */
 static size_t put_words(unsigned char *out, const unsigned *w, size_t nwords)
@@ -99,10 +94,8 @@ static void test_geokeys_hostile(void)
 static void inspect(const char *wkt, gdt_las_wkt_facts *f, int expect_rc)
 {
     int rc = gdt_las_wkt_inspect(wkt, strlen(wkt), f);
-    if (rc != expect_rc) {
-        fprintf(stderr, "inspect(%s) returned %d, expected %d\n", wkt, rc, expect_rc);
-        failures++;
-    }
+    GDT_CHECK(&checks, rc == expect_rc, "inspect(%s) returned %d, expected %d", wkt, rc,
+              expect_rc);
 }
 
 static void test_wkt(void)
@@ -236,10 +229,5 @@ int main(void)
     test_geokeys_hostile();
     test_wkt();
     test_resolve();
-    if (failures != 0) {
-        fprintf(stderr, "%d check(s) failed\n", failures);
-        return 1;
-    }
-    printf("test_las_crs: all checks passed\n");
-    return 0;
+    return gdt_check_finish(&checks, "test_las_crs");
 }

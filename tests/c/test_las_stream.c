@@ -13,6 +13,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "gdt_check.h"
 #include "gdt_source.h"
 
 enum { NPTS = 257, FORMAT = 1, BASE_LEN = 28, EXTRA = 5, HEADER = 227, VLR_HEADER = 54 };
@@ -21,15 +22,9 @@ enum { NPTS = 257, FORMAT = 1, BASE_LEN = 28, EXTRA = 5, HEADER = 227, VLR_HEADE
 static const char wkt[] = "GEOGCS[\"WGS 84\",AUTHORITY[\"EPSG\",\"4326\"]]";
 enum { WKT_PAYLOAD = sizeof wkt + 6, POINTS_AT = HEADER + VLR_HEADER + WKT_PAYLOAD };
 
-static int failures;
+static gdt_checks checks;
 
-#define CHECK(cond)                                                                                \
-    do {                                                                                           \
-        if (!(cond)) {                                                                             \
-            fprintf(stderr, "%s:%d: check failed: %s\n", __FILE__, __LINE__, #cond);               \
-            failures++;                                                                            \
-        }                                                                                          \
-    } while (0)
+#define CHECK(cond) GDT_CHECK(&checks, cond, "%s", "")
 
 static void put_u16(unsigned char *p, unsigned v)
 {
@@ -113,9 +108,9 @@ static void read_back(const char *path, int32_t (*xyz)[3], size_t buffer_bytes, 
     size_t total = 0, n = 0;
 
     gdt_error_clear(&err);
-    if (buf == NULL || gdt_source_open(&src, path, &opts, &err) != GDT_OK) {
-        fprintf(stderr, "open failed: %s\n", err.msg);
-        failures++;
+    int opened = buf != NULL && gdt_source_open(&src, path, &opts, &err) == GDT_OK;
+    GDT_CHECK(&checks, opened, "open failed: %s", err.msg);
+    if (!opened) {
         free(buf);
         return;
     }
@@ -125,11 +120,10 @@ static void read_back(const char *path, int32_t (*xyz)[3], size_t buffer_bytes, 
     CHECK(in->epsg == 4326 && in->crs_geographic == 1 && strcmp(in->crs_desc, "EPSG:4326") == 0);
     CHECK(in->file_size == (uint64_t)POINTS_AT + (uint64_t)NPTS * (BASE_LEN + EXTRA));
     for (;;) {
-        if (gdt_source_read(src, buf, chunk, &n, &err) != GDT_OK) {
-            fprintf(stderr, "read failed: %s\n", err.msg);
-            failures++;
+        gdt_status rs = gdt_source_read(src, buf, chunk, &n, &err);
+        GDT_CHECK(&checks, rs == GDT_OK, "read failed: %s", err.msg);
+        if (rs != GDT_OK)
             break;
-        }
         if (n == 0)
             break;
         CHECK(n <= chunk);
@@ -140,12 +134,10 @@ static void read_back(const char *path, int32_t (*xyz)[3], size_t buffer_bytes, 
                      p->x == (double)e[0] * scale[0] + offset[0] &&
                      p->y == (double)e[1] * scale[1] + offset[1] &&
                      p->z == (double)e[2] * scale[2] + offset[2];
-            if (!ok) {
-                fprintf(stderr, "point %zu differs (buffer %zu, chunk %zu)\n", total + k,
-                        buffer_bytes, chunk);
-                failures++;
+            GDT_CHECK(&checks, ok, "point %zu differs (buffer %zu, chunk %zu)", total + k,
+                      buffer_bytes, chunk);
+            if (!ok)
                 break;
-            }
         }
         total += n;
     }
@@ -166,11 +158,10 @@ static void shrink_while_reading(const char *path)
     gdt_status st;
 
     gdt_error_clear(&err);
-    if (gdt_source_open(&src, path, &opts, &err) != GDT_OK) {
-        fprintf(stderr, "open failed: %s\n", err.msg);
-        failures++;
+    gdt_status os = gdt_source_open(&src, path, &opts, &err);
+    GDT_CHECK(&checks, os == GDT_OK, "open failed: %s", err.msg);
+    if (os != GDT_OK)
         return;
-    }
     /* Cut the file in the middle of record 100. */
     CHECK(truncate(path, POINTS_AT + 100 * (BASE_LEN + EXTRA) + 7) == 0);
     do {
@@ -214,10 +205,5 @@ int main(int argc, char **argv)
     CHECK(gdt_source_open(&src, path, NULL, &err) == GDT_EINPUT && src == NULL);
     CHECK(strstr(err.msg, path) != NULL);
 
-    if (failures != 0) {
-        fprintf(stderr, "%d check(s) failed\n", failures);
-        return 1;
-    }
-    printf("test_las_stream: all checks passed\n");
-    return 0;
+    return gdt_check_finish(&checks, "test_las_stream");
 }

@@ -19,24 +19,15 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "gdt_check.h"
 #include "gdt_ply.h"
 
 typedef struct tctx {
     char dir[4096];
-    int failed;
-    int checks;
+    gdt_checks c;
 } tctx;
 
-#define CHECK(t, cond, ...)                                                                        \
-    do {                                                                                           \
-        (t)->checks++;                                                                             \
-        if (!(cond)) {                                                                             \
-            (t)->failed++;                                                                         \
-            fprintf(stderr, "FAIL %s:%d: %s: ", __FILE__, __LINE__, #cond);                        \
-            fprintf(stderr, __VA_ARGS__);                                                          \
-            fputc('\n', stderr);                                                                   \
-        }                                                                                          \
-    } while (0)
+#define CHECK(t, cond, ...) GDT_CHECK(&(t)->c, cond, __VA_ARGS__)
 
 static void path_in(const tctx *t, char *out, size_t size, const char *name)
 {
@@ -125,14 +116,6 @@ static uint64_t bits_of(double d)
     uint64_t b;
     memcpy(&b, &d, sizeof b);
     return b;
-}
-
-static uint64_t rng(uint64_t *s)
-{
-    uint64_t z = (*s += 0x9e3779b97f4a7c15ull);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-    return z ^ (z >> 31);
 }
 
 static gdt_ply_meta plain_meta(void)
@@ -299,28 +282,28 @@ static void test_large(tctx *t)
     if (xyz == NULL || tri == NULL)
         goto done;
     for (uint64_t i = 0; i < 3 * nv; i++) {
-        uint64_t b = rng(&s);
+        uint64_t b = gdt_splitmix64(&s);
         memcpy(&xyz[i], &b, sizeof b);
         if (!isfinite(xyz[i]))
             xyz[i] = (double)(int64_t)b;
     }
     for (uint64_t i = 0; i < nf; i++) {
         tri[3 * i] = (int32_t)(i % nv);
-        tri[3 * i + 1] = (int32_t)((i + 1 + rng(&s) % (nv - 2)) % nv);
+        tri[3 * i + 1] = (int32_t)((i + 1 + gdt_splitmix64(&s) % (nv - 2)) % nv);
         do
-            tri[3 * i + 2] = (int32_t)(rng(&s) % nv);
+            tri[3 * i + 2] = (int32_t)(gdt_splitmix64(&s) % nv);
         while (tri[3 * i + 2] == tri[3 * i] || tri[3 * i + 2] == tri[3 * i + 1]);
     }
     CHECK(t, gdt_ply_create(&w, path, &m, &err) == GDT_OK, "%s", err.msg);
     for (uint64_t i = 0; i < nv && w != NULL;) {
-        size_t k = (size_t)(rng(&s) % 20000);
+        size_t k = (size_t)(gdt_splitmix64(&s) % 20000);
         if (k > nv - i)
             k = (size_t)(nv - i);
         CHECK(t, gdt_ply_write_vertices(w, xyz + 3 * i, k, &err) == GDT_OK, "%s", err.msg);
         i += k;
     }
     for (uint64_t i = 0; i < nf && w != NULL;) {
-        size_t k = (size_t)(rng(&s) % 50000);
+        size_t k = (size_t)(gdt_splitmix64(&s) % 50000);
         if (k > nf - i)
             k = (size_t)(nf - i);
         CHECK(t, gdt_ply_write_faces(w, tri + 3 * i, k, &err) == GDT_OK, "%s", err.msg);
@@ -577,8 +560,8 @@ int main(int argc, char **argv)
     test_bad_meta(&t);
     test_replace_and_abort(&t);
 
-    printf("test_ply: %d checks, %d failed\n", t.checks, t.failed);
-    if (t.failed == 0)
+    int rc = gdt_check_finish(&t.c, "test_ply");
+    if (rc == 0)
         remove_workdir(&t);
-    return t.failed == 0 ? 0 : 1;
+    return rc;
 }

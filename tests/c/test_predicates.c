@@ -20,6 +20,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "gdt_check.h"
 #include "gdt_predicates.h"
 
 #include "../../kernels/gdt_exact.clh"
@@ -37,32 +38,16 @@ typedef __int128 i128;
 
 #define L GDT_COORD_MAX
 
-static unsigned long failures;
+static gdt_checks checks;
 
-#define CHECK(cond, ...)                                                                       \
-    do {                                                                                       \
-        if (!(cond)) {                                                                         \
-            if (failures < 20) {                                                               \
-                fprintf(stderr, "%s:%d: check failed: %s: ", __FILE__, __LINE__, #cond);       \
-                fprintf(stderr, __VA_ARGS__);                                                  \
-                fputc('\n', stderr);                                                           \
-            }                                                                                  \
-            failures++;                                                                        \
-        }                                                                                      \
-    } while (0)
+#define CHECK(cond, ...) GDT_CHECK_QUIET_AFTER(&checks, 20, cond, __VA_ARGS__)
 
 /* splitmix64: small, seedable, good enough to spread test values. */
 typedef struct rng {
     uint64_t s;
 } rng;
 
-static uint64_t rng_next(rng *r)
-{
-    uint64_t z = (r->s += UINT64_C(0x9e3779b97f4a7c15));
-    z = (z ^ (z >> 30)) * UINT64_C(0xbf58476d1ce4e5b9);
-    z = (z ^ (z >> 27)) * UINT64_C(0x94d049bb133111eb);
-    return z ^ (z >> 31);
-}
+static uint64_t rng_next(rng *r) { return gdt_splitmix64(&r->s); }
 
 /* Uniform in [lo, hi] (hi - lo < 2^63). */
 static int64_t rng_range(rng *r, int64_t lo, int64_t hi)
@@ -194,6 +179,24 @@ static int64_t rng_coord_edgy(rng *r)
     return special[rng_next(r) % (sizeof special / sizeof special[0])];
 }
 
+/* The 8 symmetries of the square: swap x/y (bit 2), negate x (bit 0),
+ * negate y (bit 1).  Returns whether the map reverses orientation. */
+static int apply_sym(int t, int64_t x, int64_t y, int64_t *ox, int64_t *oy)
+{
+    if (t & 4) {
+        int64_t s = x;
+        x = y;
+        y = s;
+    }
+    if (t & 1)
+        x = -x;
+    if (t & 2)
+        y = -y;
+    *ox = x;
+    *oy = y;
+    return ((t & 4) != 0) ^ ((t & 1) != 0) ^ ((t & 2) != 0);
+}
+
 /* All 36 lattice points of x^2 + y^2 = 65^2, counter-clockwise by angle
  * (from the images of the first-octant points under the square's symmetries). */
 static int circle65(int64_t (*out)[2])
@@ -204,16 +207,8 @@ static int circle65(int64_t (*out)[2])
     int64_t tmp[64][2];
     for (size_t i = 0; i < sizeof oct / sizeof oct[0]; i++) {
         for (int t = 0; t < 8; t++) {
-            int64_t x = oct[i][0], y = oct[i][1];
-            if (t & 4) {
-                int64_t s = x;
-                x = y;
-                y = s;
-            }
-            if (t & 1)
-                x = -x;
-            if (t & 2)
-                y = -y;
+            int64_t x, y;
+            apply_sym(t, oct[i][0], oct[i][1], &x, &y);
             int dup = 0;
             for (int k = 0; k < n; k++)
                 if (tmp[k][0] == x && tmp[k][1] == y)
@@ -415,23 +410,6 @@ static void test_grid_cells(gdt_pred_stats *st)
     printf("tie-break: %d grid cells keep the (1,1) diagonal\n", cells);
 }
 
-/* The 8 symmetries of the square: swap x/y (bit 2), negate x (bit 0),
- * negate y (bit 1).  Returns whether the map reverses orientation. */
-static int apply_sym(int t, int64_t x, int64_t y, int64_t *ox, int64_t *oy)
-{
-    if (t & 4) {
-        int64_t s = x;
-        x = y;
-        y = s;
-    }
-    if (t & 1)
-        x = -x;
-    if (t & 2)
-        y = -y;
-    *ox = x;
-    *oy = y;
-    return ((t & 4) != 0) ^ ((t & 1) != 0) ^ ((t & 2) != 0);
-}
 
 /* Checks one convex co-circular quad q (counter-clockwise, small integer
  * coordinates) under all 8 symmetries, two scales and two placements.
@@ -634,11 +612,6 @@ int main(void)
     printf("counters: orient %llu incircle %llu incircle_exact %llu tiebreak %llu\n",
            (unsigned long long)st.orient_calls, (unsigned long long)st.incircle_calls,
            (unsigned long long)st.incircle_exact, (unsigned long long)st.tiebreak_calls);
-    if (failures != 0) {
-        printf("test_predicates: %lu failures\n", failures);
-        return 1;
-    }
-    printf("test_predicates: all checks passed\n");
-    return 0;
+    return gdt_check_finish(&checks, "test_predicates");
 }
 #endif

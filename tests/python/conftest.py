@@ -37,6 +37,17 @@ def tools_dir() -> pathlib.Path:
 
 
 @pytest.fixture(scope="session")
+def tool(tools_dir):
+    """tool(name) is the path of the built test tool name; fails the test when it is absent."""
+    def find(name):
+        exe = tools_dir / name
+        if not exe.exists():
+            pytest.fail(f"{name} not built at {exe} (set GDT_BUILD_DIR)")
+        return exe
+    return find
+
+
+@pytest.fixture(scope="session")
 def data_dir() -> pathlib.Path:
     if not DATA.is_dir():
         pytest.skip(f"real LiDAR samples not found at {DATA} (../shared/data)")

@@ -21,7 +21,8 @@ BAD_VALUES = [
     ["--threads", "0"],
     ["--threads", "two"],
     ["--mem-budget", "12Q"],
-    ["--mem-budget", "100"],     # below 1M
+    ["--mem-budget", "100"],     # below 16M
+    ["--mem-budget", "8M"],
     ["--mem-budget", "-4G"],
     ["--quantum", "0"],
     ["--quantum", "inf"],
@@ -81,7 +82,6 @@ def test_version(gdt_bin, runner):
     ["IN", "--job", "j"],
     ["IN", "--restart", "--reference"],
     ["IN", "-o", "out.ply"],
-    ["IN", "--info", "--tile", "1024"],
 ])
 def test_unavailable_stages_say_so(gdt_bin, runner, tmp_path, args):
     src = tmp_path / "in.las"
@@ -149,3 +149,23 @@ def test_info_several_inputs_are_one_cloud(gdt_bin, runner, data_dir, tmp_path):
     assert info["points"] == 2 * one["points"]
     assert info["distinct_xy"] == one["distinct_xy"]
     assert info["duplicates"] == info["points"] - one["distinct_xy"]
+
+
+def test_info_tile_plan(gdt_bin, runner, data_dir, tmp_path):
+    path = data_dir / "autzen_trim.las"
+    js = tmp_path / "info.json"
+    r = runner([gdt_bin, path, "--info", "--tile", "64", "--json", js])
+    assert r.returncode == 0, r.stderr
+    assert "tile plan" in r.stdout
+    plan = json.loads(js.read_text())["tile_plan"]
+    assert plan["tile"] == 64 and plan["cell_auto"]
+    assert plan["tiles"] + plan["empty_tiles"] == plan["tiles_x"] * plan["tiles_y"]
+    assert plan["min_points"] <= plan["median_points"] <= plan["max_points"]
+    # auto cell: about N*N/4 = 1024 points per tile on average over non-empty tiles
+    mean = 110000 / plan["tiles"]
+    assert 200 <= mean <= 5000, mean
+    r2 = runner([gdt_bin, path, "--info", "--tile", "64", "--cell", "1", "--halo", "0",
+                 "--json", js])
+    assert r2.returncode == 0, r2.stderr
+    plan2 = json.loads(js.read_text())["tile_plan"]
+    assert not plan2["cell_auto"] and plan2["halo_texels"] == 0

@@ -20,11 +20,8 @@ POINT_DTYPE = [("x", "i8"), ("y", "i8"), ("z", "f8"), ("ord", "u8")]
 
 
 @pytest.fixture(scope="session")
-def cloud_dump(tools_dir):
-    exe = tools_dir / "cloud_dump"
-    if not exe.exists():
-        pytest.fail(f"cloud_dump not built at {exe} (set GDT_BUILD_DIR)")
-    return exe
+def cloud_dump(tool):
+    return tool("cloud_dump")
 
 
 class Dump:

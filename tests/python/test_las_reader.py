@@ -55,11 +55,16 @@ WKT_WGS84 = ('GEOGCS["WGS 84",DATUM["WGS_1984"],UNIT["degree",0.0174532925199433
 
 
 @pytest.fixture(scope="session")
-def dump(tools_dir):
-    exe = tools_dir / "gdt_dump"
-    if not exe.exists():
-        pytest.fail(f"gdt_dump not built at {exe} (set GDT_BUILD_DIR)")
-    return exe
+def dump(tool):
+    return tool("gdt_dump")
+
+
+def sample(data_dir, name):
+    """The real sample name in the data folder; skips the test when it is absent."""
+    path = data_dir / name
+    if not path.exists():
+        pytest.skip(f"{name} not in the data folder")
+    return path
 
 
 def run_dump(runner, exe, path, *args):
@@ -257,9 +262,7 @@ def test_real_files_tiny_buffers(dump, runner, data_dir):
 
 @pytest.mark.sanitize
 def test_bad_vlr_count_recovers_with_warning(dump, runner, data_dir):
-    path = data_dir / "bad_vlr_count.las"
-    if not path.exists():
-        pytest.skip("bad_vlr_count.las not in the data folder")
+    path = sample(data_dir, "bad_vlr_count.las")
     got, r = dump_points(runner, dump, path)
     assert "warning GDT-3150" in r.stderr and path.name in r.stderr
     assert_points_equal(got, laspy.read(str(path)), path.name)
@@ -267,9 +270,7 @@ def test_bad_vlr_count_recovers_with_warning(dump, runner, data_dir):
 
 @pytest.mark.sanitize
 def test_garbage_vlr_count_fails_cleanly(dump, runner, data_dir):
-    path = data_dir / "garbage_nVariableLength.las"
-    if not path.exists():
-        pytest.skip("garbage_nVariableLength.las not in the data folder")
+    path = sample(data_dir, "garbage_nVariableLength.las")
     for args in ((), ("--info",)):
         r = run_dump(runner, dump, path, *args)
         assert_bad_input(r, path, "GDT-31")
@@ -277,9 +278,7 @@ def test_garbage_vlr_count_fails_cleanly(dump, runner, data_dir):
 
 @pytest.mark.sanitize
 def test_gps_time_nan_reads(dump, runner, data_dir):
-    path = data_dir / "gps-time-nan.las"
-    if not path.exists():
-        pytest.skip("gps-time-nan.las not in the data folder")
+    path = sample(data_dir, "gps-time-nan.las")
     got, _ = dump_points(runner, dump, path)
     assert_points_equal(got, laspy.read(str(path)), path.name)
 

@@ -16,10 +16,9 @@ TOOLS = ["gdt_dump", "pcd_write_pcl", "pcd_dump_pcl"]
 
 
 @pytest.fixture(scope="module")
-def tools(tools_dir):
+def tools(tools_dir, tool):
     for t in TOOLS:
-        if not (tools_dir / t).exists():
-            pytest.fail(f"{t} not built in {tools_dir} (set GDT_BUILD_DIR)")
+        tool(t)
     return tools_dir
 
 

@@ -22,11 +22,8 @@ COUNT_WIDTH = 20
 
 
 @pytest.fixture(scope="module")
-def ply_write(tools_dir):
-    exe = tools_dir / "ply_write"
-    if not exe.exists():
-        pytest.fail(f"ply_write not built at {exe} (set GDT_BUILD_DIR)")
-    return exe
+def ply_write(tool):
+    return tool("ply_write")
 
 
 @pytest.fixture(scope="module")

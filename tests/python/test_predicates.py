@@ -260,16 +260,6 @@ def run_tool(exe, cases, *args):
                           capture_output=True, timeout=600)
 
 
-@pytest.fixture(scope="session")
-def tool(tools_dir):
-    def find(name):
-        exe = tools_dir / name
-        if not exe.exists():
-            pytest.fail(f"{name} not built at {exe} (set GDT_BUILD_DIR)")
-        return exe
-    return find
-
-
 @pytest.mark.sanitize
 def test_predicates_match_big_integers(batch, tool):
     cases, ref = batch

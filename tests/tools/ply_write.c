@@ -37,6 +37,7 @@
 #include <sys/resource.h>
 #include <sys/stat.h>
 
+#include "gdt_check.h"
 #include "gdt_ply.h"
 
 #define MAX_COMMENTS 64
@@ -51,18 +52,9 @@ typedef struct opts {
     unsigned long long fsize_limit;
 } opts;
 
-/* splitmix64: the seeded generator shared by vertices and faces. */
-static uint64_t next_u64(uint64_t *s)
-{
-    uint64_t z = (*s += 0x9e3779b97f4a7c15ull);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-    return z ^ (z >> 31);
-}
-
 static double unit(uint64_t *s)
 {
-    return (double)(next_u64(s) >> 11) * 0x1p-53;
+    return (double)(gdt_splitmix64(s) >> 11) * 0x1p-53;
 }
 
 static double gen_double(uint64_t *s)
@@ -72,10 +64,10 @@ static double gen_double(uint64_t *s)
         -0x1p-1074,   -0.0,          0.0,     1.0 / 3.0, -9007199254740993.0,
         2147483647.0, -2147483648.5, 1e300,   -1e-300,
     };
-    uint64_t kind = next_u64(s) % 8;
+    uint64_t kind = gdt_splitmix64(s) % 8;
     if (kind == 0) {
         for (;;) {
-            uint64_t bits = next_u64(s);
+            uint64_t bits = gdt_splitmix64(s);
             double d;
             memcpy(&d, &bits, sizeof d);
             if (isfinite(d))
@@ -83,11 +75,11 @@ static double gen_double(uint64_t *s)
         }
     }
     if (kind == 1)
-        return special[next_u64(s) % (sizeof special / sizeof special[0])];
+        return special[gdt_splitmix64(s) % (sizeof special / sizeof special[0])];
     if (kind == 2)
         return (unit(s) - 0.5) * 4e7; /* signed, far from the origin */
     /* Projected CRS coordinates with millimetre steps. */
-    return 300000.0 + (double)(next_u64(s) % 400000000ull) * 0.001;
+    return 300000.0 + (double)(gdt_splitmix64(s) % 400000000ull) * 0.001;
 }
 
 static int parse_u64(const char *s, uint64_t *out)
@@ -209,12 +201,12 @@ static gdt_status write_faces(gdt_ply_writer *w, const opts *o, int32_t *buf, gd
         gdt_status st;
         for (size_t i = 0; i < k; i++) {
             int32_t *t = buf + 3 * i;
-            t[0] = (int32_t)(next_u64(&s) % o->nvert);
+            t[0] = (int32_t)(gdt_splitmix64(&s) % o->nvert);
             do
-                t[1] = (int32_t)(next_u64(&s) % o->nvert);
+                t[1] = (int32_t)(gdt_splitmix64(&s) % o->nvert);
             while (t[1] == t[0]);
             do
-                t[2] = (int32_t)(next_u64(&s) % o->nvert);
+                t[2] = (int32_t)(gdt_splitmix64(&s) % o->nvert);
             while (t[2] == t[0] || t[2] == t[1]);
         }
         if (o->bad_index && done + k == o->nface)

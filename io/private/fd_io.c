@@ -1,0 +1,26 @@
+/* See fd_io.h. */
+#include "fd_io.h"
+
+#include <errno.h>
+#include <sys/types.h>
+#include <unistd.h>
+
+int gdt_fd_write_all(int fd, const void *p, size_t n, int64_t off)
+{
+    const unsigned char *b = p;
+    while (n > 0) {
+        ssize_t k = off < 0 ? write(fd, b, n) : pwrite(fd, b, n, (off_t)off);
+        if (k < 0) {
+            if (errno == EINTR)
+                continue;
+            return errno;
+        }
+        if (k == 0)
+            return EIO;
+        b += (size_t)k;
+        n -= (size_t)k;
+        if (off >= 0)
+            off += (int64_t)k;
+    }
+    return 0;
+}

@@ -1,0 +1,14 @@
+/* Whole-buffer writes to file descriptors, shared by the writers of io/. */
+#ifndef GDT_FD_IO_H
+#define GDT_FD_IO_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+/* Writes all n bytes of p to fd: at byte offset off when off >= 0 (the file
+ * position is left alone), else at the file position.  Partial writes and
+ * EINTR are retried.
+ * returns: 0, or an errno value (EIO when the system accepts no byte). */
+int gdt_fd_write_all(int fd, const void *p, size_t n, int64_t off);
+
+#endif

@@ -1,0 +1,9 @@
+# Out-of-core tiler: pass 1 (OpenVDB index), pass 2 (spill files), --dup
+# merge, halos, the tiny test budget.  The Python suite
+# (tests/python/test_tiler.py) drives tiler_run on generated LAS files and
+# reads index.vdb back with tiler_vdb_dump, which uses OpenVDB's own API.
+gdt_add_test_exe(tiler_run ${CMAKE_CURRENT_SOURCE_DIR}/tools/tiler_run.c)
+gdt_add_test_exe(tiler_vdb_dump ${CMAKE_CURRENT_SOURCE_DIR}/tools/tiler_vdb_dump.cpp)
+target_link_libraries(tiler_vdb_dump PRIVATE OpenVDB::openvdb)
+gdt_add_test_exe(test_tiler ${CMAKE_CURRENT_SOURCE_DIR}/c/test_tiler.c)
+add_test(NAME tiler COMMAND test_tiler ${CMAKE_CURRENT_BINARY_DIR}/tiler-work)

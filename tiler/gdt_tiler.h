@@ -1,0 +1,273 @@
+/* gdt_tiler.h — the out-of-core tiler: one cloud in, tiles the core can take.
+ *
+ * The tiler reads the cloud twice and holds only bounded buffers; its memory
+ * depends on --tile and --mem-budget, never on the number of input points.
+ *
+ * Tile geometry (all in lattice units, see gdt_cloud.h):
+ *  - A texel is c x c lattice steps (c >= 1, an integer), a tile is N x N
+ *    texels, so a tile spans T = N * c steps.  Tile (i, j) is the half-open
+ *    box [i*T, (i+1)*T) x [j*T, (j+1)*T): the tile grid is anchored at the
+ *    lattice origin, tile lines are lattice lines, and point (x, y) lies in
+ *    tile (floor(x / T), floor(y / T)).  Every point is in exactly one tile.
+ *  - The halo width is h = H * c steps (H texels).  The halo box of a tile is
+ *    [x0 - h, x0 + T + h) x [y0 - h, y0 + T + h); the halo H_T is every
+ *    deduplicated point of another tile inside that box.  So every cloud
+ *    point p with x0 - h <= p.x <= x0 + T + h - 1 (and the same in y) is in
+ *    the tile or in its halo: that closed box is the region the tile stage
+ *    knows completely.
+ *  - Tile-local coordinates are x - (x0 - h), y - (y0 - h); they lie in
+ *    [0, T + 2h - 1].  The predicates need them in [0, 2^31 - 1], so the
+ *    tiler refuses (N + 2H) * c > 2^31 (GDT_EUSAGE 2502).
+ *
+ * Choices (pass 1):
+ *  - The density grid counts points per V x V-step voxel, V = 2^shift: the
+ *    smallest power of two for which the cloud has at most density_voxels
+ *    occupied voxels and a small OpenVDB tree (rules in density.c).  It is
+ *    a function of the point set only.
+ *  - --cell auto: the occupied area is measured on the density grid (at the
+ *    finest level whose occupied voxels hold 16 points on average), and
+ *    c = sqrt(area / points) / 2, so that a tile of the occupied part holds
+ *    about N^2/4 points, rounded (in ratio) to a multiple of max(1, V / N)
+ *    (V: density voxel) so that tile counts are exact sums of density
+ *    voxels.  A given --cell S (CRS units) becomes c = S / sx steps,
+ *    rounded to the nearest integer >= 1 (with a note when it is not one).
+ *  - --halo auto: H = ceil(8 s / c) texels, s = the median point spacing
+ *    over occupied density voxels, clamped to [1, N/2] and to the 2^31
+ *    limit.  --halo 0 is legal.
+ *
+ * The index (OpenVDB, see gdt_vdb_index.h) is saved as <job>/index.vdb at
+ * the end of pass 1: grid "tile_points" (one active voxel per non-empty tile
+ * holding its point count, duplicates included) and grid "density" (a finer
+ * grid of V x V-step voxels, V = 2^shift).  Pass 2 verifies that it wrote
+ * exactly those counts, so the saved file holds the counts pass 2 wrote.
+ *
+ * Files under <job>/tiles/ (records: 32 bytes, little-endian int64 x,
+ * int64 y, IEEE double z, uint64 ord; no header):
+ *   tile_<i>_<j>.raw   pass 2: every point of the tile, in input order
+ *                      (kept only with opts.keep_spill; otherwise it is
+ *                      tile_<i>_<j>.raw.tmp, removed after the merge)
+ *   tile_<i>_<j>.pts   the tile's points after the --dup merge, sorted by
+ *                      ordinal (the lowest ordinal of each (x, y) group)
+ *   tile_<i>_<j>.edge  the subset of .pts within h of the tile's border
+ *                      (the only points any other tile's halo can hold)
+ * <i>, <j> are the decimal tile indices (may be negative).  Each kept file
+ * is written to a temporary name, fsync'd and renamed.  Intermediate files
+ * (*.tmp: buckets, merge partitions and runs) are removed when done, and
+ * pass 2 first removes whatever an interrupted run left.  The bytes of every file depend only on the
+ * inputs and the options tile, cell, halo and dup: not on the memory
+ * budget, the descriptor budget or the test knobs.
+ *
+ * Tile order: non-empty tiles sorted by (j, i) (rows from south to north,
+ * west to east in each row); index k in 0 .. tiles-1 names a tile in every
+ * function below.
+ *
+ * Memory (--mem-budget B, 0 = auto = max(256 MiB, 64 N^2 bytes)): pass 1
+ * holds one read buffer and the density histogram (at most
+ * opts.density_voxels voxels, about 90 bytes each; its OpenVDB grid, built at
+ * the end of the pass, at most GDT_TILER_DENSITY_TREE_BYTES of nodes: the
+ * voxel grows until both hold); pass 2 holds min(B/4, 64 MiB) of write
+ * buffers (touched at once, so its footprint does not depend on the data);
+ * the --dup merge holds B/2 and goes out of core beyond it; loading a tile
+ * refuses (GDT_EUSAGE 2506) a tile whose points and halo exceed B/2.  The
+ * tile table costs about 110 bytes per non-empty tile and must fit in B/8.
+ * File descriptors: a budget probed from RLIMIT_NOFILE (half the soft
+ * limit, at most 1024); more non-empty tiles than that are spilled through
+ * intermediate bucket files, level by level.
+ *
+ * Message numbers: 2501 bad options, 2502 tile-local range, 2503 too many
+ * tiles for the budget, 2504 budget too small, 2505 call out of order,
+ * 2506 tile too large for the budget, 3501 input changed between passes,
+ * 6501 tile files of an earlier run missing or damaged, 1301 stopped by the
+ * progress callback (GDT_EINTERRUPTED),
+ * 4501 job directory, 4502 create, 4503 write, 4504 read, 4505 fsync or
+ * rename, 7501 internal, 7502 merge did not converge; from the index:
+ * 3511 unreadable index, 4511 index write, 7511 OpenVDB failure;
+ * 7001 out of memory.
+ *
+ * Not thread-safe per instance; gdt_tiler_load_tile of different tiles may
+ * not run concurrently on one instance either.
+ */
+#ifndef GDT_TILER_H
+#define GDT_TILER_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+
+#include "gdt_cloud.h"
+#include "gdt_error.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define GDT_TILER_REC_BYTES 32
+#define GDT_TILER_MIN_TILE 64
+#define GDT_TILER_MAX_TILE 16384
+#define GDT_TILER_DEFAULT_BUDGET ((uint64_t)256 << 20)
+#define GDT_TILER_MIN_BUDGET ((uint64_t)16 << 20)
+#define GDT_TILER_DEFAULT_DENSITY_VOXELS 65536u
+#define GDT_TILER_DENSITY_TREE_BYTES ((uint64_t)16 << 20)
+
+typedef struct gdt_tiler_opts {
+    int tile;              /* N: texels per side, a power of two in [64, 16384] */
+    double cell;           /* texel size in CRS units (x axis); 0 = auto */
+    long halo;             /* halo width in texels; < 0 = auto */
+    uint64_t mem_budget;   /* bytes; 0 = auto; otherwise >= GDT_TILER_MIN_BUDGET */
+    gdt_dup_policy dup;    /* the --dup rule */
+    const char *job_dir;   /* existing directory; NULL: plan only (no index saved,
+                              pass 2 refused).  Copied. */
+    gdt_log *log;          /* progress notes (-v) and warnings; may be NULL */
+    /* Progress, or NULL: called after every read batch of pass 1 (stage 1)
+     * and pass 2 (stage 2) with points done and points expected, and after
+     * every merged tile (stage 3) with tiles done and tiles.  A non-zero
+     * return stops the tiler with GDT_EINTERRUPTED 1301; the job directory
+     * stays consistent (pass 2 starts over when run again). */
+    int (*progress)(void *ctx, int stage, uint64_t done, uint64_t total);
+    void *progress_ctx;
+    /* Test knobs: none of them changes a byte of the output. */
+    int test_tiny;         /* tiny buffers, 4 descriptors, out-of-core merge from 64
+                              records: forces every spill and merge path */
+    unsigned fd_budget;    /* descriptors for spill files; 0 = probe (>= 4) */
+    unsigned density_voxels; /* cap of the density grid; 0 = default.  Changes the
+                                density voxel, hence the auto cell: not a budget. */
+    int keep_spill;        /* keep the pass-2 files tile_<i>_<j>.raw */
+    int test_nosync;       /* no fsync of tile files (tests on slow disks): same
+                              bytes, but a crash may lose renamed files */
+} gdt_tiler_opts;
+
+/* The tile plan: what pass 1 decided.  All counts include duplicates. */
+typedef struct gdt_tile_plan {
+    int tile;                 /* N */
+    int64_t cell;             /* c: texel side in lattice steps */
+    int cell_auto, halo_auto; /* 1 when chosen from the density */
+    int64_t halo;             /* H in texels */
+    int64_t span;             /* T = N * c lattice steps */
+    gdt_lattice lattice;      /* the cloud's lattice (texel in CRS: c * sx by c * sy) */
+    uint64_t points;          /* points read */
+    int64_t min_x, max_x, min_y, max_y; /* lattice bounding box (valid if points > 0) */
+    double min_z, max_z;
+    int64_t tile_i0, tile_j0; /* index of the south-west tile of the grid */
+    int64_t nx, ny;           /* grid of tiles covering the bounding box */
+    uint64_t tiles;           /* non-empty tiles */
+    uint64_t empty_tiles;     /* nx * ny - tiles */
+    uint64_t min_points, median_points, max_points; /* over non-empty tiles
+                                 (median: the lower middle); 0 if none */
+    double spacing;           /* median point spacing, lattice steps (0 if unknown) */
+    int density_shift;        /* density voxel V = 2^shift lattice steps */
+    uint64_t density_voxels;  /* active voxels of the density grid */
+    uint64_t mem_budget;      /* effective budget, bytes */
+} gdt_tile_plan;
+
+/* One non-empty tile. */
+typedef struct gdt_tile_desc {
+    uint64_t index;           /* position in tile order */
+    int64_t i, j;             /* tile indices */
+    int64_t x0, y0;           /* south-west corner: tile = [x0, x0+T) x [y0, y0+T) */
+    int64_t local_x0, local_y0; /* x0 - h, y0 - h: subtract for tile-local coordinates */
+    int64_t local_extent;     /* T + 2h: local coordinates lie in [0, local_extent) */
+    uint64_t raw_points;      /* records of the tile in pass 2 (duplicates included) */
+    uint64_t points;          /* after the --dup merge (valid after pass 2) */
+    uint64_t edge_points;     /* of those, within h of the border */
+} gdt_tile_desc;
+
+/* A caller-owned growable point array, reused across tiles. */
+typedef struct gdt_point_buf {
+    gdt_point *pts;
+    size_t n, cap;
+} gdt_point_buf;
+
+/* Frees pts and zeroes the struct; b may be NULL. */
+void gdt_point_buf_free(gdt_point_buf *b);
+
+typedef struct gdt_tiler_stats {
+    double t_pass1, t_pass2, t_merge; /* wall seconds: pass 1, pass 2 spill, --dup merge */
+    uint64_t points;              /* points streamed per pass */
+    uint64_t bucket_records;      /* records written to intermediate bucket files */
+    unsigned spill_levels;        /* bucket levels used by pass 2 (0: direct) */
+    uint64_t merged_duplicates;   /* points removed by the --dup merge */
+    uint64_t external_merges;     /* tiles merged out of core */
+    unsigned merge_levels;        /* deepest partition level of those */
+    uint64_t max_tile_points;     /* largest tile after the merge */
+    unsigned fd_budget;           /* descriptors used for spill files at most */
+    uint64_t mem_budget;          /* effective budget */
+} gdt_tiler_stats;
+
+typedef struct gdt_tiler gdt_tiler;
+
+/* Checks the options.  The cloud is borrowed: it must outlive the tiler and
+ * not be read by anyone else meanwhile.
+ * returns: GDT_EUSAGE 2501/2504, GDT_EIO 4501 (job directory unusable),
+ *   GDT_EINTERNAL 7001.
+ * Ownership: *out is new, free with gdt_tiler_destroy; NULL on failure. */
+gdt_status gdt_tiler_create(gdt_tiler **out, const gdt_tiler_opts *opts, gdt_cloud *cloud,
+                            gdt_error *err);
+
+/* Pass 1: streams the cloud (from its current position, normally the
+ * start), fills the index, decides cell and halo and, with a job directory,
+ * saves <job>/index.vdb.  Call once.
+ * returns: the cloud's errors, GDT_EUSAGE 2502/2503, GDT_EIO 4505/4506,
+ *   GDT_EINTERNAL. */
+gdt_status gdt_tiler_pass1(gdt_tiler *t, gdt_error *err);
+
+/* Valid after pass 1 until gdt_tiler_destroy; NULL before. */
+const gdt_tile_plan *gdt_tiler_get_plan(const gdt_tiler *t);
+
+/* Pass 2: rewinds the cloud, writes every point to its tile's file, checks
+ * the per-tile counts against the index, then merges duplicates of every
+ * tile (--dup) and writes its .pts and .edge files.  Needs a job directory;
+ * removes stale tile files of an earlier run first.  Call once, after pass 1.
+ * returns: the cloud's errors, GDT_EINPUT 3501 (input changed between the
+ *   passes), GDT_EUSAGE 2505, GDT_EIO 4502..4505, GDT_EINTERNAL 7501/7502. */
+gdt_status gdt_tiler_pass2(gdt_tiler *t, gdt_error *err);
+
+/* Resume: after pass 1, takes the .pts and .edge files that a completed
+ * pass 2 of the same job left, instead of running pass 2 again.  The caller
+ * vouches (from its job record) that pass 2 completed with the same inputs
+ * and options; only the files' presence and sizes are checked here.
+ * returns: GDT_EUSAGE 2505 (out of order, no job directory), GDT_EJOB 6501
+ *   (a tile file is missing or its size is impossible). */
+gdt_status gdt_tiler_adopt_pass2(gdt_tiler *t, gdt_error *err);
+
+/* Number of non-empty tiles (0 before pass 1). */
+uint64_t gdt_tiler_tile_count(const gdt_tiler *t);
+
+/* Describes tile k (k < gdt_tiler_tile_count).  returns: GDT_EUSAGE 2505. */
+gdt_status gdt_tiler_tile_info(const gdt_tiler *t, uint64_t k, gdt_tile_desc *out,
+                               gdt_error *err);
+
+/* Path of tile k's file of the given kind ("raw", "pts" or "edge") into buf;
+ * returns 0, or -1 if it does not fit, k is out of range or there is no job
+ * directory. */
+int gdt_tiler_tile_path(const gdt_tiler *t, uint64_t k, const char *kind, char *buf,
+                        size_t len);
+
+/* Loads tile k after pass 2: pts receives the tile's deduplicated points
+ * sorted by ordinal, halo its halo points (from the neighbours' .edge files,
+ * deduplicated, inside the halo box, not in the tile) sorted by ordinal.
+ * Both buffers are grown as needed and reused; their old content is dropped.
+ * returns: GDT_EUSAGE 2505 (before pass 2, bad k), 2506 (tile and halo
+ *   exceed half the memory budget), GDT_EIO 4504, GDT_EINTERNAL 7001. */
+gdt_status gdt_tiler_load_tile(gdt_tiler *t, uint64_t k, gdt_point_buf *pts,
+                               gdt_point_buf *halo, gdt_error *err);
+
+const gdt_tiler_stats *gdt_tiler_get_stats(const gdt_tiler *t);
+
+/* t may be NULL.  Leaves the job directory's files in place. */
+void gdt_tiler_destroy(gdt_tiler *t);
+
+/* --info --tile N: pass 1 only, the plan in *out (index saved when
+ * opts->job_dir is set).  The cloud is read once from its current position. */
+gdt_status gdt_tiler_plan(const gdt_tiler_opts *opts, gdt_cloud *cloud, gdt_tile_plan *out,
+                          gdt_error *err);
+
+/* Human-readable tile plan ("tile plan:" block, same layout as --info). */
+void gdt_tile_plan_print(FILE *out, const gdt_tile_plan *plan);
+
+/* Effective memory budget for the given options (resolves 0 = auto). */
+uint64_t gdt_tiler_budget(const gdt_tiler_opts *opts);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,119 @@
+/* tiler_impl.h — state of the tiler shared by its source files.
+ *
+ * Invariants once pass 1 is done:
+ *  - tiles[0..ntiles) are the non-empty tiles sorted by (j, i); tiles[k].count
+ *    is the pass-1 count, > 0; map sends (i, j) to k for exactly these tiles;
+ *  - plan.span = plan.tile * plan.cell, and (tile + 2 halo) * cell <= 2^31.
+ * After pass 2: tiles[k].written == tiles[k].count, and .points / .edge are
+ * the record counts of tile_<i>_<j>.pts / .edge.
+ */
+#ifndef GDT_TILER_IMPL_H
+#define GDT_TILER_IMPL_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "gdt_tiler.h"
+#include "gdt_vdb_index.h"
+
+typedef struct tl_tile {
+    int64_t i, j;
+    uint64_t count;     /* pass 1 */
+    uint64_t written;   /* pass 2 */
+    uint64_t points;    /* after the --dup merge */
+    uint64_t edge;      /* records of the .edge file */
+} tl_tile;
+
+/* Open addressing (linear probing) from tile (i, j) to a value. */
+typedef struct tl_map_entry {
+    int64_t i, j;
+    uint64_t v;
+    uint64_t used;
+} tl_map_entry;
+
+typedef struct tl_map {
+    tl_map_entry *e;    /* owned */
+    size_t cap;         /* power of two, or 0 */
+    size_t n;
+} tl_map;
+
+/* Looks (i, j) up; returns a pointer to its value, or NULL. */
+uint64_t *tl_map_find(const tl_map *m, int64_t i, int64_t j);
+/* Finds or inserts (i, j) (value 0 when new); grows at 1/2 load, so
+ * pointers from earlier calls are invalid after it.  returns: GDT_EINTERNAL
+ * 7001. */
+gdt_status tl_map_upsert(tl_map *m, int64_t i, int64_t j, uint64_t **val, gdt_error *err);
+void tl_map_free(tl_map *m);
+
+/* density.c: the density histogram of pass 1 (rules in density.c). */
+typedef struct tl_density {
+    tl_map map;             /* (vx, vy) -> points, at shift */
+    int shift;              /* voxel V = 2^shift lattice steps */
+    size_t max_voxels;
+    uint64_t tree_bytes;    /* OpenVDB node bytes of the final voxels (after finish) */
+} tl_density;
+
+gdt_status tl_density_add(tl_density *d, const gdt_point *pts, size_t n, gdt_error *err);
+/* Coarsens until the voxels' OpenVDB tree fits in node_budget bytes
+ * (node_bytes: leaf, lower and upper internal node).  node_budget must be at
+ * least 4 * (sum of node_bytes). */
+gdt_status tl_density_finish(tl_density *d, uint64_t node_budget, const size_t node_bytes[3],
+                             gdt_error *err);
+void tl_density_free(tl_density *d);
+
+/* Sizes of every buffer, derived from the budget (or the test knobs). */
+typedef struct tl_sizes {
+    size_t read_cap;        /* points per cloud read */
+    size_t write_bytes;     /* pass 2 write buffers, all files of one level */
+    size_t min_file_recs;   /* smallest per-file write buffer worth a direct level */
+    size_t merge_cap;       /* records held by the --dup merge */
+    unsigned merge_k;       /* partitions per merge level */
+    size_t part_recs;       /* write buffer per merge partition, records */
+    size_t merge_read_recs; /* read buffer per merged run, records */
+    size_t halo_read_recs;  /* read buffer for a neighbour's .edge file */
+    size_t tiles_bytes;     /* cap of the tile table */
+} tl_sizes;
+
+struct gdt_tiler {
+    gdt_tiler_opts opts;    /* job_dir points at job_dir below */
+    char *job_dir;          /* owned, NULL without a job directory */
+    char *tiles_dir;        /* owned */
+    gdt_cloud *cloud;       /* borrowed */
+    gdt_log *log;
+    uint64_t budget;
+    unsigned fd_budget;
+    tl_sizes sz;
+    int64_t user_cell;      /* > 0: given --cell in lattice steps */
+    int state;              /* 0 new, 1 after pass 1, 2 after pass 2, -1 failed */
+    gdt_tile_plan plan;
+    tl_tile *tiles;         /* owned */
+    uint64_t ntiles;
+    tl_map map;             /* (i, j) -> index in tiles (after pass 1) */
+    tl_density density;     /* pass 1 */
+    gdt_tiler_stats stats;
+};
+
+/* plan.c: turns the pass-1 results into the plan and the tile table.
+ * With t->user_cell > 0, t->map holds the directly counted tiles (value =
+ * count); otherwise tiles are derived from the density grid.  Fills
+ * t->plan, t->tiles, t->ntiles and rebuilds t->map (value = index). */
+gdt_status tl_plan_finish(gdt_tiler *t, gdt_error *err);
+
+/* spill.c: pass 2 proper (after the rewind): every point to its tile's
+ * .raw file; counts in tiles[].written. */
+gdt_status tl_spill(gdt_tiler *t, gdt_error *err);
+
+/* merge_dup.c: the --dup merge of tile k: .raw -> .pts + .edge. */
+gdt_status tl_merge_tile(gdt_tiler *t, uint64_t k, gdt_error *err);
+
+/* Paths of tile k's files; malloc'd, NULL when out of memory.  kind is
+ * "raw", "pts" or "edge"; tmp adds ".tmp". */
+char *tl_tile_file(const gdt_tiler *t, uint64_t k, const char *kind, int tmp);
+
+/* Reports progress (opts.progress); GDT_EINTERRUPTED 1301 when told to stop. */
+gdt_status tl_progress(gdt_tiler *t, int stage, uint64_t done, uint64_t total, gdt_error *err);
+
+/* Tile index of lattice point (x, y) or UINT64_MAX if no such tile. */
+uint64_t tl_tile_of(const gdt_tiler *t, int64_t x, int64_t y);
+
+#endif

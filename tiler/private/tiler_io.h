@@ -1,0 +1,147 @@
+/* tiler_io.h — spill records and buffered record files of the tiler.
+ *
+ * A record is 32 bytes little-endian: int64 x, int64 y, IEEE double z,
+ * uint64 ord, whatever the host byte order.
+ *
+ * tl_wfile: a record file written through a caller-sized buffer.  The file
+ * is created on the first flush (so a writer that never receives a record
+ * costs no descriptor), under the temporary name; tl_wfile_commit flushes,
+ * optionally fsyncs, closes and renames it to the final name (a writer
+ * without a final name keeps its temporary name).  tl_wfile_abort closes and
+ * unlinks.  tl_rfile: sequential reads of a record file through a
+ * caller-sized buffer.
+ *
+ * Errors: GDT_EIO 4502 (create), 4503 (write), 4504 (read, short file),
+ * 4505 (fsync, rename), GDT_EINTERNAL 7001.
+ */
+#ifndef GDT_TILER_IO_H
+#define GDT_TILER_IO_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include <string.h>
+
+#include "gdt_cloud.h"
+#include "gdt_error.h"
+
+#define TL_REC 32 /* bytes per record (GDT_TILER_REC_BYTES) */
+
+static inline uint64_t tl_le64(uint64_t v)
+{
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
+    return __builtin_bswap64(v);
+#else
+    return v;
+#endif
+}
+
+static inline void tl_rec_put(unsigned char *dst, const gdt_point *p)
+{
+    uint64_t w[4];
+    memcpy(&w[0], &p->x, 8);
+    memcpy(&w[1], &p->y, 8);
+    memcpy(&w[2], &p->z, 8);
+    memcpy(&w[3], &p->ord, 8);
+    for (int i = 0; i < 4; i++)
+        w[i] = tl_le64(w[i]);
+    memcpy(dst, w, sizeof w);
+}
+
+static inline void tl_rec_get(gdt_point *p, const unsigned char *src)
+{
+    uint64_t w[4];
+    memcpy(w, src, sizeof w);
+    for (int i = 0; i < 4; i++)
+        w[i] = tl_le64(w[i]);
+    memcpy(&p->x, &w[0], 8);
+    memcpy(&p->y, &w[1], 8);
+    memcpy(&p->z, &w[2], 8);
+    memcpy(&p->ord, &w[3], 8);
+}
+
+typedef struct tl_wfile {
+    int fd;                /* -1 until the first flush */
+    char *tmp_path;        /* owned */
+    char *final_path;      /* owned; NULL: the file keeps tmp_path */
+    unsigned char *buf;    /* cap records; owned unless borrowed */
+    int borrowed;          /* buf belongs to the caller */
+    size_t len, cap;       /* records */
+    uint64_t nrec;         /* records written to the file so far (flushed or not) */
+    int durable;           /* fsync before the rename */
+} tl_wfile;
+
+/* Prepares a writer (no file yet).  final_path may be NULL.  cap >= 1.
+ * Ownership: paths are copied; release with tl_wfile_commit or _abort. */
+gdt_status tl_wfile_init(tl_wfile *w, const char *tmp_path, const char *final_path, size_t cap,
+                         int durable, gdt_error *err);
+/* The same with a caller-owned buffer of cap records (not freed here). */
+gdt_status tl_wfile_init_buf(tl_wfile *w, const char *tmp_path, const char *final_path,
+                             unsigned char *buf, size_t cap, int durable, gdt_error *err);
+gdt_status tl_wfile_flush(tl_wfile *w, gdt_error *err);
+
+static inline gdt_status tl_wfile_put(tl_wfile *w, const gdt_point *p, gdt_error *err)
+{
+    if (w->len == w->cap) {
+        gdt_status st = tl_wfile_flush(w, err);
+        if (st != GDT_OK)
+            return st;
+    }
+    tl_rec_put(w->buf + w->len * TL_REC, p);
+    w->len++;
+    w->nrec++;
+    return GDT_OK;
+}
+
+/* Flushes, creates the file if it received no record (an empty file),
+ * fsyncs when durable, closes and renames; frees everything.  On failure the
+ * file is removed and everything freed as well. */
+gdt_status tl_wfile_commit(tl_wfile *w, gdt_error *err);
+/* Closes, unlinks (temporary name) and frees; safe on a zeroed or released
+ * writer. */
+void tl_wfile_abort(tl_wfile *w);
+
+typedef struct tl_rfile {
+    int fd;
+    char *path;            /* owned, for messages */
+    unsigned char *buf;    /* owned */
+    size_t pos, len, cap;  /* records */
+    uint64_t left;         /* records not yet delivered */
+} tl_rfile;
+
+/* Opens path, which must hold exactly nrec records (checked against its
+ * size).  cap >= 1.  Ownership: release with tl_rfile_close. */
+gdt_status tl_rfile_open(tl_rfile *r, const char *path, uint64_t nrec, size_t cap,
+                         gdt_error *err);
+/* Next record into *p; *got = 0 at the end. */
+gdt_status tl_rfile_next(tl_rfile *r, gdt_point *p, int *got, gdt_error *err);
+/* Up to cap records into out[]; *n = 0 at the end. */
+gdt_status tl_rfile_read(tl_rfile *r, gdt_point *out, size_t cap, size_t *n, gdt_error *err);
+void tl_rfile_close(tl_rfile *r);
+
+/* Size of a file in records (GDT_EIO 4504 if it cannot be stat'ed or its
+ * size is not a multiple of the record size). */
+gdt_status tl_file_records(const char *path, uint64_t *nrec, gdt_error *err);
+
+/* fsync of a directory (after renames); GDT_EIO 4505. */
+gdt_status tl_sync_dir(const char *dir, gdt_error *err);
+
+/* malloc'd "%s/%s" style path; NULL when out of memory. */
+char *tl_path(const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 1, 2)))
+#endif
+    ;
+
+/* Sorts a[0..n) by ord (ords need not be distinct; equal ords keep their
+ * order).  LSD radix sort on ord - min(ord); tmp holds n records or is NULL
+ * (then it is allocated).  returns: GDT_EINTERNAL 7001. */
+gdt_status tl_sort_by_ord(gdt_point *a, size_t n, gdt_point *tmp, gdt_error *err);
+
+/* Floor division, b > 0. */
+static inline int64_t tl_floor_div(int64_t a, int64_t b)
+{
+    int64_t q = a / b;
+    return (a % b != 0 && a < 0) ? q - 1 : q;
+}
+
+#endif
