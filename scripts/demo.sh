@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The main job on a point cloud the project generates itself:
 # sets up and builds (scripts/setup.sh), generates a LiDAR-like LAS cloud,
-# describes it with --info, triangulates it and validates the mesh exactly.
+# describes it with --info, triangulates it with the OpenCL core (one tile),
+# validates the mesh exactly and compares it with the CPU reference.
 #
 #   scripts/demo.sh [POINTS]        (default 1000000)
 #
@@ -23,8 +24,12 @@ echo "== generating a LiDAR-like cloud of $POINTS points: $CLOUD"
 echo "== gdt-tile $CLOUD --info"
 build/tiler/gdt-tile "$CLOUD" --info
 
-echo "== gdt-tile $CLOUD --reference -o $MESH"
-build/tiler/gdt-tile "$CLOUD" --reference -o "$MESH" --json out/demo/run.json
+echo "== gdt-tile $CLOUD --tile 4096 -o $MESH"
+build/tiler/gdt-tile "$CLOUD" --tile 4096 -o "$MESH" --json out/demo/run.json
 
 echo "== validate_mesh.py $MESH --input $CLOUD"
 .venv/bin/python scripts/validate_mesh.py "$MESH" --input "$CLOUD"
+
+echo "== the same cloud with the CPU reference, compared"
+build/tiler/gdt-tile "$CLOUD" --reference -o out/demo/reference.ply -q
+.venv/bin/python scripts/compare_meshes.py "$MESH" out/demo/reference.ply

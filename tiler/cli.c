@@ -2,6 +2,7 @@
 #include "gdt_cli.h"
 #include "gdt_predicates.h"
 #include "private/cli_modes.h"
+#include "private/single_tile.h"
 
 #include <errno.h>
 #include <limits.h>
@@ -337,6 +338,35 @@ void gdt_options_free(gdt_options *opts)
     opts->ninputs = 0;
 }
 
+/* A run fits one tile when the inputs' header point counts add up to at
+ * most N^2/2 (half the texels of the tile's grid): then the OpenCL core
+ * triangulates the whole cloud as one tile.  Larger clouds need several
+ * tiles and the seam merge, which this build does not have yet. */
+static gdt_status check_one_tile(const gdt_options *opts, gdt_error *err)
+{
+    uint64_t total = 0, limit = (uint64_t)opts->tile * (uint64_t)opts->tile / 2;
+    for (size_t i = 0; i < opts->ninputs; i++) {
+        gdt_source *src = NULL;
+        gdt_source_opts so;
+        gdt_status st;
+        memset(&so, 0, sizeof so);
+        st = gdt_source_open(&src, opts->inputs[i], &so, err);
+        if (st != GDT_OK)
+            return st;
+        total += gdt_source_get_info(src)->point_count;
+        gdt_source_close(src);
+    }
+    if (total > limit)
+        return gdt_error_set(err, GDT_EUSAGE, 2102,
+                             "the inputs hold %llu points, more than one tile of %d x %d "
+                             "texels takes (%llu); several tiles need the seam merge, which "
+                             "is not available in this build yet (use a larger --tile, or "
+                             "--reference)",
+                             (unsigned long long)total, opts->tile, opts->tile,
+                             (unsigned long long)limit);
+    return GDT_OK;
+}
+
 /* Options that belong to stages this build does not have yet are refused
  * rather than silently ignored. */
 static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
@@ -345,13 +375,10 @@ static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
         return gdt_error_set(err, GDT_EUSAGE, 2101,
                              "resumable jobs (--job, --restart, --resume) are not available "
                              "in this build yet");
-    if (opts->mode == GDT_MODE_RUN)
-        return gdt_error_set(err, GDT_EUSAGE, 2102,
-                             "the tiled pipeline is not available in this build yet; "
-                             "use --info, or --reference for an in-memory triangulation");
-    if (opts->device != NULL)
+    if (opts->device != NULL && opts->mode != GDT_MODE_RUN)
         return gdt_error_set(err, GDT_EUSAGE, 2103,
-                             "--device: the OpenCL core is not available in this build yet");
+                             "--device only applies to a triangulation run (not --info or "
+                             "--reference)");
     return GDT_OK;
 }
 
@@ -380,13 +407,18 @@ int gdt_cli_main(int argc, char **argv)
         goto done;
     if (opts.mode == GDT_MODE_INFO) {
         st = gdt_cli_info(&opts, &err);
-    } else if (opts.mode == GDT_MODE_REFERENCE) {
+    } else {
         /* The filters' error analysis assumes IEEE double without contraction
          * or reassociation: refuse to compute anything in a build that breaks it. */
         unsigned faults = 0;
         st = gdt_predicates_selftest(&faults, &err);
-        if (st == GDT_OK)
+        if (st == GDT_OK && opts.mode == GDT_MODE_REFERENCE) {
             st = gdt_cli_reference(&opts, &err);
+        } else if (st == GDT_OK && opts.mode == GDT_MODE_RUN) {
+            st = check_one_tile(&opts, &err);
+            if (st == GDT_OK)
+                st = gdt_cli_single_tile(&opts, &err);
+        }
     }
 done:
     if (st != GDT_OK) {

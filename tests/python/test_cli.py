@@ -81,7 +81,6 @@ def test_version(gdt_bin, runner):
     ["--resume", "somejob"],
     ["IN", "--job", "j"],
     ["IN", "--restart", "--reference"],
-    ["IN", "-o", "out.ply"],
 ])
 def test_unavailable_stages_say_so(gdt_bin, runner, tmp_path, args):
     src = tmp_path / "in.las"
@@ -169,3 +168,37 @@ def test_info_tile_plan(gdt_bin, runner, data_dir, tmp_path):
     assert r2.returncode == 0, r2.stderr
     plan2 = json.loads(js.read_text())["tile_plan"]
     assert not plan2["cell_auto"] and plan2["halo_texels"] == 0
+
+
+def test_run_beyond_one_tile_says_so(gdt_bin, runner, data_dir, tmp_path):
+    # 110000 points do not fit one 64 x 64 tile: the seam merge is needed.
+    out = tmp_path / "out.ply"
+    r = runner([gdt_bin, data_dir / "autzen_trim.las", "--tile", "64", "-o", out])
+    assert r.returncode == 2, r.stderr
+    assert "not available" in r.stderr and "110000 points" in r.stderr
+    assert not out.exists()
+
+
+def test_device_only_for_runs(gdt_bin, runner, data_dir):
+    r = runner([gdt_bin, data_dir / "100-points.las", "--info", "--device", "cpu"])
+    assert r.returncode == 2
+    assert "--device" in r.stderr
+
+
+def test_missing_device_is_exit_5(gdt_bin, runner, data_dir, tmp_path):
+    out = tmp_path / "out.ply"
+    r = runner([gdt_bin, data_dir / "100-points.las", "--tile", "64", "--device", "7:7",
+                "-o", out])
+    assert r.returncode == 5, r.stderr
+    assert "CL_" in r.stderr
+    assert not out.exists()
+
+
+def test_one_tile_run_equals_reference(gdt_bin, runner, data_dir, tmp_path):
+    core, ref = tmp_path / "core.ply", tmp_path / "ref.ply"
+    src = data_dir / "autzen_trim.las"
+    r = runner([gdt_bin, src, "--tile", "1024", "-q", "-o", core])
+    assert r.returncode == 0, r.stderr
+    assert runner([gdt_bin, src, "--reference", "-q", "-o", ref]).returncode == 0
+    # unique triangulation, same vertex and face order rules: the same bytes
+    assert core.read_bytes() == ref.read_bytes()

@@ -1,0 +1,177 @@
+/* gcd_phase5.c — Phase 5: parallel Lawson flipping with the exact in-circle
+ * and the preferred-direction tie-break (kernels/gcd_flip.cl), until no
+ * edge needs a flip.  The host only reads the list lengths between
+ * launches. */
+#include "private/gcd_ctx.h"
+#include "private/gcd_test.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+/* Rounds after which flipping is declared stuck (a bug: Lawson's algorithm
+ * with the tie-break terminates). */
+#define P5_MAX_ROUNDS 1000000u
+
+/* Counters read back each round (d_small1..3 on the device). */
+enum { S_NCAND = 0, S_NEXACT = 1, S_NNEXT = 2 };
+
+gdt_status gcd_run_buffers(gdt_core *c, gcd_run *r, gdt_error *err)
+{
+    size_t T = r->cap_tris;
+    if (gcd_buf_need(c, &c->d_inact, 4 * T, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_flipped, 4 * T, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_exch, 12 * T, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_mark, 4 * T, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_stat, 64, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_bad, 4 * r->nv + 4, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_vnew, 4 * r->nv + 4, err) != GDT_OK ||
+        gcd_fill(c, &c->d_bad, r->nv, 0, err) != GDT_OK ||
+        gcd_fill(c, &c->d_vnew, r->nv, GCD_EMPTY, err) != GDT_OK ||
+        gcd_fill(c, &c->d_inact, T, 0, err) != GDT_OK ||
+        gcd_fill(c, &c->d_flipped, T, 0, err) != GDT_OK ||
+        gcd_fill(c, &c->d_mark, T, GCD_EMPTY, err) != GDT_OK)
+        return err->status;
+    r->epoch = 1;
+    return GDT_OK;
+}
+
+gdt_status gcd_flip_prepare(gdt_core *c, size_t T, gdt_error *err)
+{
+    if (gcd_buf_need(c, &c->d_vote, 4 * T, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_active, 4 * T, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_fnext, 4 * T, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_cand, 24 * T, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_exact, 12 * T, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_win, 12 * T, err) != GDT_OK ||
+        gcd_fill(c, &c->d_vote, T, GCD_EMPTY, err) != GDT_OK ||
+        gcd_fill(c, &c->d_stat, 16, 0, err) != GDT_OK)
+        return err->status;
+    return GDT_OK;
+}
+
+gdt_status gcd_flip_run(gdt_core *c, gcd_run *r, size_t na0, int all_active, uint64_t *rounds,
+                        gdt_error *err)
+{
+    size_t T = r->ntris, na = na0;
+    uint32_t cnt[3];
+    uint64_t nr = 0;
+
+    if (all_active) {
+        na = T;
+        if (gcd_args(c->k.p5_all, err, "ubbu", (unsigned)T, &c->d_active, &c->d_inact,
+                     r->epoch) != GDT_OK ||
+            gcd_launch(c, c->k.p5_all, T, err) != GDT_OK)
+            return err->status;
+    }
+    while (na > 0) {
+        uint32_t round = r->epoch;
+        if (++nr > P5_MAX_ROUNDS)
+            return gdt_error_set(err, GDT_EINTERNAL, 7651, "flipping did not end after %u rounds",
+                                 P5_MAX_ROUNDS);
+        if (gcd_fill(c, &c->d_small1, 1, 0, err) != GDT_OK ||
+            gcd_fill(c, &c->d_small2, 1, 0, err) != GDT_OK ||
+            gcd_args(c->k.p5_check, err, "bbbillbubuubbbbbb", &c->d_tri, &c->d_opp, &c->d_pos,
+                     (int)r->n, r->cx, r->cy, &c->d_active, (unsigned)na, &c->d_inact, round,
+                     (unsigned)(all_active && nr == 1), &c->d_vote, &c->d_cand, &c->d_small1, &c->d_exact, &c->d_small2,
+                     &c->d_stat) != GDT_OK ||
+            gcd_launch(c, c->k.p5_check, na, err) != GDT_OK ||
+            gcd_read_u32(c, &c->d_small2, 0, &cnt[S_NEXACT], err) != GDT_OK)
+            return err->status;
+        if (cnt[S_NEXACT] > 0 &&
+            (gcd_args(c->k.p5_exact, err, "bbbillbubbbb", &c->d_tri, &c->d_opp, &c->d_pos,
+                      (int)r->n, r->cx, r->cy, &c->d_exact, cnt[S_NEXACT], &c->d_vote,
+                      &c->d_cand, &c->d_small1, &c->d_stat) != GDT_OK ||
+             gcd_launch(c, c->k.p5_exact, cnt[S_NEXACT], err) != GDT_OK))
+            return err->status;
+        if (gcd_read_u32(c, &c->d_small1, 0, &cnt[S_NCAND], err) != GDT_OK)
+            return err->status;
+        r->epoch++;
+        if (cnt[S_NCAND] == 0)
+            break;
+        if (gcd_args(c->k.p5_flip, err, "bbbubbbubb", &c->d_tri, &c->d_opp, &c->d_cand,
+                     cnt[S_NCAND], &c->d_vote, &c->d_exch, &c->d_flipped, round, &c->d_win,
+                     &c->d_stat) != GDT_OK ||
+            gcd_launch(c, c->k.p5_flip, cnt[S_NCAND], err) != GDT_OK ||
+            gcd_args(c->k.p5_link, err, "bbubbbu", &c->d_opp, &c->d_cand, cnt[S_NCAND],
+                     &c->d_win, &c->d_exch, &c->d_flipped, round) != GDT_OK ||
+            gcd_launch(c, c->k.p5_link, cnt[S_NCAND], err) != GDT_OK ||
+            gcd_fill(c, &c->d_small3, 1, 0, err) != GDT_OK ||
+            gcd_args(c->k.p5_next, err, "bubbubb", &c->d_cand, cnt[S_NCAND], &c->d_vote,
+                     &c->d_inact, r->epoch, &c->d_fnext, &c->d_small3) != GDT_OK ||
+            gcd_launch(c, c->k.p5_next, cnt[S_NCAND], err) != GDT_OK ||
+            gcd_read_u32(c, &c->d_small3, 0, &cnt[S_NNEXT], err) != GDT_OK)
+            return err->status;
+        na = cnt[S_NNEXT];
+        gcd_buf tmp = c->d_active;
+        c->d_active = c->d_fnext;
+        c->d_fnext = tmp;
+    }
+    if (rounds != NULL)
+        *rounds = nr;
+    return GDT_OK;
+}
+
+gdt_status gcd_phase5(gdt_core *c, gcd_run *r, gdt_error *err)
+{
+    uint64_t rounds = 0;
+    uint32_t stat[4];
+    if (gcd_flip_prepare(c, r->cap_tris, err) != GDT_OK ||
+        gcd_flip_run(c, r, 0, 1, &rounds, err) != GDT_OK ||
+        gdt_ocl_read(c->ocl, c->d_stat.b, 0, stat, sizeof stat, err) != GDT_OK)
+        return err->status;
+    if (r->st != NULL) {
+        r->st->flip_iterations += rounds;
+        r->st->edges_tested += stat[0];
+        r->st->exact_escalations += stat[1];
+        r->st->tiebreaks += stat[2];
+        r->st->flips += stat[3];
+    }
+    return GDT_OK;
+}
+
+gdt_status gcd_test_flip(gdt_core *c, gdt_mesh *m, gdt_core_stats *st, gdt_error *err)
+{
+    gcd_run r;
+    int32_t *pos = NULL;
+    gdt_status s = GDT_OK;
+
+    memset(&r, 0, sizeof r);
+    r.n = m->nverts;
+    r.nv = m->nverts;
+    r.ntris = m->ntris;
+    r.cap_tris = m->ntris;
+    r.st = st;
+    if (m->ntris == 0)
+        return GDT_OK;
+    for (size_t i = 0; i < m->nverts; i++) {
+        if (i == 0 || m->pts[i].x < r.xmin)
+            r.xmin = m->pts[i].x;
+        if (i == 0 || m->pts[i].x > r.xmax)
+            r.xmax = m->pts[i].x;
+        if (i == 0 || m->pts[i].y < r.ymin)
+            r.ymin = m->pts[i].y;
+        if (i == 0 || m->pts[i].y > r.ymax)
+            r.ymax = m->pts[i].y;
+    }
+    r.cx = r.xmin + (r.xmax - r.xmin) / 2;
+    r.cy = r.ymin + (r.ymax - r.ymin) / 2;
+    pos = malloc(8 * m->nverts);
+    if (pos == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    for (size_t i = 0; i < m->nverts; i++) {
+        pos[2 * i] = (int32_t)m->pts[i].x;
+        pos[2 * i + 1] = (int32_t)m->pts[i].y;
+    }
+    if (gcd_buf_need(c, &c->d_pos, 8 * m->nverts, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_tri, 12 * m->ntris, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_opp, 12 * m->ntris, err) != GDT_OK ||
+        gdt_ocl_write(c->ocl, c->d_pos.b, 0, pos, 8 * m->nverts, err) != GDT_OK ||
+        gdt_ocl_write(c->ocl, c->d_tri.b, 0, m->tri, 12 * m->ntris, err) != GDT_OK ||
+        gdt_ocl_write(c->ocl, c->d_opp.b, 0, m->opp, 12 * m->ntris, err) != GDT_OK ||
+        gcd_run_buffers(c, &r, err) != GDT_OK || gcd_phase5(c, &r, err) != GDT_OK ||
+        gdt_ocl_read(c->ocl, c->d_tri.b, 0, m->tri, 12 * m->ntris, err) != GDT_OK ||
+        gdt_ocl_read(c->ocl, c->d_opp.b, 0, m->opp, 12 * m->ntris, err) != GDT_OK)
+        s = err->status;
+    free(pos);
+    return s;
+}

@@ -1,0 +1,139 @@
+/* gdt_core.h — the per-tile core: the gCD algorithm on OpenCL.
+ *
+ * gdt_core_triangulate computes T_{d1,d2}, the unique Delaunay
+ * triangulation with the preferred-direction tie-break (gdt_predicates.h),
+ * of the distinct tile-local points of one tile: exactly what
+ * gdt_reference_triangulate gives, as a canonical triangle set.
+ *
+ * Paths (stats->path says which one ran and why):
+ *   gcd     the digital-Voronoi path of Qi, Cao & Tan (gCD):
+ *           1. exact digital Voronoi diagram of the grid (Parallel Banding
+ *              Algorithm, integer dominance tests, a fixed tie rule) and
+ *              debris recolouring (Algorithm A.1), equal to standard flooding;
+ *              points sharing a texel: the lowest index stays, the others
+ *              are missing points;
+ *           2. dual triangles of the digital Voronoi vertices, completion to
+ *              the convex hull and a fake boundary (a symbolic polygon at
+ *              infinity, see kernels/gcd_geom.clh), neighbour links;
+ *           3. points shifted back from their texel corners to their true
+ *              positions; bad cases deleted in independent rounds;
+ *           4. missing points inserted in parallel rounds (atomic-min marks);
+ *           5. parallel Lawson flipping with the exact in-circle and the
+ *              tie-break.
+ *   insert  when the grid fits the points badly (most points would be
+ *           missing), phases 1-3 are replaced by one triangle of the fake
+ *           boundary and every point is inserted by phase 4, flipping after
+ *           each round (gDel2D style); phase 5 follows as usual.
+ * Every phase runs as OpenCL kernels; the host only orchestrates, plus the
+ * two small sequential steps the paper also does on the CPU: the debris
+ * recolouring (a priority queue over the few debris texels) and the walk
+ * along the grid border that completes the dual to the convex hull.
+ *
+ * Threading: a context is not thread-safe; use one per thread.
+ */
+#ifndef GDT_CORE_H
+#define GDT_CORE_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+
+#include "gdt_error.h"
+#include "gdt_mesh.h"
+#include "gdt_predicates.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct gdt_core gdt_core;
+
+typedef enum gdt_core_path_choice {
+    GDT_CORE_PATH_AUTO = 0, /* gcd unless most points would be missing */
+    GDT_CORE_PATH_GCD,      /* always the digital-Voronoi path */
+    GDT_CORE_PATH_INSERT    /* always the insertion path */
+} gdt_core_path_choice;
+
+typedef struct gdt_core_opts {
+    const char *device;      /* OpenCL device SPEC (gdt_ocl.h); NULL = first device */
+    const char *cache_dir;   /* PoCL kernel cache; NULL = default (gdt_ocl.h) */
+    const char *kernel_dir;  /* NULL = built-in */
+    gdt_log *log;            /* may be NULL */
+    gdt_core_path_choice path;
+    int force_no_fp64;       /* test: integer predicates only */
+    double missing_limit;    /* AUTO: insertion path above this missing fraction
+                                (0 = default 0.5) */
+    int profile;             /* time every kernel (gdt_core_profile_dump) */
+    int check_phases;        /* debug: download and verify the triangulation
+                                after phases 2, 3 and 4 (GDT_EINTERNAL 7690) */
+} gdt_core_opts;
+
+/* Per-phase figures of one gdt_core_triangulate call (cf. Fig. 11 of the
+ * gCD paper).  Times are wall-clock seconds including the device work. */
+typedef struct gdt_core_stats {
+    char path[16];             /* "gcd" or "insert" */
+    char path_reason[160];     /* why that path was taken */
+    uint64_t points;           /* n */
+    uint32_t grid_w, grid_h;   /* texels used (<= grid_n each) */
+    int64_t cell;              /* lattice units per texel */
+    double t_upload, t_phase1, t_phase2, t_phase3, t_phase4, t_phase5, t_download, t_total;
+    /* phase 1 */
+    uint64_t kept;             /* points owning a texel */
+    uint64_t missing_phase1;   /* points sharing a texel with a lower index */
+    uint64_t debris_texels;    /* texels recoloured by Algorithm A.1 */
+    /* phase 2 */
+    uint64_t dual_triangles;   /* from digital Voronoi vertices */
+    uint64_t hull_triangles;   /* completing the dual to the convex hull */
+    uint64_t fake_triangles;   /* between the hull and the fake boundary */
+    /* phase 3 */
+    uint64_t shift_iterations; /* rounds of Algorithm 1 */
+    uint64_t shifted;          /* good cases (points moved in place) */
+    uint64_t bad_cases;        /* deleted and re-inserted */
+    uint64_t delete_iterations;
+    /* phase 4 */
+    uint64_t inserted;         /* missing points inserted */
+    uint64_t insert_iterations;
+    uint64_t walk_steps;       /* point-location steps */
+    uint64_t insert_flips;     /* insertion path: flips between rounds */
+    /* phase 5 */
+    uint64_t flips;
+    uint64_t flip_iterations;
+    uint64_t edges_tested;     /* in-circle tests evaluated */
+    uint64_t exact_escalations; /* tests the double filter left to the integer path */
+    uint64_t tiebreaks;        /* co-circular convex quads decided by the tie-break */
+    uint64_t triangles;        /* output triangles */
+} gdt_core_stats;
+
+/* Creates a core on the selected OpenCL device and builds its kernels.
+ * Ownership: *out is allocated here; free it with gdt_core_destroy.
+ * Errors: GDT_EDEVICE (5101-5199, with the OpenCL error name),
+ * GDT_EINTERNAL 7001. */
+gdt_status gdt_core_create(gdt_core **out, const gdt_core_opts *opts, gdt_error *err);
+
+/* Name of the core's device (owned by the core). */
+const char *gdt_core_device_name(const gdt_core *core);
+
+/* Triangulates pts[0..n) (distinct, tile-local coordinates in
+ * [0, GDT_COORD_MAX]) on a grid of at most grid_n x grid_n texels
+ * (grid_n a power of two, 64..16384).  On success out holds vertex i =
+ * pts[i] (out->ids, if allocated, 0..n-1) and the triangles of T_{d1,d2}
+ * with their opposite pointers; fewer than 3 points or all collinear give
+ * no triangle.  out must have been initialised (gdt_mesh_init); its content
+ * is replaced.  stats may be NULL.
+ * Errors: GDT_EINPUT 3601 (bad grid_n, coordinate out of range, too many
+ * points), 3602 (duplicate points, naming two input indices);
+ * GDT_EDEVICE 51xx; GDT_EINTERNAL 7601-7699 (an internal consistency check
+ * failed: a bug), 7001 out of memory. */
+gdt_status gdt_core_triangulate(gdt_core *core, const gdt_ipt *pts, size_t n, int grid_n,
+                                gdt_mesh *out, gdt_core_stats *stats, gdt_error *err);
+
+/* With opts.profile: the device time of every kernel so far, to f. */
+void gdt_core_profile_dump(gdt_core *core, FILE *f);
+
+/* Releases the core and every device resource.  core may be NULL. */
+void gdt_core_destroy(gdt_core *core);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

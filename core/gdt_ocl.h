@@ -1,0 +1,160 @@
+/* gdt_ocl.h — the OpenCL host driver: the only code of gdt-tile that talks
+ * to OpenCL.
+ *
+ * A gdt_ocl context holds one platform, one device, one OpenCL context and
+ * one in-order command queue, the programs built from kernels/<name>.cl, and
+ * every device buffer the caller creates through it.  Callers (the gCD core)
+ * see opaque handles only; no OpenCL type or header leaks out of core/ocl.c.
+ *
+ * Device selection (gdt_ocl_opts.device, the --device SPEC of the command
+ * line):
+ *   NULL or ""   the first device of the first platform that has one;
+ *   "N"          the N-th device (from 0) counting every device of every
+ *                platform in enumeration order;
+ *   "P:D"        device D of platform P;
+ *   "cpu", "gpu" the first device of that type.
+ *
+ * Programs: kernels/<file> is read, every #include "x.clh" of the kernel
+ * directory is hashed into a comment line prepended to the source (so a
+ * kernel binary cache keyed on the source text never serves a stale build
+ * after a header changed), and the program is built with
+ *   -cl-std=CL1.2 -I <kernel dir> [-DGDT_X_NO_F64] [extra options]
+ * and never with -cl-fast-relaxed-math or -cl-unsafe-math-optimizations (the
+ * exact predicates rely on IEEE double rounding).  -DGDT_X_NO_F64 is passed
+ * when the device lacks cl_khr_fp64, or when the caller forces the integer
+ * path; kernels then never use double.
+ *
+ * PoCL kernel cache: before the first OpenCL call of the process, the
+ * environment variable POCL_CACHE_DIR is pointed at a directory the project
+ * controls: opts.cache_dir when given; else an existing POCL_CACHE_DIR is
+ * kept; else $XDG_CACHE_HOME/gdt-tile/pocl (default ~/.cache/gdt-tile/pocl).
+ * The directory is created if needed.  PoCL reads the variable once per
+ * process, so the first context created decides.
+ *
+ * Errors: every OpenCL failure is GDT_EDEVICE (exit 5) with a message
+ * naming the call and the OpenCL error (e.g. "clBuildProgram(gcd_pba.cl):
+ * CL_BUILD_PROGRAM_FAILURE ..."); message numbers 5101-5199.
+ *
+ * Threading: a context is not thread-safe; distinct contexts are independent
+ * (apart from the process-wide POCL_CACHE_DIR noted above).
+ */
+#ifndef GDT_OCL_H
+#define GDT_OCL_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+
+#include "gdt_error.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct gdt_ocl gdt_ocl;
+typedef struct gdt_ocl_program gdt_ocl_program;
+typedef struct gdt_ocl_kernel gdt_ocl_kernel;
+typedef struct gdt_ocl_buf gdt_ocl_buf;
+
+typedef struct gdt_ocl_opts {
+    const char *device;     /* device SPEC (see above); NULL = first device */
+    const char *cache_dir;  /* PoCL kernel cache directory; NULL = default */
+    const char *kernel_dir; /* NULL: $GDT_KERNEL_DIR, else the source tree's kernels/ */
+    int force_no_fp64;      /* nonzero: build every program with -DGDT_X_NO_F64 */
+    int profile;            /* nonzero: time every launch (gdt_ocl_profile_dump) */
+    gdt_log *log;           /* notes (-v) and warnings; may be NULL */
+} gdt_ocl_opts;
+
+/* Creates a context on the selected device.
+ * Ownership: *out is allocated here; release with gdt_ocl_destroy.
+ * Errors: GDT_EDEVICE 5101 (no platform/device, bad SPEC), 5102 (OpenCL
+ * call failed), GDT_EINTERNAL 7001 (out of memory). */
+gdt_status gdt_ocl_create(gdt_ocl **out, const gdt_ocl_opts *opts, gdt_error *err);
+
+/* Releases every kernel, program and buffer of the context, then the
+ * context itself.  ocl may be NULL. */
+void gdt_ocl_destroy(gdt_ocl *ocl);
+
+/* "platform name / device name" of the selected device (owned by ocl). */
+const char *gdt_ocl_device_name(const gdt_ocl *ocl);
+/* 1 when programs are built with double precision (cl_khr_fp64 present and
+ * not forced off), else 0. */
+int gdt_ocl_has_fp64(const gdt_ocl *ocl);
+/* 1 for a CPU device, 0 otherwise. */
+int gdt_ocl_is_cpu(const gdt_ocl *ocl);
+/* Number of compute units of the device. */
+unsigned gdt_ocl_compute_units(const gdt_ocl *ocl);
+/* Largest single buffer the device accepts, in bytes. */
+uint64_t gdt_ocl_max_alloc(const gdt_ocl *ocl);
+/* The kernel directory programs are read from (owned by ocl). */
+const char *gdt_ocl_kernel_dir(const gdt_ocl *ocl);
+
+/* Lists every platform and device, one line each ("P:D  N  type  name"),
+ * into buf (NUL-terminated, truncated to len).  Needs no context. */
+gdt_status gdt_ocl_list_devices(char *buf, size_t len, gdt_error *err);
+
+/* Builds kernels/<file> with the options above plus extra (may be NULL).
+ * Ownership: the program belongs to ocl (released by gdt_ocl_destroy).
+ * Errors: 5103 (source unreadable: GDT_EDEVICE, naming the path), 5104
+ * (build failed: the message carries the head of the build log, the full
+ * log goes to the log as a note). */
+gdt_status gdt_ocl_build(gdt_ocl *ocl, const char *file, const char *extra,
+                         gdt_ocl_program **out, gdt_error *err);
+
+/* Number of kernels in a built program and the name of kernel i (for the
+ * compile test); names are owned by the program. */
+size_t gdt_ocl_program_kernel_count(const gdt_ocl_program *p);
+const char *gdt_ocl_program_kernel_name(const gdt_ocl_program *p, size_t i);
+
+/* Looks up a kernel of a built program.  Owned by ocl. */
+gdt_status gdt_ocl_kernel_get(gdt_ocl_program *p, const char *name, gdt_ocl_kernel **out,
+                              gdt_error *err);
+
+/* ---- buffers ----
+ * Device buffers owned by the context: released by gdt_ocl_buf_release or
+ * gdt_ocl_destroy.  Sizes are in bytes; a zero size is rounded up to a
+ * small allocation so kernels can always be given a valid buffer. */
+gdt_status gdt_ocl_buf_create(gdt_ocl *ocl, size_t bytes, const char *what, gdt_ocl_buf **out,
+                              gdt_error *err);
+void gdt_ocl_buf_release(gdt_ocl *ocl, gdt_ocl_buf *b);
+size_t gdt_ocl_buf_size(const gdt_ocl_buf *b);
+/* Blocking transfers of bytes at offset. */
+gdt_status gdt_ocl_write(gdt_ocl *ocl, gdt_ocl_buf *b, size_t offset, const void *src,
+                         size_t bytes, gdt_error *err);
+gdt_status gdt_ocl_read(gdt_ocl *ocl, gdt_ocl_buf *b, size_t offset, void *dst, size_t bytes,
+                        gdt_error *err);
+/* Fills bytes at offset with a 4-byte pattern (offset, bytes multiples of 4). */
+gdt_status gdt_ocl_fill_u32(gdt_ocl *ocl, gdt_ocl_buf *b, size_t offset, uint32_t value,
+                            size_t bytes, gdt_error *err);
+/* Device-side copy. */
+gdt_status gdt_ocl_copy(gdt_ocl *ocl, gdt_ocl_buf *src, size_t src_off, gdt_ocl_buf *dst,
+                        size_t dst_off, size_t bytes, gdt_error *err);
+
+/* ---- kernel arguments and launches ---- */
+gdt_status gdt_ocl_arg_buf(gdt_ocl_kernel *k, unsigned i, gdt_ocl_buf *b, gdt_error *err);
+gdt_status gdt_ocl_arg_u32(gdt_ocl_kernel *k, unsigned i, uint32_t v, gdt_error *err);
+gdt_status gdt_ocl_arg_i32(gdt_ocl_kernel *k, unsigned i, int32_t v, gdt_error *err);
+gdt_status gdt_ocl_arg_i64(gdt_ocl_kernel *k, unsigned i, int64_t v, gdt_error *err);
+/* Local memory of bytes for argument i. */
+gdt_status gdt_ocl_arg_local(gdt_ocl_kernel *k, unsigned i, size_t bytes, gdt_error *err);
+
+/* Enqueues k over a 1-D range of global work-items, rounded up to a
+ * multiple of local (local = 0: the implementation chooses, no rounding).
+ * Kernels must ignore work-items at or beyond their own count.  global = 0
+ * is a no-op.  The queue is in order; gdt_ocl_finish waits. */
+gdt_status gdt_ocl_run(gdt_ocl *ocl, gdt_ocl_kernel *k, size_t global, size_t local,
+                       gdt_error *err);
+gdt_status gdt_ocl_finish(gdt_ocl *ocl, gdt_error *err);
+
+/* With opts.profile: per kernel, the number of launches and the device time
+ * they took, one line each, slowest first, to f (waits for the queue). */
+void gdt_ocl_profile_dump(gdt_ocl *ocl, FILE *f);
+
+/* Name of an OpenCL status code ("CL_OUT_OF_RESOURCES"); a constant
+ * string, "unknown OpenCL error" for codes the table does not know. */
+const char *gdt_ocl_error_name(int code);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,958 @@
+/* ocl.c — the OpenCL host driver (see gdt_ocl.h).  The only file of
+ * gdt-tile that includes the OpenCL headers. */
+#define CL_TARGET_OPENCL_VERSION 120
+#define CL_USE_DEPRECATED_OPENCL_1_2_APIS
+#include <CL/cl.h>
+
+#include "gdt_ocl.h"
+
+#include <ctype.h>
+#include <errno.h>
+#include <inttypes.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+
+#ifndef GDT_KERNEL_DIR
+#define GDT_KERNEL_DIR "kernels"
+#endif
+
+#define OCL_MAX_INCLUDE_DEPTH 8
+#define OCL_NAME_MAX 640
+
+struct gdt_ocl_kernel {
+    cl_kernel k;
+    char *name;
+    uint64_t launches;
+    double seconds; /* profiled device time */
+};
+
+struct gdt_ocl_program {
+    cl_program prog;
+    char *file;
+    size_t nkernels;
+    gdt_ocl_kernel *kernels;
+    gdt_ocl_program *next;
+};
+
+struct gdt_ocl_buf {
+    cl_mem mem;
+    size_t bytes;
+    const char *what;
+    gdt_ocl_buf *prev, *next;
+};
+
+struct gdt_ocl {
+    cl_platform_id platform;
+    cl_device_id device;
+    cl_context ctx;
+    cl_command_queue queue;
+    int fp64;
+    int is_cpu;
+    unsigned compute_units;
+    uint64_t max_alloc;
+    char name[OCL_NAME_MAX];
+    char *kernel_dir;
+    gdt_log *log;
+    gdt_ocl_program *programs;
+    gdt_ocl_buf *bufs;
+    int profile;
+};
+
+const char *gdt_ocl_error_name(int code)
+{
+    switch (code) {
+#define E(x)                                                                                   \
+    case x:                                                                                    \
+        return #x
+        E(CL_SUCCESS);
+        E(CL_DEVICE_NOT_FOUND);
+        E(CL_DEVICE_NOT_AVAILABLE);
+        E(CL_COMPILER_NOT_AVAILABLE);
+        E(CL_MEM_OBJECT_ALLOCATION_FAILURE);
+        E(CL_OUT_OF_RESOURCES);
+        E(CL_OUT_OF_HOST_MEMORY);
+        E(CL_PROFILING_INFO_NOT_AVAILABLE);
+        E(CL_MEM_COPY_OVERLAP);
+        E(CL_IMAGE_FORMAT_MISMATCH);
+        E(CL_IMAGE_FORMAT_NOT_SUPPORTED);
+        E(CL_BUILD_PROGRAM_FAILURE);
+        E(CL_MAP_FAILURE);
+        E(CL_MISALIGNED_SUB_BUFFER_OFFSET);
+        E(CL_EXEC_STATUS_ERROR_FOR_EVENTS_IN_WAIT_LIST);
+        E(CL_COMPILE_PROGRAM_FAILURE);
+        E(CL_LINKER_NOT_AVAILABLE);
+        E(CL_LINK_PROGRAM_FAILURE);
+        E(CL_DEVICE_PARTITION_FAILED);
+        E(CL_KERNEL_ARG_INFO_NOT_AVAILABLE);
+        E(CL_INVALID_VALUE);
+        E(CL_INVALID_DEVICE_TYPE);
+        E(CL_INVALID_PLATFORM);
+        E(CL_INVALID_DEVICE);
+        E(CL_INVALID_CONTEXT);
+        E(CL_INVALID_QUEUE_PROPERTIES);
+        E(CL_INVALID_COMMAND_QUEUE);
+        E(CL_INVALID_HOST_PTR);
+        E(CL_INVALID_MEM_OBJECT);
+        E(CL_INVALID_IMAGE_FORMAT_DESCRIPTOR);
+        E(CL_INVALID_IMAGE_SIZE);
+        E(CL_INVALID_SAMPLER);
+        E(CL_INVALID_BINARY);
+        E(CL_INVALID_BUILD_OPTIONS);
+        E(CL_INVALID_PROGRAM);
+        E(CL_INVALID_PROGRAM_EXECUTABLE);
+        E(CL_INVALID_KERNEL_NAME);
+        E(CL_INVALID_KERNEL_DEFINITION);
+        E(CL_INVALID_KERNEL);
+        E(CL_INVALID_ARG_INDEX);
+        E(CL_INVALID_ARG_VALUE);
+        E(CL_INVALID_ARG_SIZE);
+        E(CL_INVALID_KERNEL_ARGS);
+        E(CL_INVALID_WORK_DIMENSION);
+        E(CL_INVALID_WORK_GROUP_SIZE);
+        E(CL_INVALID_WORK_ITEM_SIZE);
+        E(CL_INVALID_GLOBAL_OFFSET);
+        E(CL_INVALID_EVENT_WAIT_LIST);
+        E(CL_INVALID_EVENT);
+        E(CL_INVALID_OPERATION);
+        E(CL_INVALID_GL_OBJECT);
+        E(CL_INVALID_BUFFER_SIZE);
+        E(CL_INVALID_MIP_LEVEL);
+        E(CL_INVALID_GLOBAL_WORK_SIZE);
+        E(CL_INVALID_PROPERTY);
+        E(CL_INVALID_IMAGE_DESCRIPTOR);
+        E(CL_INVALID_COMPILER_OPTIONS);
+        E(CL_INVALID_LINKER_OPTIONS);
+        E(CL_INVALID_DEVICE_PARTITION_COUNT);
+#undef E
+    case -1001:
+        return "CL_PLATFORM_NOT_FOUND_KHR";
+    default:
+        return "unknown OpenCL error";
+    }
+}
+
+static gdt_status cl_fail(gdt_error *err, const char *call, const char *what, cl_int rc)
+{
+    return gdt_error_set(err, GDT_EDEVICE, 5102, "OpenCL %s%s%s%s failed: %s (%d)", call,
+                         what ? "(" : "", what ? what : "", what ? ")" : "",
+                         gdt_ocl_error_name(rc), (int)rc);
+}
+
+static char *dup_str(const char *s)
+{
+    size_t n = strlen(s) + 1;
+    char *d = malloc(n);
+    if (d != NULL)
+        memcpy(d, s, n);
+    return d;
+}
+
+/* mkdir -p; returns 0 or an errno value. */
+static int make_dirs(const char *path)
+{
+    char buf[4096];
+    size_t n = strlen(path);
+    if (n == 0 || n >= sizeof buf)
+        return ENAMETOOLONG;
+    memcpy(buf, path, n + 1);
+    for (size_t i = 1; i <= n; i++) {
+        if (buf[i] == '/' || buf[i] == '\0') {
+            char c = buf[i];
+            buf[i] = '\0';
+            if (mkdir(buf, 0777) != 0 && errno != EEXIST)
+                return errno;
+            buf[i] = c;
+        }
+    }
+    return 0;
+}
+
+/* Points POCL_CACHE_DIR at a project-controlled directory (see gdt_ocl.h).
+ * Failure to create the directory is only a warning: PoCL then falls back
+ * to compiling without a cache. */
+static void set_pocl_cache(const gdt_ocl_opts *opts)
+{
+    char dir[4096];
+    const char *xdg, *home;
+    int rc;
+
+    if (opts->cache_dir != NULL && opts->cache_dir[0] != '\0') {
+        snprintf(dir, sizeof dir, "%s", opts->cache_dir);
+    } else if (getenv("POCL_CACHE_DIR") != NULL) {
+        return;
+    } else if ((xdg = getenv("XDG_CACHE_HOME")) != NULL && xdg[0] == '/') {
+        snprintf(dir, sizeof dir, "%s/gdt-tile/pocl", xdg);
+    } else if ((home = getenv("HOME")) != NULL && home[0] != '\0') {
+        snprintf(dir, sizeof dir, "%s/.cache/gdt-tile/pocl", home);
+    } else {
+        return;
+    }
+    rc = make_dirs(dir);
+    if (rc != 0) {
+        gdt_log_warn(opts->log, 5150, "cannot create the OpenCL kernel cache directory %s: %s",
+                     dir, strerror(rc));
+        return;
+    }
+    setenv("POCL_CACHE_DIR", dir, 1);
+}
+
+typedef struct dev_entry {
+    cl_platform_id platform;
+    cl_device_id device;
+    unsigned pi, di;
+    cl_device_type type;
+} dev_entry;
+
+/* Every device of every platform.  *out is malloc'ed (caller frees). */
+static gdt_status enumerate(dev_entry **out, size_t *n_out, gdt_error *err)
+{
+    cl_uint np = 0;
+    cl_platform_id *plats = NULL;
+    dev_entry *devs = NULL;
+    size_t n = 0, cap = 0;
+    gdt_status st = GDT_OK;
+    cl_int rc;
+
+    *out = NULL;
+    *n_out = 0;
+    rc = clGetPlatformIDs(0, NULL, &np);
+    if (rc == -1001 || np == 0)
+        return gdt_error_set(err, GDT_EDEVICE, 5101,
+                             "no OpenCL platform found (%s): install an OpenCL driver, e.g. "
+                             "the Debian package pocl-opencl-icd",
+                             gdt_ocl_error_name(rc == CL_SUCCESS ? -1001 : rc));
+    if (rc != CL_SUCCESS)
+        return cl_fail(err, "clGetPlatformIDs", NULL, rc);
+    plats = malloc(np * sizeof *plats);
+    if (plats == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    rc = clGetPlatformIDs(np, plats, NULL);
+    if (rc != CL_SUCCESS) {
+        st = cl_fail(err, "clGetPlatformIDs", NULL, rc);
+        goto fail;
+    }
+    for (cl_uint p = 0; p < np; p++) {
+        cl_uint nd = 0;
+        cl_device_id *ids;
+        rc = clGetDeviceIDs(plats[p], CL_DEVICE_TYPE_ALL, 0, NULL, &nd);
+        if (rc == CL_DEVICE_NOT_FOUND || nd == 0)
+            continue;
+        if (rc != CL_SUCCESS) {
+            st = cl_fail(err, "clGetDeviceIDs", NULL, rc);
+            goto fail;
+        }
+        ids = malloc(nd * sizeof *ids);
+        if (ids == NULL) {
+            st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+            goto fail;
+        }
+        rc = clGetDeviceIDs(plats[p], CL_DEVICE_TYPE_ALL, nd, ids, NULL);
+        if (rc != CL_SUCCESS) {
+            free(ids);
+            st = cl_fail(err, "clGetDeviceIDs", NULL, rc);
+            goto fail;
+        }
+        for (cl_uint d = 0; d < nd; d++) {
+            if (n == cap) {
+                size_t nc = cap ? 2 * cap : 8;
+                dev_entry *g = realloc(devs, nc * sizeof *g);
+                if (g == NULL) {
+                    free(ids);
+                    st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+                    goto fail;
+                }
+                devs = g;
+                cap = nc;
+            }
+            devs[n].platform = plats[p];
+            devs[n].device = ids[d];
+            devs[n].pi = p;
+            devs[n].di = d;
+            devs[n].type = 0;
+            clGetDeviceInfo(ids[d], CL_DEVICE_TYPE, sizeof devs[n].type, &devs[n].type, NULL);
+            n++;
+        }
+        free(ids);
+    }
+    if (n == 0) {
+        st = gdt_error_set(err, GDT_EDEVICE, 5101,
+                           "no OpenCL device found on %u platform(s) (%s)", (unsigned)np,
+                           gdt_ocl_error_name(CL_DEVICE_NOT_FOUND));
+        goto fail;
+    }
+    free(plats);
+    *out = devs;
+    *n_out = n;
+    return GDT_OK;
+fail:
+    free(plats);
+    free(devs);
+    return st;
+}
+
+static int parse_uint(const char *s, const char *end, unsigned *v)
+{
+    unsigned long x = 0;
+    if (s == end)
+        return -1;
+    for (; s < end; s++) {
+        if (!isdigit((unsigned char)*s))
+            return -1;
+        x = x * 10 + (unsigned long)(*s - '0');
+        if (x > 100000)
+            return -1;
+    }
+    *v = (unsigned)x;
+    return 0;
+}
+
+/* Picks the device SPEC designates among devs[0..n). */
+static gdt_status select_device(const dev_entry *devs, size_t n, const char *spec, size_t *pick,
+                                gdt_error *err)
+{
+    const char *colon;
+    unsigned a, b;
+
+    if (spec == NULL || spec[0] == '\0') {
+        *pick = 0;
+        return GDT_OK;
+    }
+    if (strcmp(spec, "cpu") == 0 || strcmp(spec, "gpu") == 0) {
+        cl_device_type want = spec[0] == 'c' ? CL_DEVICE_TYPE_CPU : CL_DEVICE_TYPE_GPU;
+        for (size_t i = 0; i < n; i++) {
+            if (devs[i].type & want) {
+                *pick = i;
+                return GDT_OK;
+            }
+        }
+        return gdt_error_set(err, GDT_EDEVICE, 5101,
+                             "--device %s: no OpenCL %s device among the %zu device(s) found "
+                             "(%s)",
+                             spec, spec, n, gdt_ocl_error_name(CL_DEVICE_NOT_FOUND));
+    }
+    colon = strchr(spec, ':');
+    if (colon != NULL) {
+        if (parse_uint(spec, colon, &a) != 0 || parse_uint(colon + 1, spec + strlen(spec), &b) != 0)
+            goto bad;
+        for (size_t i = 0; i < n; i++) {
+            if (devs[i].pi == a && devs[i].di == b) {
+                *pick = i;
+                return GDT_OK;
+            }
+        }
+        return gdt_error_set(err, GDT_EDEVICE, 5101,
+                             "--device %s: no device %u on platform %u (%s)", spec, b, a,
+                             gdt_ocl_error_name(CL_DEVICE_NOT_FOUND));
+    }
+    if (parse_uint(spec, spec + strlen(spec), &a) != 0)
+        goto bad;
+    if (a >= n)
+        return gdt_error_set(err, GDT_EDEVICE, 5101,
+                             "--device %s: only %zu OpenCL device(s) found (%s)", spec, n,
+                             gdt_ocl_error_name(CL_DEVICE_NOT_FOUND));
+    *pick = a;
+    return GDT_OK;
+bad:
+    return gdt_error_set(err, GDT_EDEVICE, 5101,
+                         "--device %s: expected an index N, PLATFORM:DEVICE, 'cpu' or 'gpu' (%s)",
+                         spec, gdt_ocl_error_name(CL_INVALID_VALUE));
+}
+
+static void dev_string(cl_device_id d, cl_device_info what, char *buf, size_t len)
+{
+    size_t got = 0;
+    buf[0] = '\0';
+    if (clGetDeviceInfo(d, what, len - 1, buf, &got) != CL_SUCCESS)
+        buf[0] = '\0';
+    buf[len - 1] = '\0';
+}
+
+gdt_status gdt_ocl_list_devices(char *buf, size_t len, gdt_error *err)
+{
+    dev_entry *devs = NULL;
+    size_t n = 0, used = 0;
+    gdt_status st;
+
+    if (len == 0)
+        return GDT_OK;
+    buf[0] = '\0';
+    st = enumerate(&devs, &n, err);
+    if (st != GDT_OK)
+        return st;
+    for (size_t i = 0; i < n; i++) {
+        char name[256], pname[256];
+        int w;
+        dev_string(devs[i].device, CL_DEVICE_NAME, name, sizeof name);
+        pname[0] = '\0';
+        clGetPlatformInfo(devs[i].platform, CL_PLATFORM_NAME, sizeof pname - 1, pname, NULL);
+        pname[sizeof pname - 1] = '\0';
+        w = snprintf(buf + used, len - used, "%u:%u  %zu  %s  %s / %s\n", devs[i].pi,
+                     devs[i].di, i,
+                     (devs[i].type & CL_DEVICE_TYPE_GPU)   ? "gpu"
+                     : (devs[i].type & CL_DEVICE_TYPE_CPU) ? "cpu"
+                                                           : "other",
+                     pname, name);
+        if (w < 0 || (size_t)w >= len - used)
+            break;
+        used += (size_t)w;
+    }
+    free(devs);
+    return GDT_OK;
+}
+
+gdt_status gdt_ocl_create(gdt_ocl **out, const gdt_ocl_opts *opts, gdt_error *err)
+{
+    gdt_ocl_opts defaults;
+    gdt_ocl *ocl = NULL;
+    dev_entry *devs = NULL;
+    size_t n = 0, pick = 0;
+    char ext[8192], pname[256], dname[256];
+    const char *kdir;
+    cl_int rc;
+    cl_uint cu = 0;
+    cl_ulong maxalloc = 0;
+    gdt_status st;
+
+    *out = NULL;
+    if (opts == NULL) {
+        memset(&defaults, 0, sizeof defaults);
+        opts = &defaults;
+    }
+    set_pocl_cache(opts);
+    st = enumerate(&devs, &n, err);
+    if (st != GDT_OK)
+        return st;
+    st = select_device(devs, n, opts->device, &pick, err);
+    if (st != GDT_OK)
+        goto fail;
+    ocl = calloc(1, sizeof *ocl);
+    if (ocl == NULL) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        goto fail;
+    }
+    ocl->log = opts->log;
+    ocl->platform = devs[pick].platform;
+    ocl->device = devs[pick].device;
+    ocl->is_cpu = (devs[pick].type & CL_DEVICE_TYPE_CPU) != 0;
+
+    kdir = opts->kernel_dir;
+    if (kdir == NULL || kdir[0] == '\0')
+        kdir = getenv("GDT_KERNEL_DIR");
+    if (kdir == NULL || kdir[0] == '\0')
+        kdir = GDT_KERNEL_DIR;
+    ocl->kernel_dir = dup_str(kdir);
+    if (ocl->kernel_dir == NULL) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        goto fail;
+    }
+
+    dev_string(ocl->device, CL_DEVICE_NAME, dname, sizeof dname);
+    pname[0] = '\0';
+    clGetPlatformInfo(ocl->platform, CL_PLATFORM_NAME, sizeof pname - 1, pname, NULL);
+    pname[sizeof pname - 1] = '\0';
+    /* Both names are cut so the pair always fits OCL_NAME_MAX. */
+    snprintf(ocl->name, sizeof ocl->name, "%.*s / %.*s", (int)(OCL_NAME_MAX / 2 - 2), pname,
+             (int)(OCL_NAME_MAX / 2 - 2), dname);
+    dev_string(ocl->device, CL_DEVICE_EXTENSIONS, ext, sizeof ext);
+    ocl->fp64 = strstr(ext, "cl_khr_fp64") != NULL && !opts->force_no_fp64;
+    clGetDeviceInfo(ocl->device, CL_DEVICE_MAX_COMPUTE_UNITS, sizeof cu, &cu, NULL);
+    clGetDeviceInfo(ocl->device, CL_DEVICE_MAX_MEM_ALLOC_SIZE, sizeof maxalloc, &maxalloc, NULL);
+    ocl->compute_units = cu ? cu : 1;
+    ocl->max_alloc = maxalloc;
+
+    ocl->ctx = clCreateContext(NULL, 1, &ocl->device, NULL, NULL, &rc);
+    if (rc != CL_SUCCESS) {
+        st = cl_fail(err, "clCreateContext", ocl->name, rc);
+        goto fail;
+    }
+    ocl->profile = opts->profile;
+    ocl->queue = clCreateCommandQueue(ocl->ctx, ocl->device,
+                                      opts->profile ? CL_QUEUE_PROFILING_ENABLE : 0, &rc);
+    if (rc != CL_SUCCESS) {
+        st = cl_fail(err, "clCreateCommandQueue", ocl->name, rc);
+        goto fail;
+    }
+    gdt_log_note(opts->log, "OpenCL device %s (%u compute units, %s, kernels from %s)", ocl->name,
+                 ocl->compute_units,
+                 ocl->fp64 ? "double-precision filter" : "integer predicates only",
+                 ocl->kernel_dir);
+    free(devs);
+    *out = ocl;
+    return GDT_OK;
+fail:
+    free(devs);
+    gdt_ocl_destroy(ocl);
+    return st;
+}
+
+void gdt_ocl_destroy(gdt_ocl *ocl)
+{
+    if (ocl == NULL)
+        return;
+    while (ocl->bufs != NULL)
+        gdt_ocl_buf_release(ocl, ocl->bufs);
+    while (ocl->programs != NULL) {
+        gdt_ocl_program *p = ocl->programs;
+        ocl->programs = p->next;
+        for (size_t i = 0; i < p->nkernels; i++) {
+            if (p->kernels[i].k)
+                clReleaseKernel(p->kernels[i].k);
+            free(p->kernels[i].name);
+        }
+        free(p->kernels);
+        if (p->prog)
+            clReleaseProgram(p->prog);
+        free(p->file);
+        free(p);
+    }
+    if (ocl->queue)
+        clReleaseCommandQueue(ocl->queue);
+    if (ocl->ctx)
+        clReleaseContext(ocl->ctx);
+    free(ocl->kernel_dir);
+    free(ocl);
+}
+
+const char *gdt_ocl_device_name(const gdt_ocl *ocl) { return ocl->name; }
+int gdt_ocl_has_fp64(const gdt_ocl *ocl) { return ocl->fp64; }
+int gdt_ocl_is_cpu(const gdt_ocl *ocl) { return ocl->is_cpu; }
+unsigned gdt_ocl_compute_units(const gdt_ocl *ocl) { return ocl->compute_units; }
+uint64_t gdt_ocl_max_alloc(const gdt_ocl *ocl) { return ocl->max_alloc; }
+const char *gdt_ocl_kernel_dir(const gdt_ocl *ocl) { return ocl->kernel_dir; }
+
+/* Reads a whole text file.  *out is malloc'ed and NUL-terminated. */
+static int read_text(const char *path, char **out, size_t *len)
+{
+    FILE *f = fopen(path, "rb");
+    char *buf = NULL;
+    size_t cap = 0, n = 0;
+    int e;
+
+    *out = NULL;
+    if (f == NULL)
+        return errno ? errno : EIO;
+    for (;;) {
+        size_t got;
+        if (cap - n < 4096) {
+            size_t nc = cap ? 2 * cap : 16384;
+            char *g = realloc(buf, nc + 1);
+            if (g == NULL) {
+                free(buf);
+                fclose(f);
+                return ENOMEM;
+            }
+            buf = g;
+            cap = nc;
+        }
+        got = fread(buf + n, 1, cap - n, f);
+        n += got;
+        if (got == 0)
+            break;
+    }
+    e = ferror(f) ? EIO : 0;
+    fclose(f);
+    if (e != 0) {
+        free(buf);
+        return e;
+    }
+    buf[n] = '\0';
+    *out = buf;
+    if (len)
+        *len = n;
+    return 0;
+}
+
+/* FNV-1a over the contents of every header the text includes with
+ * #include "name", recursively (headers are looked up in dir). */
+static uint64_t hash_includes(const char *dir, const char *text, uint64_t h, int depth)
+{
+    const char *s = text;
+    if (depth > OCL_MAX_INCLUDE_DEPTH)
+        return h;
+    while ((s = strstr(s, "#include")) != NULL) {
+        const char *q = s + 8, *e;
+        char path[4096], name[256];
+        char *inc = NULL;
+        size_t len = 0;
+        while (*q == ' ' || *q == '\t')
+            q++;
+        s += 8;
+        if (*q != '"')
+            continue;
+        e = strchr(q + 1, '"');
+        if (e == NULL || (size_t)(e - q - 1) >= sizeof name)
+            continue;
+        memcpy(name, q + 1, (size_t)(e - q - 1));
+        name[e - q - 1] = '\0';
+        snprintf(path, sizeof path, "%s/%s", dir, name);
+        if (read_text(path, &inc, &len) != 0)
+            continue;
+        for (size_t i = 0; i < len; i++) {
+            h ^= (unsigned char)inc[i];
+            h *= UINT64_C(1099511628211);
+        }
+        h = hash_includes(dir, inc, h, depth + 1);
+        free(inc);
+    }
+    return h;
+}
+
+gdt_status gdt_ocl_build(gdt_ocl *ocl, const char *file, const char *extra,
+                         gdt_ocl_program **out, gdt_error *err)
+{
+    gdt_ocl_program *p = NULL;
+    char path[4096], opts[4096 + 512];
+    char *text = NULL, *src = NULL, *log = NULL;
+    size_t len = 0, srclen;
+    cl_kernel *ks = NULL;
+    cl_uint nk = 0;
+    cl_int rc;
+    int e;
+    gdt_status st = GDT_OK;
+
+    *out = NULL;
+    snprintf(path, sizeof path, "%s/%s", ocl->kernel_dir, file);
+    e = read_text(path, &text, &len);
+    if (e != 0)
+        return gdt_error_set(err, GDT_EDEVICE, 5103, "cannot read the OpenCL kernel source %s: %s",
+                             path, strerror(e));
+    srclen = len + 64;
+    src = malloc(srclen);
+    if (src == NULL) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        goto fail;
+    }
+    snprintf(src, srclen, "/* headers %016" PRIx64 " */\n%s",
+             hash_includes(ocl->kernel_dir, text, UINT64_C(14695981039346656037), 0), text);
+    snprintf(opts, sizeof opts, "-cl-std=CL1.2 -I %s%s%s%s", ocl->kernel_dir,
+             ocl->fp64 ? "" : " -DGDT_X_NO_F64", extra ? " " : "", extra ? extra : "");
+
+    p = calloc(1, sizeof *p);
+    if (p == NULL) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        goto fail;
+    }
+    p->file = dup_str(file);
+    if (p->file == NULL) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        goto fail;
+    }
+    {
+        const char *srcs[1] = {src};
+        p->prog = clCreateProgramWithSource(ocl->ctx, 1, srcs, NULL, &rc);
+    }
+    if (rc != CL_SUCCESS) {
+        st = cl_fail(err, "clCreateProgramWithSource", file, rc);
+        goto fail;
+    }
+    rc = clBuildProgram(p->prog, 1, &ocl->device, opts, NULL, NULL);
+    if (rc != CL_SUCCESS) {
+        size_t loglen = 0;
+        clGetProgramBuildInfo(p->prog, ocl->device, CL_PROGRAM_BUILD_LOG, 0, NULL, &loglen);
+        log = malloc(loglen + 1);
+        if (log != NULL) {
+            log[0] = '\0';
+            clGetProgramBuildInfo(p->prog, ocl->device, CL_PROGRAM_BUILD_LOG, loglen, log, NULL);
+            log[loglen] = '\0';
+            gdt_log_note(ocl->log, "build log of %s:\n%s", path, log);
+        }
+        st = gdt_error_set(err, GDT_EDEVICE, 5104, "OpenCL clBuildProgram(%s) failed: %s (%d): %.600s",
+                           path, gdt_ocl_error_name(rc), (int)rc, log ? log : "(no build log)");
+        goto fail;
+    }
+    rc = clCreateKernelsInProgram(p->prog, 0, NULL, &nk);
+    if (rc != CL_SUCCESS) {
+        st = cl_fail(err, "clCreateKernelsInProgram", file, rc);
+        goto fail;
+    }
+    ks = calloc(nk ? nk : 1, sizeof *ks);
+    p->kernels = calloc(nk ? nk : 1, sizeof *p->kernels);
+    if (ks == NULL || p->kernels == NULL) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        goto fail;
+    }
+    if (nk > 0) {
+        rc = clCreateKernelsInProgram(p->prog, nk, ks, NULL);
+        if (rc != CL_SUCCESS) {
+            st = cl_fail(err, "clCreateKernelsInProgram", file, rc);
+            goto fail;
+        }
+    }
+    for (cl_uint i = 0; i < nk; i++) {
+        char kname[256];
+        kname[0] = '\0';
+        clGetKernelInfo(ks[i], CL_KERNEL_FUNCTION_NAME, sizeof kname - 1, kname, NULL);
+        kname[sizeof kname - 1] = '\0';
+        p->kernels[i].k = ks[i];
+        ks[i] = NULL;
+        p->kernels[i].name = dup_str(kname);
+        p->nkernels = i + 1;
+        if (p->kernels[i].name == NULL) {
+            st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+            goto fail;
+        }
+    }
+    p->next = ocl->programs;
+    ocl->programs = p;
+    *out = p;
+    p = NULL;
+fail:
+    if (ks != NULL) {
+        for (cl_uint i = 0; i < nk; i++)
+            if (ks[i])
+                clReleaseKernel(ks[i]);
+        free(ks);
+    }
+    if (p != NULL) {
+        for (size_t i = 0; i < p->nkernels; i++) {
+            clReleaseKernel(p->kernels[i].k);
+            free(p->kernels[i].name);
+        }
+        free(p->kernels);
+        if (p->prog)
+            clReleaseProgram(p->prog);
+        free(p->file);
+        free(p);
+    }
+    free(log);
+    free(src);
+    free(text);
+    return st;
+}
+
+size_t gdt_ocl_program_kernel_count(const gdt_ocl_program *p) { return p->nkernels; }
+
+const char *gdt_ocl_program_kernel_name(const gdt_ocl_program *p, size_t i)
+{
+    return i < p->nkernels ? p->kernels[i].name : NULL;
+}
+
+gdt_status gdt_ocl_kernel_get(gdt_ocl_program *p, const char *name, gdt_ocl_kernel **out,
+                              gdt_error *err)
+{
+    for (size_t i = 0; i < p->nkernels; i++) {
+        if (strcmp(p->kernels[i].name, name) == 0) {
+            *out = &p->kernels[i];
+            return GDT_OK;
+        }
+    }
+    *out = NULL;
+    return gdt_error_set(err, GDT_EDEVICE, 5105, "OpenCL program %s has no kernel %s (%s)",
+                         p->file, name, gdt_ocl_error_name(CL_INVALID_KERNEL_NAME));
+}
+
+gdt_status gdt_ocl_buf_create(gdt_ocl *ocl, size_t bytes, const char *what, gdt_ocl_buf **out,
+                              gdt_error *err)
+{
+    gdt_ocl_buf *b;
+    cl_int rc;
+    size_t alloc = bytes < 16 ? 16 : bytes;
+
+    *out = NULL;
+    if (ocl->max_alloc != 0 && alloc > ocl->max_alloc)
+        return gdt_error_set(err, GDT_EDEVICE, 5106,
+                             "OpenCL buffer %s of %zu bytes exceeds the device limit of %" PRIu64
+                             " bytes (%s)",
+                             what, alloc, ocl->max_alloc, gdt_ocl_error_name(CL_INVALID_BUFFER_SIZE));
+    b = calloc(1, sizeof *b);
+    if (b == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    b->mem = clCreateBuffer(ocl->ctx, CL_MEM_READ_WRITE, alloc, NULL, &rc);
+    if (rc != CL_SUCCESS) {
+        free(b);
+        return gdt_error_set(err, GDT_EDEVICE, 5106,
+                             "OpenCL clCreateBuffer(%s, %zu bytes) failed: %s (%d)", what, alloc,
+                             gdt_ocl_error_name(rc), (int)rc);
+    }
+    b->bytes = bytes;
+    b->what = what;
+    b->next = ocl->bufs;
+    if (ocl->bufs)
+        ocl->bufs->prev = b;
+    ocl->bufs = b;
+    *out = b;
+    return GDT_OK;
+}
+
+void gdt_ocl_buf_release(gdt_ocl *ocl, gdt_ocl_buf *b)
+{
+    if (b == NULL)
+        return;
+    if (b->prev)
+        b->prev->next = b->next;
+    else
+        ocl->bufs = b->next;
+    if (b->next)
+        b->next->prev = b->prev;
+    clReleaseMemObject(b->mem);
+    free(b);
+}
+
+size_t gdt_ocl_buf_size(const gdt_ocl_buf *b) { return b->bytes; }
+
+static gdt_status check_range(const gdt_ocl_buf *b, size_t off, size_t bytes, const char *op,
+                              gdt_error *err)
+{
+    if (off > b->bytes || bytes > b->bytes - off)
+        return gdt_error_set(err, GDT_EINTERNAL, 7501,
+                             "%s of %zu bytes at offset %zu outside the %zu-byte buffer %s", op,
+                             bytes, off, b->bytes, b->what);
+    return GDT_OK;
+}
+
+gdt_status gdt_ocl_write(gdt_ocl *ocl, gdt_ocl_buf *b, size_t offset, const void *src,
+                         size_t bytes, gdt_error *err)
+{
+    cl_int rc;
+    if (bytes == 0)
+        return GDT_OK;
+    if (check_range(b, offset, bytes, "write", err) != GDT_OK)
+        return err->status;
+    rc = clEnqueueWriteBuffer(ocl->queue, b->mem, CL_TRUE, offset, bytes, src, 0, NULL, NULL);
+    return rc == CL_SUCCESS ? GDT_OK : cl_fail(err, "clEnqueueWriteBuffer", b->what, rc);
+}
+
+gdt_status gdt_ocl_read(gdt_ocl *ocl, gdt_ocl_buf *b, size_t offset, void *dst, size_t bytes,
+                        gdt_error *err)
+{
+    cl_int rc;
+    if (bytes == 0)
+        return GDT_OK;
+    if (check_range(b, offset, bytes, "read", err) != GDT_OK)
+        return err->status;
+    rc = clEnqueueReadBuffer(ocl->queue, b->mem, CL_TRUE, offset, bytes, dst, 0, NULL, NULL);
+    return rc == CL_SUCCESS ? GDT_OK : cl_fail(err, "clEnqueueReadBuffer", b->what, rc);
+}
+
+gdt_status gdt_ocl_fill_u32(gdt_ocl *ocl, gdt_ocl_buf *b, size_t offset, uint32_t value,
+                            size_t bytes, gdt_error *err)
+{
+    cl_int rc;
+    if (bytes == 0)
+        return GDT_OK;
+    if (check_range(b, offset, bytes, "fill", err) != GDT_OK)
+        return err->status;
+    if (offset % 4 != 0 || bytes % 4 != 0)
+        return gdt_error_set(err, GDT_EINTERNAL, 7501, "unaligned fill of buffer %s", b->what);
+    rc = clEnqueueFillBuffer(ocl->queue, b->mem, &value, sizeof value, offset, bytes, 0, NULL,
+                             NULL);
+    return rc == CL_SUCCESS ? GDT_OK : cl_fail(err, "clEnqueueFillBuffer", b->what, rc);
+}
+
+gdt_status gdt_ocl_copy(gdt_ocl *ocl, gdt_ocl_buf *src, size_t src_off, gdt_ocl_buf *dst,
+                        size_t dst_off, size_t bytes, gdt_error *err)
+{
+    cl_int rc;
+    if (bytes == 0)
+        return GDT_OK;
+    if (check_range(src, src_off, bytes, "copy", err) != GDT_OK ||
+        check_range(dst, dst_off, bytes, "copy", err) != GDT_OK)
+        return err->status;
+    rc = clEnqueueCopyBuffer(ocl->queue, src->mem, dst->mem, src_off, dst_off, bytes, 0, NULL,
+                             NULL);
+    return rc == CL_SUCCESS ? GDT_OK : cl_fail(err, "clEnqueueCopyBuffer", dst->what, rc);
+}
+
+static gdt_status set_arg(gdt_ocl_kernel *k, unsigned i, size_t size, const void *v,
+                          gdt_error *err)
+{
+    cl_int rc = clSetKernelArg(k->k, i, size, v);
+    if (rc != CL_SUCCESS) {
+        char what[300];
+        snprintf(what, sizeof what, "%s, argument %u", k->name, i);
+        return cl_fail(err, "clSetKernelArg", what, rc);
+    }
+    return GDT_OK;
+}
+
+gdt_status gdt_ocl_arg_buf(gdt_ocl_kernel *k, unsigned i, gdt_ocl_buf *b, gdt_error *err)
+{
+    return set_arg(k, i, sizeof(cl_mem), &b->mem, err);
+}
+
+gdt_status gdt_ocl_arg_u32(gdt_ocl_kernel *k, unsigned i, uint32_t v, gdt_error *err)
+{
+    cl_uint x = v;
+    return set_arg(k, i, sizeof x, &x, err);
+}
+
+gdt_status gdt_ocl_arg_i32(gdt_ocl_kernel *k, unsigned i, int32_t v, gdt_error *err)
+{
+    cl_int x = v;
+    return set_arg(k, i, sizeof x, &x, err);
+}
+
+gdt_status gdt_ocl_arg_i64(gdt_ocl_kernel *k, unsigned i, int64_t v, gdt_error *err)
+{
+    cl_long x = v;
+    return set_arg(k, i, sizeof x, &x, err);
+}
+
+gdt_status gdt_ocl_arg_local(gdt_ocl_kernel *k, unsigned i, size_t bytes, gdt_error *err)
+{
+    return set_arg(k, i, bytes, NULL, err);
+}
+
+gdt_status gdt_ocl_run(gdt_ocl *ocl, gdt_ocl_kernel *k, size_t global, size_t local,
+                       gdt_error *err)
+{
+    size_t g = global, l = local;
+    cl_int rc;
+    if (global == 0)
+        return GDT_OK;
+    if (local != 0)
+        g = (global + local - 1) / local * local;
+    if (ocl->profile) {
+        cl_event ev;
+        cl_ulong t0 = 0, t1 = 0;
+        rc = clEnqueueNDRangeKernel(ocl->queue, k->k, 1, NULL, &g, local ? &l : NULL, 0, NULL, &ev);
+        if (rc != CL_SUCCESS)
+            return cl_fail(err, "clEnqueueNDRangeKernel", k->name, rc);
+        clWaitForEvents(1, &ev);
+        clGetEventProfilingInfo(ev, CL_PROFILING_COMMAND_START, sizeof t0, &t0, NULL);
+        clGetEventProfilingInfo(ev, CL_PROFILING_COMMAND_END, sizeof t1, &t1, NULL);
+        clReleaseEvent(ev);
+        k->launches++;
+        k->seconds += 1e-9 * (double)(t1 - t0);
+        return GDT_OK;
+    }
+    rc = clEnqueueNDRangeKernel(ocl->queue, k->k, 1, NULL, &g, local ? &l : NULL, 0, NULL, NULL);
+    return rc == CL_SUCCESS ? GDT_OK : cl_fail(err, "clEnqueueNDRangeKernel", k->name, rc);
+}
+
+gdt_status gdt_ocl_finish(gdt_ocl *ocl, gdt_error *err)
+{
+    cl_int rc = clFinish(ocl->queue);
+    return rc == CL_SUCCESS ? GDT_OK : cl_fail(err, "clFinish", NULL, rc);
+}
+
+void gdt_ocl_profile_dump(gdt_ocl *ocl, FILE *f)
+{
+    double total = 0;
+    size_t nk = 0, at = 0;
+    gdt_ocl_kernel **all;
+    clFinish(ocl->queue);
+    for (gdt_ocl_program *p = ocl->programs; p != NULL; p = p->next)
+        nk += p->nkernels;
+    all = malloc((nk ? nk : 1) * sizeof *all);
+    if (all == NULL)
+        return;
+    for (gdt_ocl_program *p = ocl->programs; p != NULL; p = p->next)
+        for (size_t i = 0; i < p->nkernels; i++) {
+            all[at++] = &p->kernels[i];
+            total += p->kernels[i].seconds;
+        }
+    for (size_t i = 1; i < nk; i++)
+        for (size_t j = i; j > 0 && all[j]->seconds > all[j - 1]->seconds; j--) {
+            gdt_ocl_kernel *t = all[j];
+            all[j] = all[j - 1];
+            all[j - 1] = t;
+        }
+    for (size_t i = 0; i < nk && all[i]->launches > 0; i++)
+        fprintf(f, "%-22s %8" PRIu64 " launches %9.4f s %5.1f%%\n", all[i]->name,
+                all[i]->launches, all[i]->seconds, total > 0 ? 100 * all[i]->seconds / total : 0);
+    fprintf(f, "%-22s %8s          %9.4f s\n", "(all kernels)", "", total);
+    free(all);
+}

@@ -1,0 +1,43 @@
+/* gcd_test.h — entry points into single phases of the gCD core, for the
+ * tests that compare each phase with its CPU reference.  Not part of the
+ * public API; the same code paths as gdt_core_triangulate. */
+#ifndef GCD_TEST_H
+#define GCD_TEST_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "gdt_core.h"
+#include "gdt_error.h"
+#include "gdt_mesh.h"
+
+/* Phase 1 alone on a W x H grid: sites[i] is a texel index (repeats: the
+ * lowest i wins).  colour[y*W + x] receives the texel index of the site of
+ * every texel (standard flooding).  colour holds W*H values (caller-owned). */
+gdt_status gcd_test_voronoi(gdt_core *c, const uint32_t *sites, size_t nsites, uint32_t W,
+                            uint32_t H, uint32_t *colour, gdt_error *err);
+
+/* Row bands of the column pass (1 = none). */
+void gcd_test_set_bands(gdt_core *c, unsigned bands);
+
+
+/* Phases 1 and 2 on real input (grid_n may be as small as 2): all receives
+ * the triangulation after Phase 2 — vertices n + 12 (positions: texel
+ * corner of every kept point, true position of every missing one; the 12
+ * fakes at (0, 0)), every triangle slot with its links.  centre receives
+ * the centre of the fake boundary. */
+gdt_status gcd_test_phase2(gdt_core *c, const gdt_ipt *pts, size_t n, int grid_n, gdt_mesh *all,
+                           int64_t centre[2], gdt_core_stats *st, gdt_error *err);
+
+/* Phase 5 alone on a valid triangulation m of its points (all real, hull
+ * edges without neighbour): m's triangles and links are replaced by the
+ * flipped ones. */
+gdt_status gcd_test_flip(gdt_core *c, gdt_mesh *m, gdt_core_stats *st, gdt_error *err);
+
+/* The scan kernels on in[0..n): out receives the exclusive prefix sums and
+ * *total the sum; flagged[0..*nflagged) the indices of the nonzero entries
+ * in increasing order (the compaction kernel).  Caller-owned arrays of n. */
+gdt_status gcd_test_scan(gdt_core *c, const uint32_t *in, size_t n, uint32_t *out,
+                         uint32_t *total, size_t *nflagged, uint32_t *flagged, gdt_error *err);
+
+#endif

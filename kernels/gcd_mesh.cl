@@ -1,0 +1,214 @@
+/* gcd_mesh.cl — triangle-list kernels shared by the phases of the gCD core.
+ *
+ * Layout (core/gdt_mesh.h): triangle t has vertices tri[3t..3t+2]; slot i
+ * faces the edge tri[3t+(i+1)%3] -> tri[3t+(i+2)%3]; opp[3t+i] is
+ * (u << 2 | j) for the neighbour u across it (its slot j), or -1.  A dead
+ * slot has tri[3t] = -1.  vt[v] is one live triangle incident to vertex v.
+ * CPU references: gdt_mesh_link (core/mesh.c) for the links, and the
+ * checks of tests/c/test_gcd_phase2.c for the rest. */
+#include "gcd_geom.clh"
+
+/* cnt[v] += number of live triangles incident to v. */
+__kernel void m_vcount(__global const int *tri, uint T, __global uint *cnt)
+{
+    uint t = get_global_id(0);
+    if (t >= T || tri[3 * t] < 0)
+        return;
+    for (int i = 0; i < 3; i++)
+        atomic_inc(&cnt[tri[3 * t + i]]);
+}
+
+/* Vertex arrays: list[off[v] .. off[v] + cnt[v]) receives v's triangles
+ * (in arbitrary order; fill[] counts them up again from zero). */
+__kernel void m_vfill(__global const int *tri, uint T, __global const uint *off,
+                      __global uint *fill, __global int *list)
+{
+    uint t = get_global_id(0);
+    if (t >= T || tri[3 * t] < 0)
+        return;
+    for (int i = 0; i < 3; i++) {
+        int v = tri[3 * t + i];
+        uint k = atomic_inc(&fill[v]);
+        list[off[v] + k] = (int)t;
+    }
+}
+
+/* Neighbour links from the vertex arrays: the triangle across edge a -> b
+ * of t is the one of a's triangles that holds b -> a.  Each interior edge
+ * is searched once, by the side with a < b, which sets both links; opp
+ * must be preset to -1 (hull edges keep it).  The result does not depend
+ * on the order of the vertex arrays. */
+__kernel void m_link(__global const int *tri, uint T, __global const uint *off,
+                     __global const uint *cnt, __global const int *list, __global int *opp)
+{
+    uint t = get_global_id(0);
+    if (t >= T || tri[3 * t] < 0)
+        return;
+    for (int i = 0; i < 3; i++) {
+        int a = tri[3 * t + (i + 1) % 3], b = tri[3 * t + (i + 2) % 3];
+        if (a > b)
+            continue;
+        for (uint k = 0; k < cnt[a]; k++) {
+            int u = list[off[a] + k], j = -1;
+            /* u traverses b -> a opposite its slot j */
+            if (tri[3 * u + 1] == b && tri[3 * u + 2] == a)
+                j = 0;
+            else if (tri[3 * u + 2] == b && tri[3 * u] == a)
+                j = 1;
+            else if (tri[3 * u] == b && tri[3 * u + 1] == a)
+                j = 2;
+            if (j >= 0) {
+                opp[3 * t + i] = (u << 2) | j;
+                opp[3 * u + j] = ((int)t << 2) | i;
+                break;
+            }
+        }
+    }
+}
+
+/* vt[v] = the smallest live triangle incident to v (vt preset to -1 read
+ * as unsigned, i.e. 0xffffffff). */
+__kernel void m_vt_min(__global const int *tri, uint T, __global uint *vt)
+{
+    uint t = get_global_id(0);
+    if (t >= T || tri[3 * t] < 0)
+        return;
+    for (int i = 0; i < 3; i++)
+        atomic_min(&vt[tri[3 * t + i]], t);
+}
+
+/* Current positions: the texel corner for a point that owns its texel,
+ * the true position otherwise. */
+__kernel void m_snap(__global const int *pts, __global const uint *texel,
+                     __global const uint *seed, uint n, int xmin, int ymin, int cell,
+                     __global int *pos)
+{
+    uint i = get_global_id(0);
+    if (i >= n)
+        return;
+    int x = pts[2 * i], y = pts[2 * i + 1];
+    if (seed[texel[i]] == i) {
+        x = xmin + (x - xmin) / cell * cell;
+        y = ymin + (y - ymin) / cell * cell;
+    }
+    pos[2 * i] = x;
+    pos[2 * i + 1] = y;
+}
+
+/* Frame vertex positions: the corner of their texel. */
+__kernel void m_frame_pos(uint W, uint H, int xmin, int ymin, int cell, uint base,
+                          __global int *pos)
+{
+    uint k = get_global_id(0);
+    if (k >= gcd_frame_count(W, H))
+        return;
+    uint t = gcd_frame_texel(k, W, H);
+    pos[2 * (base + k)] = xmin + (int)(t % W) * cell;
+    pos[2 * (base + k) + 1] = ymin + (int)(t / W) * cell;
+}
+
+/* flag[t] = 1 for a live triangle. */
+__kernel void m_live_flags(__global const int *tri, uint T, __global uint *flag)
+{
+    uint t = get_global_id(0);
+    if (t < T)
+        flag[t] = tri[3 * t] >= 0 ? 1u : 0u;
+}
+
+/* flag[t] = 1 for a live triangle whose three vertices are real (< nreal). */
+__kernel void m_real_flags(__global const int *tri, uint T, int nreal, __global uint *flag)
+{
+    uint t = get_global_id(0);
+    if (t >= T)
+        return;
+    flag[t] = (tri[3 * t] >= 0 && tri[3 * t] < nreal && tri[3 * t + 1] < nreal &&
+               tri[3 * t + 2] < nreal)
+                  ? 1u
+                  : 0u;
+}
+
+/* Compaction of the triangle list by a scanned flag array pos (exclusive
+ * sums; total = kept count): kept triangle t moves to pos[t]; links to
+ * dropped triangles become -1.  Out-of-place (ntri/nopp). */
+__kernel void m_compact_tris(__global const int *tri, __global const int *opp, uint T,
+                             __global const uint *pos, uint total, __global int *ntri,
+                             __global int *nopp)
+{
+    uint t = get_global_id(0);
+    if (t >= T)
+        return;
+    uint next = t + 1 < T ? pos[t + 1] : total;
+    if (next == pos[t])
+        return;
+    uint d = pos[t];
+    for (int i = 0; i < 3; i++) {
+        ntri[3 * d + i] = tri[3 * t + i];
+        int o = opp[3 * t + i];
+        if (o >= 0) {
+            uint u = (uint)o >> 2;
+            uint un = u + 1 < T ? pos[u + 1] : total;
+            o = un != pos[u] ? (int)((pos[u] << 2) | ((uint)o & 3u)) : GCD_NONE;
+        }
+        nopp[3 * d + i] = o;
+    }
+}
+
+/* Vertices of the triangles written this round (listed in tl[0..m)) whose
+ * vt entry no longer names a live triangle holding them: vnew[v] takes the
+ * smallest such triangle (vnew preset to 0xffffffff). */
+__kernel void m_fix_vt_collect(__global const int *tri, __global const int *tl, uint m,
+                               __global const int *vt, __global uint *vnew)
+{
+    uint i = get_global_id(0);
+    if (i >= m)
+        return;
+    int t = tl[i];
+    for (int k = 0; k < 3; k++) {
+        int v = tri[3 * t + k];
+        int old = vt[v];
+        int ok = old >= 0 && tri[3 * old] >= 0 &&
+                 (tri[3 * old] == v || tri[3 * old + 1] == v || tri[3 * old + 2] == v);
+        if (!ok)
+            atomic_min(&vnew[v], (uint)t);
+    }
+}
+
+__kernel void m_fix_vt_apply(__global const int *tri, __global const int *tl, uint m,
+                             __global int *vt, __global uint *vnew)
+{
+    uint i = get_global_id(0);
+    if (i >= m)
+        return;
+    int t = tl[i];
+    for (int k = 0; k < 3; k++) {
+        int v = tri[3 * t + k];
+        uint nv = vnew[v];
+        if (nv != GCD_EMPTY) {
+            vt[v] = (int)nv;
+            vnew[v] = GCD_EMPTY;
+        }
+    }
+}
+
+/* After m_compact_tris with the scan pos[] of live flags: vt entries move
+ * with their triangles; an entry naming a dead slot falls back to 0. */
+__kernel void m_remap_vt(__global int *vt, uint nv, __global const uint *pos, uint T,
+                         uint total)
+{
+    uint v = get_global_id(0);
+    if (v >= nv)
+        return;
+    int t = vt[v];
+    if (t < 0 || (uint)t >= T)
+        return;
+    uint next = (uint)t + 1 < T ? pos[t + 1] : total;
+    vt[v] = next != pos[t] ? (int)pos[t] : 0;
+}
+
+/* Output numbering: internal vertex indices back to input indices. */
+__kernel void m_map_out(__global int *tri, uint m, __global const uint *int2in)
+{
+    uint i = get_global_id(0);
+    if (i < m)
+        tri[i] = (int)int2in[tri[i]];
+}

@@ -1,0 +1,232 @@
+/* test_gcd_core — the whole per-tile core against the CPU reference.
+ *
+ * For grid sizes 256..4096 (smaller ones with --quick) and every generator
+ * of the degenerate corpus, random and LiDAR-like point sets: the core's
+ * output equals gdt_reference_triangulate's as a canonical triangle set,
+ * passes gdt_check_mesh, and is identical across a repeated run and a
+ * permutation of the input (mapped back).  Both paths (digital Voronoi and
+ * insertion) are forced on some sets; duplicate points are refused with
+ * GDT_EINPUT.
+ *
+ *   test_gcd_core [--quick] [--big N] [--only NAME]
+ * Exit 77 without an OpenCL device. */
+#include <inttypes.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "gdt_core.h"
+#include "gdt_reference.h"
+#include "gen_degenerate.h"
+#include "test_gcd_gen.h"
+
+static double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+typedef struct opts {
+    int quick;
+    const char *only;
+    size_t big;
+} opts;
+
+/* One point set through the core: compare with the reference; repeat; and
+ * a permuted copy.  path: forced path or AUTO. */
+static void run(tctx *t, gdt_core *core, gdt_core *core_ins, const gdt_ipt *pts, size_t n,
+                int grid, gen_rng *rng, const char *label, int perm)
+{
+    gdt_mesh ref, out, out2;
+    gdt_error err;
+    gdt_core_stats st, st2;
+    char why[512];
+    double t0, t_ref, t_core;
+
+    memset(&err, 0, sizeof err);
+    gdt_mesh_init(&ref);
+    gdt_mesh_init(&out);
+    gdt_mesh_init(&out2);
+    t0 = now_s();
+    if (gdt_reference_triangulate(NULL, pts, n, &ref, &err) != GDT_OK) {
+        CHECK(t, 0, "%s: reference: %s", label, err.msg);
+        goto done;
+    }
+    t_ref = now_s() - t0;
+    t0 = now_s();
+    if (gdt_core_triangulate(core, pts, n, grid, &out, &st, &err) != GDT_OK) {
+        CHECK(t, 0, "%s (grid %d): %s", label, grid, err.msg);
+        goto done;
+    }
+    t_core = now_s() - t0;
+    CHECK(t, gen_same_triangles(&out, &ref, why, sizeof why) == 0,
+          "%s (grid %d, path %s): differs from the reference: %s", label, grid, st.path, why);
+    if (gdt_check_mesh(NULL, &out, &err) != GDT_OK)
+        CHECK(t, 0, "%s (grid %d): %s", label, grid, err.msg);
+    fprintf(stderr,
+            "%-26s grid %5d %8zu pts %-6s kept %8" PRIu64 " miss %7" PRIu64 " debris %3" PRIu64
+            " bad %5" PRIu64 " ins-it %3" PRIu64 " flips %8" PRIu64 " (%3" PRIu64
+            " it) exact %6" PRIu64 " | core %.3fs ref %.3fs\n",
+            label, grid, n, st.path, st.kept, st.missing_phase1, st.debris_texels, st.bad_cases,
+            st.insert_iterations, st.flips, st.flip_iterations, st.exact_escalations, t_core,
+            t_ref);
+    /* repeat: identical triangles in the same order */
+    if (gdt_core_triangulate(core, pts, n, grid, &out2, &st2, &err) != GDT_OK) {
+        CHECK(t, 0, "%s: repeat: %s", label, err.msg);
+        goto done;
+    }
+    CHECK(t, out2.ntris == out.ntris &&
+                 (out.ntris == 0 || memcmp(out2.tri, out.tri, 3 * out.ntris * sizeof *out.tri) == 0) &&
+                 st2.flips == st.flips && st2.bad_cases == st.bad_cases,
+          "%s: a repeated run differs", label);
+    /* the other path */
+    if (core_ins != NULL) {
+        if (gdt_core_triangulate(core_ins, pts, n, grid, &out2, &st2, &err) != GDT_OK) {
+            CHECK(t, 0, "%s: insertion path: %s", label, err.msg);
+            goto done;
+        }
+        CHECK(t, gen_same_triangles(&out2, &ref, why, sizeof why) == 0,
+              "%s (grid %d, path %s): differs from the reference: %s", label, grid, st2.path,
+              why);
+        fprintf(stderr,
+                "%-26s grid %5d %8zu pts %-6s inserted %7" PRIu64 " ins-it %3" PRIu64
+                " walk %8" PRIu64 " ins-flips %8" PRIu64 " flips %8" PRIu64 " | core %.3fs\n",
+                label, grid, n, st2.path, st2.inserted, st2.insert_iterations, st2.walk_steps,
+                st2.insert_flips, st2.flips, st2.t_total);
+    }
+    if (perm) {
+        gdt_ipt *q = malloc((n ? n : 1) * sizeof *q);
+        int64_t *pi = malloc((n ? n : 1) * sizeof *pi);
+        if (n > 0)
+            memcpy(q, pts, n * sizeof *q);
+        gen_shuffle(rng, q, n, pi);
+        if (gdt_core_triangulate(core, q, n, grid, &out2, &st2, &err) != GDT_OK) {
+            CHECK(t, 0, "%s: permuted: %s", label, err.msg);
+        } else {
+            /* vertex i of out2 is input point pi[i]: compare as id sets */
+            if (gdt_mesh_reserve(&out2, out2.nverts, out2.ntris, 1, &err) == GDT_OK) {
+                for (size_t i = 0; i < n; i++)
+                    out2.ids[i] = pi[i];
+                CHECK(t, gen_same_triangles(&out2, &ref, why, sizeof why) == 0,
+                      "%s: permuted input gives another triangulation: %s", label, why);
+            }
+        }
+        free(q);
+        free(pi);
+    }
+done:
+    gdt_mesh_free(&ref);
+    gdt_mesh_free(&out);
+    gdt_mesh_free(&out2);
+}
+
+int main(int argc, char **argv)
+{
+    tctx t = {0, 0};
+    gdt_core *core = NULL, *core_ins = NULL;
+    gdt_core_opts o;
+    gdt_error err;
+    gen_rng rng;
+    opts op = {0, NULL, 200000};
+    char label[128];
+
+    for (int i = 1; i < argc; i++) {
+        if (strcmp(argv[i], "--quick") == 0)
+            op.quick = 1;
+        else if (strcmp(argv[i], "--big") == 0 && i + 1 < argc)
+            op.big = (size_t)strtoull(argv[++i], NULL, 10);
+        else if (strcmp(argv[i], "--only") == 0 && i + 1 < argc)
+            op.only = argv[++i];
+    }
+    memset(&o, 0, sizeof o);
+    memset(&err, 0, sizeof err);
+    o.device = getenv("GDT_TEST_DEVICE");
+    o.path = GDT_CORE_PATH_GCD;
+    o.check_phases = getenv("GCD_CHECK_PHASES") != NULL;
+    if (gdt_core_create(&core, &o, &err) != GDT_OK) {
+        gdt_error_print(&err, stderr);
+        return err.status == GDT_EDEVICE && err.code == 5101 ? 77 : 1;
+    }
+    o.path = GDT_CORE_PATH_INSERT;
+    if (gdt_core_create(&core_ins, &o, &err) != GDT_OK) {
+        gdt_error_print(&err, stderr);
+        return 1;
+    }
+    gen_seed(&rng, 31337);
+#define ONLY(name) (op.only == NULL || strstr(name, op.only) != NULL)
+    static const int grids[] = {256, 1024, 4096};
+    for (size_t gi = 0; gi < sizeof grids / sizeof grids[0]; gi++) {
+        int g = grids[gi];
+        size_t n;
+        gdt_ipt *p;
+        if (op.quick && g > 256)
+            break;
+        if (ONLY("uniform")) {
+            size_t want = (size_t)g * g / 4 < op.big ? (size_t)g * g / 4 : op.big;
+            p = gen_uniform(&rng, want, 0, 5000000, &n);
+            snprintf(label, sizeof label, "uniform");
+            run(&t, core, gi == 0 ? core_ins : NULL, p, n, g, &rng, label, 1);
+            free(p);
+        }
+        if (ONLY("lidar")) {
+            size_t want = (size_t)g * g / 4 < op.big ? (size_t)g * g / 4 : op.big;
+            p = gcd_gen_lidar(&rng, want, 3000000, &n);
+            run(&t, core, gi == 0 ? core_ins : NULL, p, n, g, &rng, "lidar-like", 1);
+            free(p);
+        }
+        if (ONLY("grid")) {
+            p = gen_grid(300, 200, 1000, 2000, 5, &n);
+            run(&t, core, gi == 0 ? core_ins : NULL, p, n, g, &rng, "grid", 1);
+            free(p);
+        }
+        if (ONLY("rotated")) {
+            p = gen_rotated_grid(80, 3, 4, 1000000, 1000000, &n);
+            run(&t, core, NULL, p, n, g, &rng, "rotated grid", 0);
+            free(p);
+        }
+        if (ONLY("circle")) {
+            p = gen_circle(1000000, 1000000, 5525, &n);
+            run(&t, core, gi == 0 ? core_ins : NULL, p, n, g, &rng, "circle", 1);
+            free(p);
+            p = gen_thin_circle(&rng, 20000, 1000000, 1000000, 900000, 3, &n);
+            run(&t, core, NULL, p, n, g, &rng, "thin circle", 0);
+            free(p);
+        }
+        if (ONLY("collinear")) {
+            p = gen_collinear(&rng, 500, 10, 20, 3, 7, 100000, &n);
+            run(&t, core, gi == 0 ? core_ins : NULL, p, n, g, &rng, "collinear", 1);
+            free(p);
+        }
+        if (ONLY("clusters")) {
+            p = gen_clusters(&rng, 20, 2000, 300, &n);
+            run(&t, core, gi == 0 ? core_ins : NULL, p, n, g, &rng, "clusters", 1);
+            free(p);
+        }
+        if (ONLY("extremes")) {
+            p = gen_extremes(&rng, &n);
+            run(&t, core, gi == 0 ? core_ins : NULL, p, n, g, &rng, "extremes", 1);
+            free(p);
+        }
+        if (ONLY("few")) {
+            gdt_ipt few[5] = {{10, 10}, {2000000000, 11}, {15, 2000000000}, {40, 40}, {41, 41}};
+            for (size_t k = 0; k <= 5; k++) {
+                snprintf(label, sizeof label, "%zu points", k);
+                run(&t, core, gi == 0 ? core_ins : NULL, few, k, g, &rng, label, 0);
+            }
+        }
+    }
+    if (ONLY("dup")) {
+        gdt_ipt d[4] = {{5, 5}, {100, 7}, {5, 5}, {50, 90}};
+        gdt_mesh m;
+        gdt_mesh_init(&m);
+        memset(&err, 0, sizeof err);
+        gdt_status s = gdt_core_triangulate(core, d, 4, 256, &m, NULL, &err);
+        CHECK(&t, s == GDT_EINPUT && err.code == 3602, "duplicates: status %d code %d (%s)", s,
+              err.code, err.msg);
+        gdt_mesh_free(&m);
+    }
+    gdt_core_destroy(core);
+    gdt_core_destroy(core_ins);
+    return gen_finish(&t, "test_gcd_core");
+}
