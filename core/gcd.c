@@ -98,11 +98,22 @@ gdt_status gcd_args(gdt_ocl_kernel *k, gdt_error *err, const char *kinds, ...)
     return st;
 }
 
-/* A fixed work-group size: PoCL specialises (compiles) a kernel for every
- * local size it meets, so letting it choose per launch would recompile. */
+/* A fixed work-group size per kernel: PoCL specialises (compiles) a kernel
+ * for every local size it meets, so letting it choose per launch would
+ * recompile.  c->wg, or the largest power of two the device allows for the
+ * kernel (register-hungry kernels may allow less on a GPU). */
 gdt_status gcd_launch(gdt_core *c, gdt_ocl_kernel *k, size_t global, gdt_error *err)
 {
-    return gdt_ocl_run(c->ocl, k, global, c->wg, err);
+    return gcd_launch_wg(c, k, global, c->wg, err);
+}
+
+gdt_status gcd_launch_wg(gdt_core *c, gdt_ocl_kernel *k, size_t global, size_t wg,
+                         gdt_error *err)
+{
+    size_t max = gdt_ocl_kernel_max_wg(k);
+    while (wg > 1 && wg > max)
+        wg /= 2;
+    return gdt_ocl_run(c->ocl, k, global, wg, err);
 }
 
 /* ---- exclusive scan ----
@@ -174,6 +185,39 @@ gdt_status gcd_compact(gdt_core *c, gcd_buf *flags, size_t n, gcd_buf *out, size
     return GDT_OK;
 }
 
+/* Stable sort of keys[0..n) with vals (d_ buffers, sorted in place through
+ * two scratch buffers) by the low `bits` bits of the keys. */
+gdt_status gcd_radix_sort(gdt_core *c, gcd_buf *keys, gcd_buf *vals, size_t n, unsigned bits,
+                          gdt_error *err)
+{
+    const uint32_t chunk = 1024;
+    size_t nchunks = (n + chunk - 1) / chunk;
+    uint32_t total = 0;
+    if (n <= 1)
+        return GDT_OK;
+    if (gcd_buf_need(c, &c->d_rk, 4 * n, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_rv, 4 * n, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_rhist, 4 * 256 * nchunks, err) != GDT_OK)
+        return err->status;
+    for (unsigned shift = 0; shift < bits; shift += 8) {
+        if (gcd_args(c->k.radix_hist, err, "buuuub", keys, (unsigned)n, shift, chunk,
+                     (unsigned)nchunks, &c->d_rhist) != GDT_OK ||
+            gcd_launch_wg(c, c->k.radix_hist, nchunks, 16, err) != GDT_OK ||
+            gcd_scan(c, &c->d_rhist, 256 * nchunks, &total, err) != GDT_OK ||
+            gcd_args(c->k.radix_scatter, err, "bbuuuubbb", keys, vals, (unsigned)n, shift, chunk,
+                     (unsigned)nchunks, &c->d_rhist, &c->d_rk, &c->d_rv) != GDT_OK ||
+            gcd_launch_wg(c, c->k.radix_scatter, nchunks, 16, err) != GDT_OK)
+            return err->status;
+        gcd_buf tmp = *keys;
+        *keys = c->d_rk;
+        c->d_rk = tmp;
+        tmp = *vals;
+        *vals = c->d_rv;
+        c->d_rv = tmp;
+    }
+    return GDT_OK;
+}
+
 /* ---- context ---- */
 
 typedef struct kdef {
@@ -188,6 +232,9 @@ static const kdef KERNELS[] = {
     KD("gcd_scan.cl", scan_single),
     KD("gcd_scan.cl", scan_down),
     KD("gcd_scan.cl", compact_index),
+    KD("gcd_scan.cl", radix_hist),
+    KD("gcd_scan.cl", radix_scatter),
+    KD("gcd_pba.cl", p1_missing_keys),
     KD("gcd_pba.cl", p1_splat),
     KD("gcd_pba.cl", p1_missing_flags),
     KD("gcd_pba.cl", p1_plant),
@@ -197,6 +244,12 @@ static const kdef KERNELS[] = {
     KD("gcd_pba.cl", p1_number_missing),
     KD("gcd_pba.cl", p1_permute),
     KD("gcd_mesh.cl", m_map_out),
+    KD("gcd_mesh.cl", m_sort_count),
+    KD("gcd_mesh.cl", m_sort_scatter),
+    KD("gcd_mesh.cl", m_sort_bucket),
+    KD("gcd_mesh.cl", m_sort_inverse),
+    KD("gcd_mesh.cl", m_sort_apply),
+    KD("gcd_mesh.cl", m_sort_vt),
     KD("gcd_pba.cl", p1_cols_band),
     KD("gcd_pba.cl", p1_cols_link),
     KD("gcd_pba.cl", p1_cols),
@@ -225,6 +278,7 @@ static const kdef KERNELS[] = {
     KD("gcd_flip.cl", p5_next),
     KD("gcd_flip.cl", p5_all),
     KD("gcd_flip.cl", p5_from_list),
+    KD("gcd_flip.cl", p5_round_flags),
     KD("gcd_mesh.cl", m_remap_vt),
     KD("gcd_shift.cl", p3_shift),
     KD("gcd_shift.cl", p3_bulk_check),
@@ -358,6 +412,13 @@ gdt_status gdt_core_create(gdt_core **out, const gdt_core_opts *opts, gdt_error 
     NAME(d_inm);
     NAME(d_inm2);
     NAME(d_dropped);
+    NAME(d_cont2);
+    NAME(d_locep);
+    NAME(d_locep2);
+    NAME(d_rk);
+    NAME(d_rv);
+    NAME(d_rhist);
+    NAME(d_mkeys);
 #undef NAME
     st = gcd_buf_need(c, &c->d_small, 64, err);
     if (st == GDT_OK)
@@ -430,6 +491,15 @@ static gdt_status setup_run(gdt_core *c, gcd_run *r, const gdt_ipt *pts, size_t 
             r->ymax = pts[i].y;
     }
     span = (r->xmax - r->xmin > r->ymax - r->ymin ? r->xmax - r->xmin : r->ymax - r->ymin) + 1;
+    if (!c->opts.full_grid) {
+        /* A tile holds about grid_n^2/4 points; a sparser one gets a
+         * coarser grid (about 4 texels per point, at least 64 per side):
+         * the grid passes cost as much as the texels. */
+        int g = grid_n < 64 ? grid_n : 64;
+        while (g < grid_n && (uint64_t)g * (uint64_t)g < 4 * (uint64_t)n)
+            g *= 2;
+        grid_n = g;
+    }
     r->cell = (span + grid_n - 1) / grid_n;
     r->W = (uint32_t)((r->xmax - r->xmin) / r->cell + 1);
     r->H = (uint32_t)((r->ymax - r->ymin) / r->cell + 1);
@@ -438,7 +508,9 @@ static gdt_status setup_run(gdt_core *c, gcd_run *r, const gdt_ipt *pts, size_t 
     r->nframe = gcd_frame_count(r->W, r->H);
     r->frame_base = n + GCD_NFAKE;
     r->nv = n + GCD_NFAKE + r->nframe;
-    r->cap_tris = 2 * r->nv + 16;
+    /* 2 nv - 14 triangles in the end; slack for the slots Phase 3 frees
+     * (2 per deleted vertex), so that it rarely needs to compact */
+    r->cap_tris = 2 * r->nv + 16 + r->nv / 8;
     if (st != NULL) {
         st->points = n;
         st->grid_w = r->W;
@@ -736,6 +808,7 @@ gdt_status gdt_core_triangulate(gdt_core *core, const gdt_ipt *pts, size_t n, in
             return err->status;
     }
     t1 = gcd_now();
+    r.sort_tris = 1;
     if (gcd_phase5(core, &r, err) != GDT_OK || gdt_ocl_finish(core->ocl, err) != GDT_OK)
         return err->status;
     st->t_phase5 = gcd_now() - t1;
@@ -775,5 +848,19 @@ gdt_status gcd_test_scan(gdt_core *c, const uint32_t *in, size_t n, uint32_t *ou
         gdt_ocl_read(c->ocl, c->d_aux2.b, 0, flagged, 4 * cnt, err) != GDT_OK)
         return err->status;
     *nflagged = cnt;
+    return GDT_OK;
+}
+
+gdt_status gcd_test_radix(gdt_core *c, uint32_t *keys, uint32_t *vals, size_t n, unsigned bits,
+                          gdt_error *err)
+{
+    if (gcd_buf_need(c, &c->d_mkeys, 4 * n + 4, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_aux3, 4 * n + 4, err) != GDT_OK ||
+        gdt_ocl_write(c->ocl, c->d_mkeys.b, 0, keys, 4 * n, err) != GDT_OK ||
+        gdt_ocl_write(c->ocl, c->d_aux3.b, 0, vals, 4 * n, err) != GDT_OK ||
+        gcd_radix_sort(c, &c->d_mkeys, &c->d_aux3, n, bits, err) != GDT_OK ||
+        gdt_ocl_read(c->ocl, c->d_mkeys.b, 0, keys, 4 * n, err) != GDT_OK ||
+        gdt_ocl_read(c->ocl, c->d_aux3.b, 0, vals, 4 * n, err) != GDT_OK)
+        return err->status;
     return GDT_OK;
 }

@@ -342,7 +342,7 @@ gdt_status gcd_voronoi_from_seeds(gdt_core *c, gcd_run *r, gdt_error *err)
     } else {
         if (gcd_args(c->k.p1_cols_band, err, "buuubb", &c->d_seed, r->W, r->H, bands,
                      &c->d_band_lo, &c->d_band_hi) != GDT_OK ||
-            gcd_launch(c, c->k.p1_cols_band, nstrips * bands, err) != GDT_OK ||
+            gcd_launch_wg(c, c->k.p1_cols_band, nstrips * bands, 16, err) != GDT_OK ||
             gcd_args(c->k.p1_cols_link, err, "uubbbb", r->W, bands, &c->d_band_lo,
                      &c->d_band_hi, &c->d_band_below, &c->d_band_above) != GDT_OK ||
             gcd_launch(c, c->k.p1_cols_link, r->W, err) != GDT_OK)
@@ -350,9 +350,9 @@ gdt_status gcd_voronoi_from_seeds(gdt_core *c, gcd_run *r, gdt_error *err)
     }
     if (gcd_args(c->k.p1_cols, err, "buuubbb", &c->d_seed, r->W, r->H, bands, &c->d_band_below,
                  &c->d_band_above, &c->d_near) != GDT_OK ||
-        gcd_launch(c, c->k.p1_cols, nstrips * bands, err) != GDT_OK ||
+        gcd_launch_wg(c, c->k.p1_cols, nstrips * bands, 16, err) != GDT_OK ||
         gcd_args(c->k.p1_rows, err, "buub", &c->d_near, r->W, r->H, &c->d_colour) != GDT_OK ||
-        gcd_launch(c, c->k.p1_rows, r->H, err) != GDT_OK)
+        gcd_launch_wg(c, c->k.p1_rows, r->H, 16, err) != GDT_OK)
         return err->status;
 
     /* Debris seeds; the list capacity grows until it holds them all. */
@@ -361,7 +361,7 @@ gdt_status gcd_voronoi_from_seeds(gdt_core *c, gcd_run *r, gdt_error *err)
             gcd_fill(c, &c->d_small, 1, 0, err) != GDT_OK ||
             gcd_args(c->k.p1_debris, err, "buubub", &c->d_colour, r->W, r->H, &c->d_list2, cap,
                      &c->d_small) != GDT_OK ||
-            gcd_launch(c, c->k.p1_debris, npix, err) != GDT_OK ||
+            gcd_launch_wg(c, c->k.p1_debris, r->H, 16, err) != GDT_OK ||
             gcd_read_u32(c, &c->d_small, 0, &ndebris, err) != GDT_OK)
             return err->status;
         if (ndebris <= cap)
@@ -405,7 +405,11 @@ gdt_status gcd_phase1(gdt_core *c, gcd_run *r, gdt_error *err)
         gcd_launch(c, c->k.p1_missing_flags, r->n, err) != GDT_OK ||
         gcd_compact(c, &c->d_flags, r->n, &c->d_list, &nmiss, err) != GDT_OK)
         return err->status;
-    /* internal numbering: kept points in texel order, then the missing */
+    /* internal numbering: kept points in texel order, then the missing ones
+     * grouped by the vertex owning their texel (stable: input order within) */
+    unsigned bits = 8;
+    while (bits < 32 && ((size_t)1 << bits) <= r->nv)
+        bits += 8;
     if (gcd_args(c->k.p1_occ_flags, err, "buub", &c->d_seed, (unsigned)npix, (unsigned)r->n,
                  &c->d_flags) != GDT_OK ||
         gcd_launch(c, c->k.p1_occ_flags, npix, err) != GDT_OK ||
@@ -413,6 +417,11 @@ gdt_status gcd_phase1(gdt_core *c, gcd_run *r, gdt_error *err)
         gcd_args(c->k.p1_number_kept, err, "buubb", &c->d_seed, (unsigned)npix, (unsigned)r->n,
                  &c->d_flags, &c->d_int2in) != GDT_OK ||
         gcd_launch(c, c->k.p1_number_kept, npix, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_mkeys, 4 * nmiss + 4, err) != GDT_OK ||
+        gcd_args(c->k.p1_missing_keys, err, "bubbb", &c->d_list, (unsigned)nmiss,
+                 &c->d_texel_in, &c->d_seed, &c->d_mkeys) != GDT_OK ||
+        gcd_launch(c, c->k.p1_missing_keys, nmiss, err) != GDT_OK ||
+        gcd_radix_sort(c, &c->d_mkeys, &c->d_list, nmiss, bits, err) != GDT_OK ||
         gcd_args(c->k.p1_number_missing, err, "buub", &c->d_list, (unsigned)nmiss, kept,
                  &c->d_int2in) != GDT_OK ||
         gcd_launch(c, c->k.p1_number_missing, nmiss, err) != GDT_OK ||

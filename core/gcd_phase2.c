@@ -32,12 +32,13 @@ gdt_status gcd_link_all(gdt_core *c, gcd_run *r, gdt_error *err)
         gdt_ocl_copy(c->ocl, c->d_cnt.b, 0, c->d_aux.b, 0, 4 * nv, err) != GDT_OK ||
         gcd_scan(c, &c->d_aux, nv, &total, err) != GDT_OK ||
         gcd_fill(c, &c->d_cnt, nv, 0, err) != GDT_OK ||
-        gcd_args(c->k.m_vfill, err, "bubbb", &c->d_tri, (unsigned)T, &c->d_aux, &c->d_cnt,
-                 &c->d_aux2) != GDT_OK ||
+        gcd_buf_need(c, &c->d_aux3, 12 * T, err) != GDT_OK ||
+        gcd_args(c->k.m_vfill, err, "bubbbb", &c->d_tri, (unsigned)T, &c->d_aux, &c->d_cnt,
+                 &c->d_aux2, &c->d_aux3) != GDT_OK ||
         gcd_launch(c, c->k.m_vfill, T, err) != GDT_OK ||
         gcd_fill(c, &c->d_opp, 3 * T, GCD_EMPTY, err) != GDT_OK ||
-        gcd_args(c->k.m_link, err, "bubbbb", &c->d_tri, (unsigned)T, &c->d_aux, &c->d_cnt,
-                 &c->d_aux2, &c->d_opp) != GDT_OK ||
+        gcd_args(c->k.m_link, err, "bubbbbb", &c->d_tri, (unsigned)T, &c->d_aux, &c->d_cnt,
+                 &c->d_aux2, &c->d_aux3, &c->d_opp) != GDT_OK ||
         gcd_launch(c, c->k.m_link, T, err) != GDT_OK ||
         gcd_fill(c, &c->d_vt, nv, GCD_EMPTY, err) != GDT_OK ||
         gcd_args(c->k.m_vt_min, err, "bub", &c->d_tri, (unsigned)T, &c->d_vt) != GDT_OK ||

@@ -224,7 +224,11 @@ gdt_status gcd_phase3(gdt_core *c, gcd_run *r, gdt_error *err)
         r->st->shifted += stat[0];
         r->st->bad_cases += stat[1];
     }
-    return compact_tris(c, r, err);
+    /* Phase 4 appends 2 slots per inserted point; the dead slots go away
+     * with Phase 5's sort, or here when they would not leave room. */
+    if (r->ntris + 2 * (r->nmissing + (size_t)stat[1]) > r->cap_tris)
+        return compact_tris(c, r, err);
+    return GDT_OK;
 }
 
 /* The missing points: Phase 1's (sharing a texel or on the frame) and
@@ -255,6 +259,10 @@ gdt_status gcd_phase4(gdt_core *c, gcd_run *r, int flip_between, gdt_error *err)
         gcd_buf_need(c, &c->d_next, 4 * nl, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_hint2, 4 * nl, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_cont, 4 * nl, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_cont2, 4 * nl, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_locep, 4 * nl, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_locep2, 4 * nl, err) != GDT_OK ||
+        gcd_fill(c, &c->d_locep, nl, 0, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_oldnb, 4 * nl, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_win, 4 * nl, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_rank, 4 * nl, err) != GDT_OK ||
@@ -275,9 +283,9 @@ gdt_status gcd_phase4(gdt_core *c, gcd_run *r, int flip_between, gdt_error *err)
         uint32_t wins = 0, nnew = 0, left = 0, round = r->epoch++;
         if (++rounds > P4_MAX_ROUNDS)
             return gdt_error_set(err, GDT_EINTERNAL, 7641, "inserting did not end");
-        if (gcd_args(c->k.p4_locate, err, "bbbbillbubbb", &c->d_tri, &c->d_opp, &c->d_pos,
+        if (gcd_args(c->k.p4_locate, err, "bbbbillbubbbbub", &c->d_tri, &c->d_opp, &c->d_pos,
                      &c->d_pts, (int)r->n, r->cx, r->cy, &c->d_list2, (unsigned)nl, &c->d_hint,
-                     &c->d_cont, &c->d_stat34) != GDT_OK ||
+                     &c->d_cont, &c->d_locep, &c->d_flipped, round, &c->d_stat34) != GDT_OK ||
             gcd_launch(c, c->k.p4_locate, nl, err) != GDT_OK ||
             gcd_args(c->k.p4_nb, err, "bubb", &c->d_opp, (unsigned)nl, &c->d_cont,
                      &c->d_oldnb) != GDT_OK ||
@@ -331,8 +339,9 @@ gdt_status gcd_phase4(gdt_core *c, gcd_run *r, int flip_between, gdt_error *err)
                      &c->d_oldnb, &c->d_mark, &c->d_win, &c->d_rank) != GDT_OK ||
             gcd_launch(c, c->k.p4_unmark, nl, err) != GDT_OK ||
             gcd_scan(c, &c->d_rank, nl, &left, err) != GDT_OK ||
-            gcd_args(c->k.p4_compact, err, "bbububb", &c->d_list2, &c->d_hint, (unsigned)nl,
-                     &c->d_rank, left, &c->d_next, &c->d_hint2) != GDT_OK ||
+            gcd_args(c->k.p4_compact, err, "bbbbububbbb", &c->d_list2, &c->d_hint, &c->d_cont,
+                     &c->d_locep, (unsigned)nl, &c->d_rank, left, &c->d_next, &c->d_hint2,
+                     &c->d_cont2, &c->d_locep2) != GDT_OK ||
             gcd_launch(c, c->k.p4_compact, nl, err) != GDT_OK)
             return err->status;
         r->ntris += 2 * (size_t)wins;
@@ -355,6 +364,12 @@ gdt_status gcd_phase4(gdt_core *c, gcd_run *r, int flip_between, gdt_error *err)
         tmp = c->d_hint;
         c->d_hint = c->d_hint2;
         c->d_hint2 = tmp;
+        tmp = c->d_cont;
+        c->d_cont = c->d_cont2;
+        c->d_cont2 = tmp;
+        tmp = c->d_locep;
+        c->d_locep = c->d_locep2;
+        c->d_locep2 = tmp;
     }
     if (gdt_ocl_read(c->ocl, c->d_stat34.b, 0, stat, sizeof stat, err) != GDT_OK)
         return err->status;

@@ -105,9 +105,68 @@ gdt_status gcd_flip_run(gdt_core *c, gcd_run *r, size_t na0, int all_active, uin
         gcd_buf tmp = c->d_active;
         c->d_active = c->d_fnext;
         c->d_fnext = tmp;
+        if (na > T / 8) {
+            /* a long list in scheduling order would scatter the next
+             * round's reads: list the same triangles in index order */
+            size_t nsorted = 0;
+            if (gcd_buf_need(c, &c->d_flags, 4 * T, err) != GDT_OK ||
+                gcd_args(c->k.p5_round_flags, err, "buub", &c->d_inact, (unsigned)T, r->epoch,
+                         &c->d_flags) != GDT_OK ||
+                gcd_launch(c, c->k.p5_round_flags, T, err) != GDT_OK ||
+                gcd_compact(c, &c->d_flags, T, &c->d_active, &nsorted, err) != GDT_OK)
+                return err->status;
+            if (nsorted != na)
+                return gdt_error_set(err, GDT_EINTERNAL, 7653,
+                                     "active list of %zu triangles, %zu marked", na, nsorted);
+        }
     }
     if (rounds != NULL)
         *rounds = nr;
+    return GDT_OK;
+}
+
+/* Sorts the triangle list by smallest vertex (kernels/gcd_mesh.cl), dropping
+ * dead slots: the flipping rounds then find neighbours and vertices near in
+ * memory. */
+static gdt_status sort_tris(gdt_core *c, gcd_run *r, gdt_error *err)
+{
+    size_t T = r->ntris, nv = r->nv;
+    uint32_t live = 0;
+    gcd_buf tmp;
+    if (gcd_buf_need(c, &c->d_cnt, 4 * nv, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_aux, 4 * nv, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_aux2, 4 * T, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_aux3, 4 * T, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_tri2, 12 * r->cap_tris, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_opp2, 12 * r->cap_tris, err) != GDT_OK ||
+        gcd_fill(c, &c->d_cnt, nv, 0, err) != GDT_OK ||
+        gcd_args(c->k.m_sort_count, err, "bub", &c->d_tri, (unsigned)T, &c->d_cnt) != GDT_OK ||
+        gcd_launch(c, c->k.m_sort_count, T, err) != GDT_OK ||
+        gdt_ocl_copy(c->ocl, c->d_cnt.b, 0, c->d_aux.b, 0, 4 * nv, err) != GDT_OK ||
+        gcd_scan(c, &c->d_aux, nv, &live, err) != GDT_OK ||
+        gcd_fill(c, &c->d_cnt, nv, 0, err) != GDT_OK ||
+        gcd_args(c->k.m_sort_scatter, err, "bubbb", &c->d_tri, (unsigned)T, &c->d_aux, &c->d_cnt,
+                 &c->d_aux2) != GDT_OK ||
+        gcd_launch(c, c->k.m_sort_scatter, T, err) != GDT_OK ||
+        gcd_args(c->k.m_sort_bucket, err, "bbub", &c->d_aux, &c->d_cnt, (unsigned)nv,
+                 &c->d_aux2) != GDT_OK ||
+        gcd_launch(c, c->k.m_sort_bucket, nv, err) != GDT_OK ||
+        gcd_args(c->k.m_sort_inverse, err, "bub", &c->d_aux2, live, &c->d_aux3) != GDT_OK ||
+        gcd_launch(c, c->k.m_sort_inverse, live, err) != GDT_OK ||
+        gcd_args(c->k.m_sort_apply, err, "bbbbubb", &c->d_tri, &c->d_opp, &c->d_aux2, &c->d_aux3,
+                 live, &c->d_tri2, &c->d_opp2) != GDT_OK ||
+        gcd_launch(c, c->k.m_sort_apply, live, err) != GDT_OK ||
+        gcd_args(c->k.m_sort_vt, err, "bubu", &c->d_vt, (unsigned)nv, &c->d_aux3,
+                 (unsigned)T) != GDT_OK ||
+        gcd_launch(c, c->k.m_sort_vt, nv, err) != GDT_OK)
+        return err->status;
+    r->ntris = live;
+    tmp = c->d_tri;
+    c->d_tri = c->d_tri2;
+    c->d_tri2 = tmp;
+    tmp = c->d_opp;
+    c->d_opp = c->d_opp2;
+    c->d_opp2 = tmp;
     return GDT_OK;
 }
 
@@ -115,6 +174,8 @@ gdt_status gcd_phase5(gdt_core *c, gcd_run *r, gdt_error *err)
 {
     uint64_t rounds = 0;
     uint32_t stat[4];
+    if (r->sort_tris && sort_tris(c, r, err) != GDT_OK)
+        return err->status;
     if (gcd_flip_prepare(c, r->cap_tris, err) != GDT_OK ||
         gcd_flip_run(c, r, 0, 1, &rounds, err) != GDT_OK ||
         gdt_ocl_read(c->ocl, c->d_stat.b, 0, stat, sizeof stat, err) != GDT_OK)

@@ -8,26 +8,36 @@
  * Paths (stats->path says which one ran and why):
  *   gcd     the digital-Voronoi path of Qi, Cao & Tan (gCD):
  *           1. exact digital Voronoi diagram of the grid (Parallel Banding
- *              Algorithm, integer dominance tests, a fixed tie rule) and
- *              debris recolouring (Algorithm A.1), equal to standard flooding;
- *              points sharing a texel: the lowest index stays, the others
- *              are missing points;
- *           2. dual triangles of the digital Voronoi vertices, completion to
- *              the convex hull and a fake boundary (a symbolic polygon at
- *              infinity, see kernels/gcd_geom.clh), neighbour links;
- *           3. points shifted back from their texel corners to their true
- *              positions; bad cases deleted in independent rounds;
+ *              Algorithm, integer dominance tests, the fixed tie rule of
+ *              kernels/gcd_pba.cl) and debris recolouring (Algorithm A.1),
+ *              equal to standard flooding.  Points sharing a texel: the
+ *              lowest index stays, the others are missing points.  Every
+ *              border texel is the site of a "frame" vertex of its own, so
+ *              no region reaches the border and the dual is a triangulation
+ *              of the frame rectangle (Cao, Edelsbrunner, Tan); points in
+ *              border texels are missing points too;
+ *           2. dual triangles of the digital Voronoi vertices, the fake
+ *              boundary around them (a polygon at infinity, evaluated
+ *              symbolically: kernels/gcd_geom.clh), neighbour links from
+ *              vertex arrays;
+ *           3. points shifted from their texel corners to their true
+ *              positions, all at once where every triangle stays positively
+ *              oriented, then Algorithm 1 for the rest; bad cases and the
+ *              frame vertices deleted in independent rounds (Algorithm 2);
  *           4. missing points inserted in parallel rounds (atomic-min marks);
  *           5. parallel Lawson flipping with the exact in-circle and the
- *              tie-break.
+ *              tie-break.  Triangles touching a fake vertex are dropped at
+ *              the end: what remains is T_{d1,d2} of the points.
  *   insert  when the grid fits the points badly (most points would be
- *           missing), phases 1-3 are replaced by one triangle of the fake
- *           boundary and every point is inserted by phase 4, flipping after
- *           each round (gDel2D style); phase 5 follows as usual.
- * Every phase runs as OpenCL kernels; the host only orchestrates, plus the
- * two small sequential steps the paper also does on the CPU: the debris
- * recolouring (a priority queue over the few debris texels) and the walk
- * along the grid border that completes the dual to the convex hull.
+ *           missing), phases 1-3 are replaced by a fan of the fake boundary
+ *           and every point is inserted by phase 4, flipping after each
+ *           round (gDel2D style); phase 5 follows as usual.
+ * Every phase runs as OpenCL kernels; the host only orchestrates, plus two
+ * small sequential steps the paper also does on the CPU: the debris
+ * recolouring (a priority queue over the few debris texels) and the ring of
+ * triangles between the frame and the fake boundary (O(grid side)).
+ * Internally the kept points are renumbered in texel order for locality;
+ * the output uses the input indices.
  *
  * Threading: a context is not thread-safe; use one per thread.
  */
@@ -63,6 +73,8 @@ typedef struct gdt_core_opts {
     int force_no_fp64;       /* test: integer predicates only */
     double missing_limit;    /* AUTO: insertion path above this missing fraction
                                 (0 = default 0.5) */
+    int full_grid;           /* use grid_n texels per side whatever the point count
+                                (default: at most about 4 texels per point) */
     int profile;             /* time every kernel (gdt_core_profile_dump) */
     int check_phases;        /* debug: download and verify the triangulation
                                 after phases 2, 3 and 4 (GDT_EINTERNAL 7690) */
@@ -115,7 +127,8 @@ const char *gdt_core_device_name(const gdt_core *core);
 
 /* Triangulates pts[0..n) (distinct, tile-local coordinates in
  * [0, GDT_COORD_MAX]) on a grid of at most grid_n x grid_n texels
- * (grid_n a power of two, 64..16384).  On success out holds vertex i =
+ * (grid_n a power of two, 64..16384; a tile with fewer than grid_n^2/4
+ * points gets a coarser grid unless opts.full_grid).  On success out holds vertex i =
  * pts[i] (out->ids, if allocated, 0..n-1) and the triangles of T_{d1,d2}
  * with their opposite pointers; fewer than 3 points or all collinear give
  * no triangle.  out must have been initialised (gdt_mesh_init); its content

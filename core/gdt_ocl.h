@@ -106,6 +106,10 @@ gdt_status gdt_ocl_build(gdt_ocl *ocl, const char *file, const char *extra,
 size_t gdt_ocl_program_kernel_count(const gdt_ocl_program *p);
 const char *gdt_ocl_program_kernel_name(const gdt_ocl_program *p, size_t i);
 
+/* Largest work-group size the device runs kernel k with
+ * (CL_KERNEL_WORK_GROUP_SIZE), at least 1. */
+size_t gdt_ocl_kernel_max_wg(const gdt_ocl_kernel *k);
+
 /* Looks up a kernel of a built program.  Owned by ocl. */
 gdt_status gdt_ocl_kernel_get(gdt_ocl_program *p, const char *name, gdt_ocl_kernel **out,
                               gdt_error *err);

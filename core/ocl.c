@@ -1,5 +1,7 @@
 /* ocl.c — the OpenCL host driver (see gdt_ocl.h).  The only file of
  * gdt-tile that includes the OpenCL headers. */
+/* madvise(MADV_HUGEPAGE) is a Linux extension */
+#define _DEFAULT_SOURCE 1
 #define CL_TARGET_OPENCL_VERSION 120
 #define CL_USE_DEPRECATED_OPENCL_1_2_APIS
 #include <CL/cl.h>
@@ -12,6 +14,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/mman.h>
 #include <sys/stat.h>
 
 #ifndef GDT_KERNEL_DIR
@@ -19,11 +22,14 @@
 #endif
 
 #define OCL_MAX_INCLUDE_DEPTH 8
+#define OCL_HUGE_MIN ((size_t)4 << 20)
+#define OCL_HUGE_ALIGN ((size_t)2 << 20)
 #define OCL_NAME_MAX 640
 
 struct gdt_ocl_kernel {
     cl_kernel k;
     char *name;
+    size_t max_wg;
     uint64_t launches;
     double seconds; /* profiled device time */
 };
@@ -38,6 +44,7 @@ struct gdt_ocl_program {
 
 struct gdt_ocl_buf {
     cl_mem mem;
+    void *host; /* CPU devices: our own allocation behind the buffer */
     size_t bytes;
     const char *what;
     gdt_ocl_buf *prev, *next;
@@ -687,6 +694,11 @@ gdt_status gdt_ocl_build(gdt_ocl *ocl, const char *file, const char *extra,
         kname[sizeof kname - 1] = '\0';
         p->kernels[i].k = ks[i];
         ks[i] = NULL;
+        p->kernels[i].max_wg = 1;
+        clGetKernelWorkGroupInfo(p->kernels[i].k, ocl->device, CL_KERNEL_WORK_GROUP_SIZE,
+                                 sizeof p->kernels[i].max_wg, &p->kernels[i].max_wg, NULL);
+        if (p->kernels[i].max_wg < 1)
+            p->kernels[i].max_wg = 1;
         p->kernels[i].name = dup_str(kname);
         p->nkernels = i + 1;
         if (p->kernels[i].name == NULL) {
@@ -724,6 +736,8 @@ fail:
 
 size_t gdt_ocl_program_kernel_count(const gdt_ocl_program *p) { return p->nkernels; }
 
+size_t gdt_ocl_kernel_max_wg(const gdt_ocl_kernel *k) { return k->max_wg; }
+
 const char *gdt_ocl_program_kernel_name(const gdt_ocl_program *p, size_t i)
 {
     return i < p->nkernels ? p->kernels[i].name : NULL;
@@ -759,7 +773,26 @@ gdt_status gdt_ocl_buf_create(gdt_ocl *ocl, size_t bytes, const char *what, gdt_
     b = calloc(1, sizeof *b);
     if (b == NULL)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-    b->mem = clCreateBuffer(ocl->ctx, CL_MEM_READ_WRITE, alloc, NULL, &rc);
+    if (ocl->is_cpu && alloc >= OCL_HUGE_MIN) {
+        /* On a CPU device the kernels read this memory directly: back big
+         * buffers with transparent huge pages (their accesses are scattered,
+         * so TLB misses would dominate), where the kernel allows it. */
+        size_t rounded = (alloc + OCL_HUGE_ALIGN - 1) / OCL_HUGE_ALIGN * OCL_HUGE_ALIGN;
+        b->host = aligned_alloc(OCL_HUGE_ALIGN, rounded);
+        if (b->host != NULL) {
+#if defined(MADV_HUGEPAGE)
+            madvise(b->host, rounded, MADV_HUGEPAGE);
+#endif
+            b->mem = clCreateBuffer(ocl->ctx, CL_MEM_READ_WRITE | CL_MEM_USE_HOST_PTR, alloc,
+                                    b->host, &rc);
+            if (rc != CL_SUCCESS) {
+                free(b->host);
+                b->host = NULL;
+            }
+        }
+    }
+    if (b->host == NULL)
+        b->mem = clCreateBuffer(ocl->ctx, CL_MEM_READ_WRITE, alloc, NULL, &rc);
     if (rc != CL_SUCCESS) {
         free(b);
         return gdt_error_set(err, GDT_EDEVICE, 5106,
@@ -787,6 +820,7 @@ void gdt_ocl_buf_release(gdt_ocl *ocl, gdt_ocl_buf *b)
     if (b->next)
         b->next->prev = b->prev;
     clReleaseMemObject(b->mem);
+    free(b->host);
     free(b);
 }
 

@@ -47,8 +47,12 @@ __kernel void p2_count(__global const uint *colour, uint W, uint H, uint chunk,
         return;
     size_t hi = lo + chunk < ncorner ? lo + chunk : ncorner;
     uint s = 0, t[6];
-    for (size_t i = lo; i < hi; i++)
-        s += (uint)p2_corner(colour, W, (uint)(i % (W - 1)), (uint)(i / (W - 1)), t);
+    uint x = (uint)(lo % (W - 1)), y = (uint)(lo / (W - 1));
+    for (size_t i = lo; i < hi; i++) {
+        s += (uint)p2_corner(colour, W, x, y, t);
+        if (++x == W - 1)
+            x = 0, y++;
+    }
     counts[g] = s;
 }
 
@@ -64,11 +68,14 @@ __kernel void p2_write(__global const uint *colour, __global const uint *seed, u
     size_t hi = lo + chunk < ncorner ? lo + chunk : ncorner;
     size_t o = offsets[g];
     uint t[6];
+    uint x = (uint)(lo % (W - 1)), y = (uint)(lo / (W - 1));
     for (size_t i = lo; i < hi; i++) {
-        int k = p2_corner(colour, W, (uint)(i % (W - 1)), (uint)(i / (W - 1)), t);
+        int k = p2_corner(colour, W, x, y, t);
         for (int j = 0; j < 3 * k; j++)
             tri[3 * o + j] = (int)seed[t[j]];
         o += (size_t)k;
+        if (++x == W - 1)
+            x = 0, y++;
     }
 }
 

@@ -240,21 +240,34 @@ __kernel void p5_link(__global int *opp, __global const int *cand, uint nc,
 
 /* Next active list: both triangles of every candidate (flipped or
  * outvoted), once each (inact[] holds the round a triangle was listed in);
- * votes are reset. */
+ * votes are reset.  Appends are aggregated per work-group. */
 __kernel void p5_next(__global const int *cand, uint nc, __global uint *vote,
-                      __global uint *inact,
-                      uint next_round, __global int *next, __global uint *nnext)
+                      __global uint *inact, uint next_round, __global int *next,
+                      __global uint *nnext)
 {
-    uint g = get_global_id(0);
-    if (g >= nc)
-        return;
-    int t = cand[2 * g] >> 2, u = cand[2 * g + 1] >> 2;
-    vote[t] = GCD_EMPTY;
-    vote[u] = GCD_EMPTY;
-    if (atomic_xchg(&inact[t], next_round) != next_round)
-        next[atomic_inc(nnext)] = t;
-    if (atomic_xchg(&inact[u], next_round) != next_round)
-        next[atomic_inc(nnext)] = u;
+    __local uint l_n, l_base;
+    uint g = get_global_id(0), lid = get_local_id(0);
+    int add[2];
+    uint na = 0;
+    if (lid == 0)
+        l_n = 0;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    if (g < nc) {
+        int t = cand[2 * g] >> 2, u = cand[2 * g + 1] >> 2;
+        vote[t] = GCD_EMPTY;
+        vote[u] = GCD_EMPTY;
+        if (atomic_xchg(&inact[t], next_round) != next_round)
+            add[na++] = t;
+        if (atomic_xchg(&inact[u], next_round) != next_round)
+            add[na++] = u;
+    }
+    uint my = na ? atomic_add(&l_n, na) : 0;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    if (lid == 0)
+        l_base = l_n ? atomic_add(nnext, l_n) : 0;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (uint k = 0; k < na; k++)
+        next[l_base + my + k] = add[k];
 }
 
 /* Initial active list: every slot, marked with the round. */
@@ -276,4 +289,14 @@ __kernel void p5_from_list(__global const int *list, uint n, __global int *activ
         return;
     active[g] = list[g];
     inact[list[g]] = round;
+}
+
+/* flag[t] = 1 for the triangles marked for round (to rebuild a long active
+ * list in index order, which keeps the next round's reads local). */
+__kernel void p5_round_flags(__global const uint *inact, uint T, uint round,
+                             __global uint *flag)
+{
+    uint t = get_global_id(0);
+    if (t < T)
+        flag[t] = inact[t] == round ? 1u : 0u;
 }

@@ -28,18 +28,26 @@
 #define P4_STEPS 5
 
 /* cont[g] = container: (t << 2 | e), e = 3 inside, else the slot of the
- * edge p lies on.  hint[g]: start triangle in, container out. */
+ * edge p lies on.  hint[g]: start triangle in, container out.  locep[g]:
+ * the round that located the point (0: never); a point whose container
+ * was not rewritten since (modified[] holds each slot's last rewrite round)
+ * keeps it without walking. */
 __kernel void p4_locate(__global const int *tri, __global const int *opp,
                         __global const int *pos, __global const int *pts, int nreal, long cx,
                         long cy, __global const int *list, uint nl, __global int *hint,
-                        __global int *cont, __global uint *stat)
+                        __global int *cont, __global uint *locep,
+                        __global const uint *modified, uint epoch, __global uint *stat)
 {
     uint g = get_global_id(0);
     if (g >= nl)
         return;
+    /* a container untouched since the point found it is still its container */
+    if (locep[g] != 0 && cont[g] >= 0 && modified[cont[g] >> 2] < locep[g])
+        return;
+    locep[g] = epoch;
     int p = list[g];
     gcd_spt q = gcd_spt_real((long)pts[2 * p], (long)pts[2 * p + 1], cx, cy);
-    int t = hint[g], from = -1;
+    int t = hint[g];
     uint steps = 0;
     for (;;) {
         int v0 = tri[3 * t], v1 = tri[3 * t + 1], v2 = tri[3 * t + 2];
@@ -65,7 +73,6 @@ __kernel void p4_locate(__global const int *tri, __global const int *opp,
             int i = (r + k) % 3;
             int nb = opp[3 * t + i];
             if (o[i] < 0 && nb >= 0) {
-                from = t;
                 t = nb >> 2;
                 moved = 1;
             }
@@ -101,7 +108,6 @@ __kernel void p4_locate(__global const int *tri, __global const int *opp,
             cont[g] = -1;
             return;
         }
-        (void)from;
     }
 }
 
@@ -270,11 +276,12 @@ __kernel void p4_hints(__global const int *list, uint nl, __global const uint *t
     hint[g] = h;
 }
 
-/* Compaction of the losers: out[j] = list[g], outh[j] = hint[g] for
- * rank[g] = j (scan of lose[]). */
-__kernel void p4_compact(__global const int *list, __global const int *hint, uint nl,
+/* Compaction of the losers: their point, hint, container and location
+ * round move to rank[g] (scan of lose[]). */
+__kernel void p4_compact(__global const int *list, __global const int *hint,
+                         __global const int *cont, __global const uint *locep, uint nl,
                          __global const uint *rank, uint total, __global int *out,
-                         __global int *outh)
+                         __global int *outh, __global int *outc, __global uint *oute)
 {
     uint g = get_global_id(0);
     if (g >= nl)
@@ -283,6 +290,8 @@ __kernel void p4_compact(__global const int *list, __global const int *hint, uin
     if (next != rank[g]) {
         out[rank[g]] = list[g];
         outh[rank[g]] = hint[g];
+        outc[rank[g]] = cont[g];
+        oute[rank[g]] = locep[g];
     }
 }
 

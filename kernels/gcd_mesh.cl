@@ -18,28 +18,32 @@ __kernel void m_vcount(__global const int *tri, uint T, __global uint *cnt)
         atomic_inc(&cnt[tri[3 * t + i]]);
 }
 
-/* Vertex arrays: list[off[v] .. off[v] + cnt[v]) receives v's triangles
- * (in arbitrary order; fill[] counts them up again from zero). */
+/* Vertex arrays: list[off[v] .. off[v] + cnt[v]) receives v's corners
+ * (t << 2 | slot of v in t) and pred[] the vertex before v in t, in
+ * arbitrary order (fill[] counts them up again from zero). */
 __kernel void m_vfill(__global const int *tri, uint T, __global const uint *off,
-                      __global uint *fill, __global int *list)
+                      __global uint *fill, __global int *list, __global int *pred)
 {
     uint t = get_global_id(0);
     if (t >= T || tri[3 * t] < 0)
         return;
     for (int i = 0; i < 3; i++) {
         int v = tri[3 * t + i];
-        uint k = atomic_inc(&fill[v]);
-        list[off[v] + k] = (int)t;
+        uint k = off[v] + atomic_inc(&fill[v]);
+        list[k] = ((int)t << 2) | i;
+        pred[k] = tri[3 * t + (i + 2) % 3];
     }
 }
 
 /* Neighbour links from the vertex arrays: the triangle across edge a -> b
- * of t is the one of a's triangles that holds b -> a.  Each interior edge
- * is searched once, by the side with a < b, which sets both links; opp
- * must be preset to -1 (hull edges keep it).  The result does not depend
- * on the order of the vertex arrays. */
+ * of t is the one of a's corners whose predecessor of a is b (it traverses
+ * b -> a, opposite the slot after a's).  Each interior edge is searched
+ * once, by the side with a < b, which sets both links; opp must be preset
+ * to -1 (hull edges keep it).  The result does not depend on the order of
+ * the vertex arrays. */
 __kernel void m_link(__global const int *tri, uint T, __global const uint *off,
-                     __global const uint *cnt, __global const int *list, __global int *opp)
+                     __global const uint *cnt, __global const int *list,
+                     __global const int *pred, __global int *opp)
 {
     uint t = get_global_id(0);
     if (t >= T || tri[3 * t] < 0)
@@ -48,16 +52,10 @@ __kernel void m_link(__global const int *tri, uint T, __global const uint *off,
         int a = tri[3 * t + (i + 1) % 3], b = tri[3 * t + (i + 2) % 3];
         if (a > b)
             continue;
-        for (uint k = 0; k < cnt[a]; k++) {
-            int u = list[off[a] + k], j = -1;
-            /* u traverses b -> a opposite its slot j */
-            if (tri[3 * u + 1] == b && tri[3 * u + 2] == a)
-                j = 0;
-            else if (tri[3 * u + 2] == b && tri[3 * u] == a)
-                j = 1;
-            else if (tri[3 * u] == b && tri[3 * u + 1] == a)
-                j = 2;
-            if (j >= 0) {
+        uint lo = off[a], hi = lo + cnt[a];
+        for (uint k = lo; k < hi; k++) {
+            if (pred[k] == b) {
+                int u = list[k] >> 2, j = ((list[k] & 3) + 1) % 3;
                 opp[3 * t + i] = (u << 2) | j;
                 opp[3 * u + j] = ((int)t << 2) | i;
                 break;
@@ -211,4 +209,84 @@ __kernel void m_map_out(__global int *tri, uint m, __global const uint *int2in)
     uint i = get_global_id(0);
     if (i < m)
         tri[i] = (int)int2in[tri[i]];
+}
+
+/* ---- spatial re-ordering of the triangle list ----
+ * Triangles are sorted by their smallest vertex (vertex indices follow the
+ * texels, so this groups neighbours in memory), ties by old index: a
+ * counting sort (m_sort_count, scan, m_sort_scatter), each bucket then put
+ * in old-index order (m_sort_bucket), and the list rewritten with every
+ * link renumbered (m_sort_inverse, m_sort_apply).  The order is a pure
+ * function of the triangle list. */
+inline int m_min3(__global const int *tri, uint t)
+{
+    int a = tri[3 * t], b = tri[3 * t + 1], c = tri[3 * t + 2];
+    int m = a < b ? a : b;
+    return m < c ? m : c;
+}
+
+__kernel void m_sort_count(__global const int *tri, uint T, __global uint *cnt)
+{
+    uint t = get_global_id(0);
+    if (t < T && tri[3 * t] >= 0)
+        atomic_inc(&cnt[m_min3(tri, t)]);
+}
+
+__kernel void m_sort_scatter(__global const int *tri, uint T, __global const uint *off,
+                             __global uint *fill, __global int *order)
+{
+    uint t = get_global_id(0);
+    if (t >= T || tri[3 * t] < 0)
+        return;
+    int k = m_min3(tri, t);
+    order[off[k] + atomic_inc(&fill[k])] = (int)t;
+}
+
+/* fill[v] = cnt[v] after m_sort_scatter. */
+__kernel void m_sort_bucket(__global const uint *off, __global const uint *cnt, uint nv,
+                            __global int *order)
+{
+    uint v = get_global_id(0);
+    if (v >= nv)
+        return;
+    uint lo = off[v], n = cnt[v];
+    for (uint i = 1; i < n; i++) {
+        int x = order[lo + i];
+        uint j = i;
+        while (j > 0 && order[lo + j - 1] > x) {
+            order[lo + j] = order[lo + j - 1];
+            j--;
+        }
+        order[lo + j] = x;
+    }
+}
+
+__kernel void m_sort_inverse(__global const int *order, uint n, __global int *newidx)
+{
+    uint k = get_global_id(0);
+    if (k < n)
+        newidx[order[k]] = (int)k;
+}
+
+__kernel void m_sort_apply(__global const int *tri, __global const int *opp,
+                           __global const int *order, __global const int *newidx, uint n,
+                           __global int *ntri, __global int *nopp)
+{
+    uint k = get_global_id(0);
+    if (k >= n)
+        return;
+    int t = order[k];
+    for (int i = 0; i < 3; i++) {
+        ntri[3 * k + i] = tri[3 * t + i];
+        int o = opp[3 * t + i];
+        nopp[3 * k + i] = o >= 0 ? ((newidx[o >> 2] << 2) | (o & 3)) : o;
+    }
+}
+
+/* vt entries follow the permutation (deleted vertices keep their code). */
+__kernel void m_sort_vt(__global int *vt, uint nv, __global const int *newidx, uint T)
+{
+    uint v = get_global_id(0);
+    if (v < nv && vt[v] >= 0 && (uint)vt[v] < T)
+        vt[v] = newidx[vt[v]];
 }

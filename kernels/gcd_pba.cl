@@ -165,8 +165,9 @@ __kernel void p1_cols(__global const uint *seed, uint W, uint H, uint bands,
  * so m_ab = floor((xb^2 - xa^2 + db^2 - da^2) / (2 (xb - xa))). */
 inline long p1_thresh(long xa, long da, long xb, long db)
 {
-    long num = xb * xb - xa * xa + db * db - da * da;
-    long den = 2 * (xb - xa);
+    /* |num| < 2^29 and 0 < den < 2^15 (W, H <= 16384): 32-bit division */
+    int num = (int)(xb * xb - xa * xa + db * db - da * da);
+    int den = (int)(2 * (xb - xa));
     return num >= 0 ? num / den : -((-num + den - 1) / den);
 }
 
@@ -248,38 +249,45 @@ inline int p1_closer(long bx, long by, uint bi, long ax, long ay, uint ai, long 
 /* Debris seeds: a texel that is not a site and has no 8-neighbour of its
  * colour closer (in key order) to the site is the closest texel of a debris
  * component (every bulk texel other than the site has such a neighbour, by
- * the Bulk Lemma of Cao, Edelsbrunner and Tan).  Appended to list (order
- * arbitrary: the host sorts it); *count may exceed cap (then grow and rerun). */
+ * the Bulk Lemma of Cao, Edelsbrunner and Tan).  One row per work-item;
+ * appended to list (order arbitrary: the host sorts it); *count may exceed
+ * cap (then grow and rerun). */
 __kernel void p1_debris(__global const uint *colour, uint W, uint H, __global uint *list,
                         uint cap, __global uint *count)
 {
-    uint i = get_global_id(0);
-    if (i >= W * H)
+    uint y = get_global_id(0);
+    if (y >= H)
         return;
-    uint s = colour[i];
-    if (s == i || s == P1_NONE)
-        return;
-    long x = i % W, y = i / W, sx = s % W, sy = s / W;
-    /* the 8-neighbour one step towards the site is strictly closer to it:
-     * if it has the colour, the texel is supported (the usual case) */
-    {
-        long bx = x + (sx > x) - (sx < x), by = y + (sy > y) - (sy < y);
-        if (colour[by * (long)W + bx] == s)
-            return;
-    }
-    for (int dy = -1; dy <= 1; dy++) {
-        for (int dx = -1; dx <= 1; dx++) {
-            long bx = x + dx, by = y + dy;
-            if ((dx | dy) == 0 || bx < 0 || by < 0 || bx >= (long)W || by >= (long)H)
-                continue;
-            uint b = (uint)(by * (long)W + bx);
-            if (colour[b] == s && p1_closer(bx, by, b, x, y, i, sx, sy))
-                return;
+    for (uint x = 0; x < W; x++) {
+        uint i = y * W + x;
+        uint s = colour[i];
+        if (s == i || s == P1_NONE)
+            continue;
+        long sx = s % W, sy = s / W;
+        /* the 8-neighbour one step towards the site is strictly closer to
+         * it: if it has the colour, the texel is supported (the usual case) */
+        long bx0 = x + (sx > x) - (sx < (long)x), by0 = y + (sy > y) - (sy < (long)y);
+        if (colour[by0 * (long)W + bx0] == s)
+            continue;
+        int supported = 0;
+        for (int dy = -1; dy <= 1 && !supported; dy++) {
+            for (int dx = -1; dx <= 1; dx++) {
+                long bx = (long)x + dx, by = (long)y + dy;
+                if ((dx | dy) == 0 || bx < 0 || by < 0 || bx >= (long)W || by >= (long)H)
+                    continue;
+                uint b = (uint)(by * (long)W + bx);
+                if (colour[b] == s && p1_closer(bx, by, b, x, y, i, sx, sy)) {
+                    supported = 1;
+                    break;
+                }
+            }
+        }
+        if (!supported) {
+            uint k = atomic_inc(count);
+            if (k < cap)
+                list[k] = i;
         }
     }
-    uint k = atomic_inc(count);
-    if (k < cap)
-        list[k] = i;
 }
 
 /* The 3x3 neighbourhood colours of listed texels (row-major from (-1,-1);
@@ -314,8 +322,9 @@ __kernel void p1_scatter(__global uint *colour, __global const uint *pix,
 /* ---- internal numbering ----
  * Kept points are renumbered in texel (row-major) order, so that points
  * near each other have near indices (the dual triangles, positions and
- * per-vertex arrays are then read with locality); missing points follow in
- * input order.  int2in[k] is the input index of internal point k. */
+ * per-vertex arrays are then read with locality); missing points follow,
+ * grouped by the vertex owning their texel and in input order within a
+ * group.  int2in[k] is the input index of internal point k. */
 
 /* flag[t] = 1 for a texel owned by a real point (seed < n). */
 __kernel void p1_occ_flags(__global const uint *seed, uint npix, uint n, __global uint *flag)
@@ -337,7 +346,8 @@ __kernel void p1_number_kept(__global uint *seed, uint npix, uint n, __global co
     seed[t] = rank[t];
 }
 
-/* Missing points (input indices, increasing) become kept + j. */
+/* Missing points (input indices, sorted by the vertex owning their texel)
+ * become kept + j. */
 __kernel void p1_number_missing(__global const uint *missing, uint m, uint kept,
                                 __global uint *int2in)
 {
@@ -357,4 +367,15 @@ __kernel void p1_permute(__global const uint *int2in, uint n, __global const int
     pts[2 * k] = pts_in[2 * i];
     pts[2 * k + 1] = pts_in[2 * i + 1];
     texel[k] = texel_in[i];
+}
+
+/* Sort keys of the missing points: the vertex that owns their texel (a
+ * kept point, numbered in texel order, or a frame vertex). */
+__kernel void p1_missing_keys(__global const uint *missing, uint m,
+                              __global const uint *texel_in, __global const uint *seed,
+                              __global uint *keys)
+{
+    uint j = get_global_id(0);
+    if (j < m)
+        keys[j] = seed[texel_in[missing[j]]];
 }

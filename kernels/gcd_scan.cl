@@ -67,3 +67,44 @@ __kernel void compact_index(__global const uint *pos, uint n, uint total, __glob
     if (next != pos[i])
         out[pos[i]] = i;
 }
+
+/* ---- stable LSD radix sort of (key, value) pairs ----
+ * One pass sorts by the 8-bit digit at shift: radix_hist counts the digits
+ * of every chunk of `chunk` pairs into hist[digit * nchunks + chunk index];
+ * after an exclusive scan of hist, radix_scatter moves each chunk's pairs in
+ * order to their digit's next slot.  Chunks are walked in order by one
+ * work-item each, so every pass is stable and the result deterministic.
+ * CPU reference: a stable sort in tests/c/test_gcd_kernels.c. */
+__kernel void radix_hist(__global const uint *keys, uint n, uint shift, uint chunk,
+                         uint nchunks, __global uint *hist)
+{
+    uint g = get_global_id(0);
+    if (g >= nchunks)
+        return;
+    uint cnt[256];
+    for (int d = 0; d < 256; d++)
+        cnt[d] = 0;
+    size_t lo = (size_t)g * chunk, hi = lo + chunk < n ? lo + chunk : n;
+    for (size_t i = lo; i < hi; i++)
+        cnt[(keys[i] >> shift) & 255u]++;
+    for (int d = 0; d < 256; d++)
+        hist[(size_t)d * nchunks + g] = cnt[d];
+}
+
+__kernel void radix_scatter(__global const uint *keys, __global const uint *vals, uint n,
+                            uint shift, uint chunk, uint nchunks, __global const uint *hist,
+                            __global uint *okeys, __global uint *ovals)
+{
+    uint g = get_global_id(0);
+    if (g >= nchunks)
+        return;
+    uint at[256];
+    for (int d = 0; d < 256; d++)
+        at[d] = hist[(size_t)d * nchunks + g];
+    size_t lo = (size_t)g * chunk, hi = lo + chunk < n ? lo + chunk : n;
+    for (size_t i = lo; i < hi; i++) {
+        uint k = keys[i], p = at[(k >> shift) & 255u]++;
+        okeys[p] = k;
+        ovals[p] = vals[i];
+    }
+}

@@ -4,7 +4,7 @@
  *   d_pts_in int2 per point: true tile-local coordinates, input order
  *   d_int2in uint per point: input index of internal point k; internally
  *            the kept points come first in texel order, then the missing
- *            ones in input order (locality: see p1_number_kept)
+ *            ones grouped by texel owner (locality: see p1_number_kept)
  *   d_pts    int2 per point: true coordinates, internal order
  *   d_pos    int2 per vertex: current coordinates (texel corner of a kept
  *            point until phase 3 shifts it; true position after)
@@ -15,7 +15,9 @@
  *   d_tri    int per triangle slot x3: vertex indices (gdt_mesh layout);
  *            a dead slot has tri[3t] = GCD_NONE
  *   d_opp    int per triangle slot x3: packed opposite pointers (gdt_mesh)
- *   d_vt     int per vertex: one triangle incident to it (or GCD_NONE)
+ *   d_vt     int per vertex: one live triangle incident to it; a vertex
+ *            deleted in Phase 3 holds -2 - q instead, q a former neighbour
+ *            (where its re-insertion walk starts)
  * plus scratch buffers named by use.  Vertex indices: real points 0..n-1,
  * fake boundary n..n+GCD_NFAKE-1 (kernels/gcd_geom.clh), then the frame
  * vertices (one per border texel, deleted in Phase 3).
@@ -34,9 +36,8 @@
 #include "gdt_mesh.h"
 #include "gdt_ocl.h"
 
-#define GCD_NFAKE 12
-#define GCD_NONE (-1)
-#define GCD_EMPTY 0xffffffffu
+#include "gcd_geom.clh" /* GCD_NFAKE, GCD_NONE, GCD_EMPTY, the frame layout */
+
 #define GCD_SCAN_CHUNK 256u
 
 /* A growable device buffer. */
@@ -48,17 +49,19 @@ typedef struct gcd_buf {
 
 typedef struct gcd_kernels {
     /* gcd_scan.cl */
-    gdt_ocl_kernel *scan_reduce, *scan_single, *scan_down, *compact_index;
+    gdt_ocl_kernel *scan_reduce, *scan_single, *scan_down, *compact_index, *radix_hist,
+        *radix_scatter;
     /* gcd_pba.cl */
     gdt_ocl_kernel *p1_splat, *p1_missing_flags, *p1_plant, *p1_frame, *p1_occ_flags,
-        *p1_number_kept, *p1_number_missing, *p1_permute, *p1_cols_band, *p1_cols_link,
+        *p1_number_kept, *p1_number_missing, *p1_permute, *p1_missing_keys, *p1_cols_band, *p1_cols_link,
         *p1_cols, *p1_rows, *p1_debris, *p1_gather, *p1_scatter;
     /* gcd_dual.cl */
     gdt_ocl_kernel *p2_count, *p2_write, *p2_kept_flags;
     /* gcd_mesh.cl */
     gdt_ocl_kernel *m_vcount, *m_vfill, *m_link, *m_vt_min, *m_snap, *m_frame_pos, *m_live_flags,
         *m_real_flags, *m_compact_tris, *m_fix_vt_collect, *m_fix_vt_apply, *m_remap_vt,
-        *m_map_out;
+        *m_map_out, *m_sort_count, *m_sort_scatter, *m_sort_bucket, *m_sort_inverse,
+        *m_sort_apply, *m_sort_vt;
     /* gcd_shift.cl */
     gdt_ocl_kernel *p3_shift, *p3_bulk_check, *p3_bulk_star, *p3_bulk_apply, *p3_del_deg, *p3_del_mark, *p3_del_win, *p3_del_apply,
         *p3_del_link, *p3_del_next, *p3_del_flags;
@@ -66,7 +69,8 @@ typedef struct gcd_kernels {
     gdt_ocl_kernel *p4_locate, *p4_mark, *p4_win, *p4_apply, *p4_link, *p4_unmark, *p4_nb,
         *p4_hints, *p4_compact, *p4_absent_flags;
     /* gcd_flip.cl */
-    gdt_ocl_kernel *p5_check, *p5_exact, *p5_flip, *p5_link, *p5_next, *p5_all, *p5_from_list;
+    gdt_ocl_kernel *p5_check, *p5_exact, *p5_flip, *p5_link, *p5_next, *p5_all, *p5_from_list,
+        *p5_round_flags;
 } gcd_kernels;
 
 struct gdt_core {
@@ -82,7 +86,8 @@ struct gdt_core {
     gcd_buf d_vote, d_inact, d_flipped, d_stat, d_active, d_next, d_cand, d_exact, d_win;
     gcd_buf d_chk, d_bad, d_vnew, d_list3, d_tri2, d_opp2, d_deg, d_off, d_sc, d_hint, d_hint2;
     gcd_buf d_cont, d_oldnb, d_rank, d_fix, d_stat34, d_fnext, d_pts_in, d_texel_in, d_int2in,
-        d_inm, d_inm2, d_dropped;
+        d_inm, d_inm2, d_dropped, d_cont2, d_locep, d_locep2,
+        d_rk, d_rv, d_rhist, d_mkeys;
     size_t scan_levels_cap;
     unsigned strip;  /* columns per work-item in the column pass */
     unsigned bands;  /* row bands of the column pass */
@@ -105,6 +110,7 @@ typedef struct gcd_run {
     size_t nmissing;    /* entries of the missing list (d_list) */
     size_t kept;
     int all_missing;    /* insertion path: every point goes through Phase 4 */
+    int sort_tris;      /* Phase 5 first sorts the triangles (no dead slots) */
     uint32_t epoch;     /* round counter shared by every phase: marks in
                            d_flipped / d_inact name the round that set them */
     gdt_core_stats *st;
@@ -124,6 +130,11 @@ gdt_status gcd_scan(gdt_core *c, gcd_buf *b, size_t n, uint32_t *total, gdt_erro
  * flagged indices in increasing order (out grown as needed). */
 gdt_status gcd_compact(gdt_core *c, gcd_buf *flags, size_t n, gcd_buf *out, size_t *count,
                        gdt_error *err);
+/* Stable sort of keys[0..n) with vals by the low bits of the keys (LSD
+ * radix, 8 bits a pass); the handles of keys and vals may be swapped with
+ * scratch buffers. */
+gdt_status gcd_radix_sort(gdt_core *c, gcd_buf *keys, gcd_buf *vals, size_t n, unsigned bits,
+                          gdt_error *err);
 gdt_status gcd_read_u32(gdt_core *c, gcd_buf *b, size_t i, uint32_t *v, gdt_error *err);
 gdt_status gcd_fill(gdt_core *c, gcd_buf *b, size_t n_u32, uint32_t v, gdt_error *err);
 
@@ -132,6 +143,10 @@ gdt_status gcd_fill(gdt_core *c, gcd_buf *b, size_t n_u32, uint32_t v, gdt_error
  * unsigned), 'i' int32_t (as int), 'l' int64_t. */
 gdt_status gcd_args(gdt_ocl_kernel *k, gdt_error *err, const char *kinds, ...);
 gdt_status gcd_launch(gdt_core *c, gdt_ocl_kernel *k, size_t global, gdt_error *err);
+/* With a given work-group size (a power of two; kernels with few but long
+ * work-items need small groups to spread over the compute units). */
+gdt_status gcd_launch_wg(gdt_core *c, gdt_ocl_kernel *k, size_t global, size_t wg,
+                         gdt_error *err);
 
 double gcd_now(void);
 

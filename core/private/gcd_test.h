@@ -40,4 +40,9 @@ gdt_status gcd_test_flip(gdt_core *c, gdt_mesh *m, gdt_core_stats *st, gdt_error
 gdt_status gcd_test_scan(gdt_core *c, const uint32_t *in, size_t n, uint32_t *out,
                          uint32_t *total, size_t *nflagged, uint32_t *flagged, gdt_error *err);
 
+/* The radix sort kernels: keys/vals[0..n) sorted in place, stably, by the
+ * low `bits` bits of the keys (rounded up to whole bytes). */
+gdt_status gcd_test_radix(gdt_core *c, uint32_t *keys, uint32_t *vals, size_t n, unsigned bits,
+                          gdt_error *err);
+
 #endif

@@ -4,7 +4,9 @@
  * of the degenerate corpus, random and LiDAR-like point sets: the core's
  * output equals gdt_reference_triangulate's as a canonical triangle set,
  * passes gdt_check_mesh, and is identical across a repeated run and a
- * permutation of the input (mapped back).  Both paths (digital Voronoi and
+ * permutation of the input (mapped back); the triangulation between the
+ * phases is verified too (gdt_core_opts.check_phases: symbolic orientation,
+ * links, Euler, vertex entries).  Both paths (digital Voronoi and
  * insertion) are forced on some sets; duplicate points are refused with
  * GDT_EINPUT.
  *
@@ -143,7 +145,10 @@ int main(int argc, char **argv)
     memset(&err, 0, sizeof err);
     o.device = getenv("GDT_TEST_DEVICE");
     o.path = GDT_CORE_PATH_GCD;
-    o.check_phases = getenv("GCD_CHECK_PHASES") != NULL;
+    /* every phase boundary is verified: a valid triangulation after
+     * phases 2, 3 and 4, not only at the end */
+    o.check_phases = 1;
+    o.full_grid = 1; /* the grid sizes below, whatever the point count */
     if (gdt_core_create(&core, &o, &err) != GDT_OK) {
         gdt_error_print(&err, stderr);
         return err.status == GDT_EDEVICE && err.code == 5101 ? 77 : 1;

@@ -110,13 +110,6 @@ int main(int argc, char **argv)
         gen_seed(&rng, 99 + (uint64_t)intpath);
         size_t n;
         gdt_ipt *p;
-        if (getenv("GCD_ONLY_CIRCLE")) {
-            p = gen_circle(1000000, 1000000, 5525, &n);
-            run(&t, core, p, n, &rng, "circle");
-            free(p);
-            gdt_core_destroy(core);
-            continue;
-        }
         p = gen_uniform(&rng, intpath ? big / 10 : big, 0, 1000000, &n);
         snprintf(label, sizeof label, "uniform %zu", n);
         run(&t, core, p, n, &rng, label);

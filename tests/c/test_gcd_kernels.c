@@ -1,12 +1,20 @@
 /* test_gcd_kernels — the utility kernels of the gCD core against their
  * sequential CPU references: the multi-level exclusive scan and the stream
  * compaction (gcd_scan.cl), on sizes around every level boundary and on
- * random, sparse and all-zero data.  Exit 77 without an OpenCL device. */
+ * random, sparse and all-zero data; the stable radix sort against a stable
+ * merge sort (ties keep their order), with few and many distinct keys.
+ * Exit 77 without an OpenCL device. */
 #include <stdlib.h>
 #include <string.h>
 
 #include "gen_degenerate.h"
 #include "private/gcd_test.h"
+
+static int cmp_u64(const void *a, const void *b)
+{
+    uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
+    return (x > y) - (x < y);
+}
 
 int main(void)
 {
@@ -57,6 +65,33 @@ int main(void)
             free(fl);
             if (n > 1000000)
                 break;
+        }
+    }
+    /* radix sort: (key, original position) pairs against qsort on (key, position) */
+    static const size_t rsizes[] = {1, 5, 1023, 1024, 1025, 100000, 1000003};
+    for (size_t si = 0; si < sizeof rsizes / sizeof rsizes[0]; si++) {
+        for (int kind = 0; kind < 2; kind++) {
+            size_t n = rsizes[si];
+            unsigned bits = kind ? 28 : 8;
+            uint32_t *k = malloc(4 * n), *v = malloc(4 * n);
+            uint64_t *ref = malloc(8 * n);
+            for (size_t i = 0; i < n; i++) {
+                k[i] = (uint32_t)gen_below(&rng, kind ? (1u << 28) : 7u);
+                v[i] = (uint32_t)i;
+                ref[i] = ((uint64_t)k[i] << 32) | i;
+            }
+            qsort(ref, n, sizeof *ref, cmp_u64);
+            if (gcd_test_radix(core, k, v, n, bits, &err) != GDT_OK) {
+                CHECK(&t, 0, "radix n %zu: %s", n, err.msg);
+            } else {
+                size_t bad = 0;
+                for (size_t i = 0; i < n; i++)
+                    bad += k[i] != (uint32_t)(ref[i] >> 32) || v[i] != (uint32_t)ref[i];
+                CHECK(&t, bad == 0, "radix n %zu bits %u: %zu pairs out of place", n, bits, bad);
+            }
+            free(k);
+            free(v);
+            free(ref);
         }
     }
     gdt_core_destroy(core);

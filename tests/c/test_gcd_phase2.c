@@ -235,6 +235,7 @@ int main(void)
     memset(&o, 0, sizeof o);
     memset(&err, 0, sizeof err);
     o.device = getenv("GDT_TEST_DEVICE");
+    o.full_grid = 1;
     if (gdt_core_create(&core, &o, &err) != GDT_OK) {
         gdt_error_print(&err, stderr);
         return err.status == GDT_EDEVICE && err.code == 5101 ? 77 : 1;
