@@ -74,6 +74,21 @@ int gdt_prefer_diagonal(gdt_pred_stats *st, gdt_ipt e, gdt_ipt f);
  * optimal. */
 int gdt_edge_needs_flip(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c, gdt_ipt d);
 
+/* A certified outer box of the closed circumdisk of the triangle (a, b, c):
+ * on return 1, bounds = {xmin, ymin, xmax, ymax} (tile-local units) with
+ * xmin <= every x of the closed disk <= xmax, and the same in y.  The box is
+ * computed in double with a proven error bound added outwards, so it may be
+ * a little larger than the disk but never smaller: tests built on it are
+ * conservative (they may refuse a disk that fits, never accept one that does
+ * not).  Returns 0 (bounds untouched) when a, b, c are not strictly
+ * counter-clockwise: such a triangle has no disk to certify.
+ * Error analysis (u = 2^-53): with b' = b - a, c' = c - a, D = b' x c' and
+ * M_x = |c'_y| |b'|^2 + |b'_y| |c'|^2 (M_y alike), the computed centre
+ * offset is within 7u M_x / (2D) of the true one per axis and the radius
+ * within the sum of both plus 3u r; the slack added is 32u (M_x + M_y) / (2D)
+ * + 8u (|a| + |centre offset| + r) per side, several times that bound. */
+int gdt_circumdisk_bounds(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c, double bounds[4]);
+
 /* Faults found by gdt_predicates_selftest (bit mask). */
 #define GDT_FPENV_CONTRACTION 0x1u /* a*b - c was fused into one rounding (FMA) */
 #define GDT_FPENV_REASSOC 0x2u     /* (a + b) - a was simplified, or extended precision */

@@ -7,6 +7,8 @@
 #include "gdt_predicates.h"
 
 #include <assert.h>
+#include <float.h>
+#include <math.h>
 #include <stddef.h>
 
 #include "../kernels/gdt_exact.clh"
@@ -80,6 +82,38 @@ int gdt_edge_needs_flip(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c, gdt
 /* a*b - c with c = fl(a*b): 0 when a*b is rounded on its own, the rounding
  * error 2^-60 when the product is fused into the subtraction.  Tried in the
  * one-expression form and in the named-temporaries form the filter uses. */
+int gdt_circumdisk_bounds(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c, double bounds[4])
+{
+    const double u = DBL_EPSILON / 2.0;
+    int64_t bx = b.x - a.x, by = b.y - a.y, cx = c.x - a.x, cy = c.y - a.y;
+    /* |b'|, |c'| < 2^31: every product below is < 2^62 and the sums < 2^63 */
+    int64_t det = bx * cy - by * cx;
+    int64_t bb = bx * bx + by * by, cc = cx * cx + cy * cy;
+    double d2, nx, ny, ux, uy, qx, qy, r, xc, yc, slack;
+
+    if (st != NULL)
+        st->orient_calls++;
+    if (det <= 0)
+        return 0;
+    d2 = 2.0 * (double)det;
+    nx = (double)cy * (double)bb - (double)by * (double)cc;
+    ny = (double)bx * (double)cc - (double)cx * (double)bb;
+    ux = nx / d2;
+    uy = ny / d2;
+    qx = (fabs((double)cy) * (double)bb + fabs((double)by) * (double)cc) / d2;
+    qy = (fabs((double)bx) * (double)cc + fabs((double)cx) * (double)bb) / d2;
+    r = sqrt(ux * ux + uy * uy);
+    xc = (double)a.x + ux;
+    yc = (double)a.y + uy;
+    slack = 32.0 * u * (qx + qy) +
+            8.0 * u * ((double)a.x + (double)a.y + fabs(ux) + fabs(uy) + r) + 8.0 * u;
+    bounds[0] = (xc - r) - slack;
+    bounds[1] = (yc - r) - slack;
+    bounds[2] = (xc + r) + slack;
+    bounds[3] = (yc + r) + slack;
+    return 1;
+}
+
 static unsigned probe_contraction(void)
 {
     volatile double va = 1.0 + 0x1p-30, vb = 1.0 + 0x1p-30;

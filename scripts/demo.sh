@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The main job on a point cloud the project generates itself:
 # sets up and builds (scripts/setup.sh), generates a LiDAR-like LAS cloud,
-# describes it with --info, triangulates it with the OpenCL core (one tile),
+# describes it with --info, triangulates it with the tiled pipeline (OpenCL
+# core per tile, certification, seam merge) at --tile 1024, i.e. several tiles,
 # validates the mesh exactly and compares it with the CPU reference.
 #
 #   scripts/demo.sh [POINTS]        (default 1000000)
@@ -24,8 +25,8 @@ echo "== generating a LiDAR-like cloud of $POINTS points: $CLOUD"
 echo "== gdt-tile $CLOUD --info"
 build/tiler/gdt-tile "$CLOUD" --info
 
-echo "== gdt-tile $CLOUD --tile 4096 -o $MESH"
-build/tiler/gdt-tile "$CLOUD" --tile 4096 -o "$MESH" --json out/demo/run.json
+echo "== gdt-tile $CLOUD --tile 1024 -o $MESH"
+build/tiler/gdt-tile "$CLOUD" --tile 1024 -o "$MESH" --json out/demo/run.json
 
 echo "== validate_mesh.py $MESH --input $CLOUD"
 .venv/bin/python scripts/validate_mesh.py "$MESH" --input "$CLOUD"

@@ -107,3 +107,6 @@ add_test(NAME pred_unsafe_fp
                  -P ${GDT_PRED_UNSAFE_SCRIPT})
 set_tests_properties(pred_unsafe_fp PROPERTIES LABELS "predicates;unsafe_fp" TIMEOUT 900
                      PROCESSORS 2)
+
+# Conservative circumdisk bounds (certification), checked exactly in Python.
+gdt_add_pred_exe(disk_eval ${CMAKE_CURRENT_SOURCE_DIR}/tools/disk_eval.c)

@@ -3,6 +3,7 @@
 #include "gdt_predicates.h"
 #include "private/cli_modes.h"
 #include "private/single_tile.h"
+#include "private/tiled_run.h"
 
 #include <errno.h>
 #include <limits.h>
@@ -18,7 +19,7 @@
 typedef enum opt_id {
     OPT_OUTPUT, OPT_TILE, OPT_CELL, OPT_HALO, OPT_JOB, OPT_RESTART, OPT_RESUME, OPT_DEVICE,
     OPT_THREADS, OPT_MEM, OPT_QUANTUM, OPT_DUP, OPT_CHECK, OPT_JSON, OPT_QUIET, OPT_VERBOSE,
-    OPT_INFO, OPT_REFERENCE, OPT_HELP, OPT_VERSION
+    OPT_INFO, OPT_REFERENCE, OPT_SINGLE, OPT_KEEP_JOB, OPT_HELP, OPT_VERSION
 } opt_id;
 
 /* The option table: every option once, with its argument, default and help. */
@@ -40,6 +41,8 @@ static const opt_spec OPTIONS[] = {
      "texel size in CRS units (auto: about N*N/4 points per tile)"},
     {OPT_HALO, "--halo", NULL, "H", "auto", "halo width in texels around each tile (0 is legal)"},
     {OPT_JOB, "--job", NULL, "DIR", "OUT.ply.gdt-job", "job directory (state for resuming)"},
+    {OPT_KEEP_JOB, "--keep-job", NULL, NULL, NULL,
+     "keep the job directory after a successful run (tile files, index)"},
     {OPT_RESTART, "--restart", NULL, NULL, NULL,
      "discard an existing job directory that does not match and start again"},
     {OPT_RESUME, "--resume", NULL, "DIR", NULL, "resume the job in DIR (needs nothing else)"},
@@ -61,6 +64,9 @@ static const opt_spec OPTIONS[] = {
      "with --tile/--cell/--halo also the tile plan"},
     {OPT_REFERENCE, "--reference", NULL, NULL, NULL,
      "triangulate in memory with the CPU reference (one tile; for testing)"},
+    {OPT_SINGLE, "--single-tile", NULL, NULL, NULL,
+     "triangulate the whole cloud as one tile with the OpenCL core, in memory (at most "
+     "N*N/2 points; for testing)"},
     {OPT_HELP, "--help", "-h", NULL, NULL, "show this help"},
     {OPT_VERSION, "--version", NULL, NULL, NULL, "show the version"},
 };
@@ -257,6 +263,8 @@ static gdt_status apply(gdt_options *opts, const opt_spec *o, const char *val, g
     case OPT_VERBOSE: opts->verbosity = opts->verbosity < 1 ? 1 : opts->verbosity + 1; break;
     case OPT_INFO: st = set_mode(opts, GDT_MODE_INFO, o->lng, err); break;
     case OPT_REFERENCE: st = set_mode(opts, GDT_MODE_REFERENCE, o->lng, err); break;
+    case OPT_SINGLE: opts->single_tile = 1; break;
+    case OPT_KEEP_JOB: opts->keep_job = 1; break;
     case OPT_HELP: opts->mode = GDT_MODE_HELP; break;
     case OPT_VERSION: if (opts->mode != GDT_MODE_HELP) opts->mode = GDT_MODE_VERSION; break;
     }
@@ -338,10 +346,8 @@ void gdt_options_free(gdt_options *opts)
     opts->ninputs = 0;
 }
 
-/* A run fits one tile when the inputs' header point counts add up to at
- * most N^2/2 (half the texels of the tile's grid): then the OpenCL core
- * triangulates the whole cloud as one tile.  Larger clouds need several
- * tiles and the seam merge, which this build does not have yet. */
+/* --single-tile: the inputs' header point counts must add up to at most
+ * N^2/2 (half the texels of the tile's grid). */
 static gdt_status check_one_tile(const gdt_options *opts, gdt_error *err)
 {
     uint64_t total = 0, limit = (uint64_t)opts->tile * (uint64_t)opts->tile / 2;
@@ -358,10 +364,9 @@ static gdt_status check_one_tile(const gdt_options *opts, gdt_error *err)
     }
     if (total > limit)
         return gdt_error_set(err, GDT_EUSAGE, 2102,
-                             "the inputs hold %llu points, more than one tile of %d x %d "
-                             "texels takes (%llu); several tiles need the seam merge, which "
-                             "is not available in this build yet (use a larger --tile, or "
-                             "--reference)",
+                             "--single-tile: the inputs hold %llu points, more than one tile "
+                             "of %d x %d texels takes (%llu); use a larger --tile or the "
+                             "tiled pipeline (without --single-tile)",
                              (unsigned long long)total, opts->tile, opts->tile,
                              (unsigned long long)limit);
     return GDT_OK;
@@ -371,14 +376,20 @@ static gdt_status check_one_tile(const gdt_options *opts, gdt_error *err)
  * rather than silently ignored. */
 static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
 {
-    if (opts->mode == GDT_MODE_RESUME || opts->restart || opts->job != NULL)
+    if (opts->mode == GDT_MODE_RESUME || opts->restart)
         return gdt_error_set(err, GDT_EUSAGE, 2101,
-                             "resumable jobs (--job, --restart, --resume) are not available "
-                             "in this build yet");
+                             "resuming jobs (--restart, --resume) is not available in this "
+                             "build yet");
+    if ((opts->job != NULL || opts->keep_job) && (opts->mode != GDT_MODE_RUN || opts->single_tile))
+        return gdt_error_set(err, GDT_EUSAGE, 2104,
+                             "--job and --keep-job only apply to a tiled run");
     if (opts->device != NULL && opts->mode != GDT_MODE_RUN)
         return gdt_error_set(err, GDT_EUSAGE, 2103,
                              "--device only applies to a triangulation run (not --info or "
                              "--reference)");
+    if (opts->single_tile && opts->mode != GDT_MODE_RUN)
+        return gdt_error_set(err, GDT_EUSAGE, 2105,
+                             "--single-tile only applies to a triangulation run");
     return GDT_OK;
 }
 
@@ -415,9 +426,13 @@ int gdt_cli_main(int argc, char **argv)
         if (st == GDT_OK && opts.mode == GDT_MODE_REFERENCE) {
             st = gdt_cli_reference(&opts, &err);
         } else if (st == GDT_OK && opts.mode == GDT_MODE_RUN) {
-            st = check_one_tile(&opts, &err);
-            if (st == GDT_OK)
-                st = gdt_cli_single_tile(&opts, &err);
+            if (opts.single_tile) {
+                st = check_one_tile(&opts, &err);
+                if (st == GDT_OK)
+                    st = gdt_cli_single_tile(&opts, &err);
+            } else {
+                st = gdt_cli_tiled(&opts, &err);
+            }
         }
     }
 done:

@@ -38,6 +38,8 @@ typedef struct gdt_options {
     long halo;               /* --halo H texels; -1 = automatic */
     const char *job;         /* --job DIR; NULL = OUT.ply.gdt-job */
     int restart;             /* --restart */
+    int keep_job;            /* --keep-job */
+    int single_tile;         /* --single-tile */
     const char *resume;      /* --resume DIR */
     const char *device;      /* --device SPEC; NULL = first device */
     int threads;             /* --threads K; 0 = number of cores */

@@ -79,7 +79,7 @@ def test_version(gdt_bin, runner):
 
 @pytest.mark.parametrize("args", [
     ["--resume", "somejob"],
-    ["IN", "--job", "j"],
+    ["IN", "--restart"],
     ["IN", "--restart", "--reference"],
 ])
 def test_unavailable_stages_say_so(gdt_bin, runner, tmp_path, args):
@@ -170,13 +170,27 @@ def test_info_tile_plan(gdt_bin, runner, data_dir, tmp_path):
     assert not plan2["cell_auto"] and plan2["halo_texels"] == 0
 
 
-def test_run_beyond_one_tile_says_so(gdt_bin, runner, data_dir, tmp_path):
-    # 110000 points do not fit one 64 x 64 tile: the seam merge is needed.
+def test_single_tile_beyond_one_tile_says_so(gdt_bin, runner, data_dir, tmp_path):
+    # 110000 points do not fit one 64 x 64 tile: --single-tile refuses, the
+    # tiled pipeline takes it.
     out = tmp_path / "out.ply"
-    r = runner([gdt_bin, data_dir / "autzen_trim.las", "--tile", "64", "-o", out])
+    r = runner([gdt_bin, data_dir / "autzen_trim.las", "--tile", "64", "--single-tile", "-o", out])
     assert r.returncode == 2, r.stderr
-    assert "not available" in r.stderr and "110000 points" in r.stderr
+    assert "GDT-2102" in r.stderr and "110000 points" in r.stderr
     assert not out.exists()
+
+
+@pytest.mark.parametrize("args", [
+    ["--info", "--job", "j"],
+    ["--reference", "--keep-job"],
+    ["--single-tile", "--job", "j"],
+    ["--info", "--single-tile"],
+])
+def test_job_options_only_for_tiled_runs(gdt_bin, runner, data_dir, tmp_path, args):
+    r = runner([gdt_bin, data_dir / "100-points.las", "-o", tmp_path / "o.ply", *args],
+               cwd=tmp_path)
+    assert r.returncode == 2, r.stderr
+    assert not (tmp_path / "o.ply").exists()
 
 
 def test_device_only_for_runs(gdt_bin, runner, data_dir):
@@ -197,7 +211,7 @@ def test_missing_device_is_exit_5(gdt_bin, runner, data_dir, tmp_path):
 def test_one_tile_run_equals_reference(gdt_bin, runner, data_dir, tmp_path):
     core, ref = tmp_path / "core.ply", tmp_path / "ref.ply"
     src = data_dir / "autzen_trim.las"
-    r = runner([gdt_bin, src, "--tile", "1024", "-q", "-o", core])
+    r = runner([gdt_bin, src, "--tile", "1024", "--single-tile", "-q", "-o", core])
     assert r.returncode == 0, r.stderr
     assert runner([gdt_bin, src, "--reference", "-q", "-o", ref]).returncode == 0
     # unique triangulation, same vertex and face order rules: the same bytes

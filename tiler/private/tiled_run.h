@@ -1,0 +1,33 @@
+/* tiled_run.h — gdt-tile INPUT... --tile N -o OUT.ply: the tiled pipeline.
+ *
+ * Stages, all in the job directory (--job, default OUT.ply.gdt-job):
+ *   1. the tiler (gdt_tiler.h): pass 1 (index.vdb), pass 2 (the .pts and
+ *      .edge tile files, duplicates merged by --dup);
+ *   2. per tile, in tile order: the OpenCL core triangulates the tile's own
+ *      points, the halo is loaded beside them, gdt_certify.h marks the final
+ *      triangles, and tiles/tile_<i>_<j>.tri receives the certified faces and
+ *      the tile's seam (gdt_seam.h);
+ *   3. the seam merge (gdt_merge_seams) of all tiles' seams;
+ *   4. the PLY: vertices tile by tile (each tile's points by lowest input
+ *      ordinal), then every tile's certified faces, then the merge's faces.
+ * Output bytes depend only on the inputs and the options --tile, --cell,
+ * --halo, --dup and --quantum.  The face count is checked against Euler's
+ * relation F = 2V - h - 2 before the PLY is completed.
+ *
+ * .tri layout (little-endian): 64-byte header = "GDTTRI01", u64 vertex base,
+ * u64 vertices, u64 certified faces, u64 seam vertices, u64 barrier edges,
+ * u64 0, u64 0; faces as 3 x u32 output indices (counter-clockwise, each
+ * rotated to its smallest index, sorted); seam vertices as u64 index,
+ * i64 x, i64 y (merge frame); barrier edges as u64 a, u64 b. */
+#ifndef GDT_TILED_RUN_H
+#define GDT_TILED_RUN_H
+
+#include "gdt_cli.h"
+#include "gdt_error.h"
+
+/* returns: GDT_OK; the tiler's, core's and merge's errors; GDT_EIO 48xx
+ * (job directory and .tri files); GDT_EINTERNAL 7820 (Euler's relation
+ * fails: a bug), 73xx (--check). */
+gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err);
+
+#endif

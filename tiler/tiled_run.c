@@ -1,0 +1,834 @@
+/* The tiled pipeline (see private/tiled_run.h). */
+#define _XOPEN_SOURCE 700
+#include "private/tiled_run.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <ftw.h>
+#include <inttypes.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "gdt_certify.h"
+#include "gdt_cloud.h"
+#include "gdt_core.h"
+#include "gdt_mesh.h"
+#include "gdt_ply.h"
+#include "gdt_seam.h"
+#include "gdt_tiler.h"
+#include "private/json_out.h"
+#include "private/run_stats.h"
+#include "private/tiler_io.h"
+
+#define TR_MAGIC "GDTTRI01"
+#define TR_HEADER 64
+#define TR_CHUNK 65536
+
+typedef struct tr_summary {
+    uint64_t points_read, vertices, tiles, faces, certified, merge_faces;
+    uint64_t max_tile_points, max_halo_points, gcd_tiles, insert_tiles;
+    double t_pass1, t_pass2, t_tiles, t_core, t_certify, t_merge, t_write, t_check, t_total;
+    gdt_cert_stats cert;
+    gdt_merge_stats merge;
+    int checked;
+    char device[256];
+} tr_summary;
+
+typedef struct tr_ctx {
+    const gdt_options *opts;
+    gdt_log log;
+    char *job;          /* owned */
+    char *tiles_dir;    /* owned */
+    gdt_cloud *cloud;
+    gdt_tiler *tiler;
+    gdt_core *core;
+    gdt_certifier *certifier;
+    const gdt_tile_plan *plan;
+    uint64_t *base;     /* ntiles + 1 output index of each tile's first vertex */
+    gdt_point_buf pts, halo;
+    gdt_ipt *lp, *lh;
+    size_t cap_lp, cap_lh;
+    gdt_mesh mesh;
+    uint8_t *cert;
+    size_t cap_cert;
+    uint32_t *faces;    /* certified faces of the current tile, 3 per face */
+    size_t cap_faces;
+    uint32_t *count;    /* bucket counts for the face sort */
+    size_t cap_count;
+    unsigned char *fbuf; /* the .tri file image */
+    size_t cap_fbuf;
+    gdt_seam seam;
+    tr_summary s;
+} tr_ctx;
+
+static void put_u64(unsigned char *p, uint64_t v)
+{
+    for (int i = 0; i < 8; i++)
+        p[i] = (unsigned char)(v >> (8 * i));
+}
+
+static void put_u32(unsigned char *p, uint32_t v)
+{
+    for (int i = 0; i < 4; i++)
+        p[i] = (unsigned char)(v >> (8 * i));
+}
+
+static uint64_t get_u64(const unsigned char *p)
+{
+    uint64_t v = 0;
+    for (int i = 7; i >= 0; i--)
+        v = (v << 8) | p[i];
+    return v;
+}
+
+static uint32_t get_u32(const unsigned char *p)
+{
+    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
+}
+
+static int reserve(void **p, size_t *cap, size_t need, size_t elem)
+{
+    void *q;
+    if (need <= *cap)
+        return 0;
+    q = realloc(*p, need * elem);
+    if (q == NULL)
+        return -1;
+    *p = q;
+    *cap = need;
+    return 0;
+}
+
+static char *path_join(const char *a, const char *b)
+{
+    size_t la = strlen(a), lb = strlen(b);
+    char *p = malloc(la + lb + 2);
+    if (p == NULL)
+        return NULL;
+    memcpy(p, a, la);
+    p[la] = '/';
+    memcpy(p + la + 1, b, lb + 1);
+    return p;
+}
+
+static gdt_status make_dir(const char *path, gdt_error *err)
+{
+    struct stat sb;
+    if (mkdir(path, 0777) == 0)
+        return GDT_OK;
+    if (errno == EEXIST && stat(path, &sb) == 0 && S_ISDIR(sb.st_mode))
+        return GDT_OK;
+    return gdt_error_set(err, GDT_EIO, 4801, "%s: cannot create the job directory: %s", path,
+                         strerror(errno));
+}
+
+/* Writes buf to path through path.tmp: write, fsync (unless nosync),
+ * rename.  On failure nothing is left at either name. */
+static gdt_status write_atomic(const char *path, const unsigned char *buf, size_t len,
+                               int nosync, gdt_error *err)
+{
+    size_t lp = strlen(path);
+    char *tmp = malloc(lp + 5);
+    int fd = -1;
+    size_t done = 0;
+    gdt_status st = GDT_OK;
+
+    if (tmp == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    memcpy(tmp, path, lp);
+    memcpy(tmp + lp, ".tmp", 5);
+    fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (fd < 0) {
+        st = gdt_error_set(err, GDT_EIO, 4802, "%s: cannot create: %s", tmp, strerror(errno));
+        goto fail;
+    }
+    while (done < len) {
+        ssize_t w = write(fd, buf + done, len - done);
+        if (w < 0 && errno == EINTR)
+            continue;
+        if (w <= 0) {
+            st = gdt_error_set(err, GDT_EIO, 4803, "%s: write failed: %s", tmp,
+                               w < 0 ? strerror(errno) : "no progress");
+            goto fail;
+        }
+        done += (size_t)w;
+    }
+    if (!nosync && fsync(fd) != 0) {
+        st = gdt_error_set(err, GDT_EIO, 4804, "%s: fsync failed: %s", tmp, strerror(errno));
+        goto fail;
+    }
+    if (close(fd) != 0) {
+        fd = -1;
+        st = gdt_error_set(err, GDT_EIO, 4803, "%s: write failed: %s", tmp, strerror(errno));
+        goto fail;
+    }
+    fd = -1;
+    if (rename(tmp, path) != 0) {
+        st = gdt_error_set(err, GDT_EIO, 4804, "%s: rename failed: %s", path, strerror(errno));
+        goto fail;
+    }
+    free(tmp);
+    return GDT_OK;
+fail:
+    if (fd >= 0)
+        close(fd);
+    unlink(tmp);
+    free(tmp);
+    return st;
+}
+
+static int rm_entry(const char *path, const struct stat *sb, int flag, struct FTW *ftw)
+{
+    (void)sb;
+    (void)flag;
+    (void)ftw;
+    return remove(path);
+}
+
+/* Certified faces of the current tile as output indices, each rotated to
+ * start at its smallest index, in sorted order: a counting sort on the first
+ * index, then insertion sort inside each (short) bucket.  The order depends
+ * only on the face set, not on the order the core produced them in. */
+static gdt_status sort_faces(tr_ctx *c, size_t nf, uint32_t base, gdt_error *err)
+{
+    const gdt_mesh *m = &c->mesh;
+    size_t nv = m->nverts, k = 0;
+    uint32_t *tmp;
+
+    if (reserve((void **)&c->count, &c->cap_count, nv + 1, sizeof *c->count) != 0 ||
+        reserve((void **)&c->faces, &c->cap_faces, 6 * nf + 3, sizeof *c->faces) != 0)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    tmp = c->faces + 3 * nf;
+    memset(c->count, 0, (nv + 1) * sizeof *c->count);
+    for (size_t t = 0; t < m->ntris; t++) {
+        const int32_t *v = &m->tri[3 * t];
+        int r = 0;
+        if (!c->cert[t])
+            continue;
+        if (v[1] < v[r])
+            r = 1;
+        if (v[2] < v[r])
+            r = 2;
+        tmp[3 * k + 0] = (uint32_t)v[r];
+        tmp[3 * k + 1] = (uint32_t)v[(r + 1) % 3];
+        tmp[3 * k + 2] = (uint32_t)v[(r + 2) % 3];
+        c->count[tmp[3 * k] + 1]++;
+        k++;
+    }
+    for (size_t i = 0; i < nv; i++)
+        c->count[i + 1] += c->count[i];
+    for (size_t f = 0; f < nf; f++) {
+        uint32_t d = c->count[tmp[3 * f]]++;
+        memcpy(&c->faces[3 * (size_t)d], &tmp[3 * f], 3 * sizeof *tmp);
+    }
+    /* count[i] is now the end of bucket i; insertion sort on (b, c) */
+    for (size_t i = 0, lo = 0; i < nv; lo = c->count[i], i++) {
+        for (size_t a = lo + 1; a < c->count[i]; a++) {
+            uint32_t f[3];
+            size_t b = a;
+            memcpy(f, &c->faces[3 * a], sizeof f);
+            while (b > lo && (c->faces[3 * (b - 1) + 1] > f[1] ||
+                              (c->faces[3 * (b - 1) + 1] == f[1] &&
+                               c->faces[3 * (b - 1) + 2] > f[2]))) {
+                memcpy(&c->faces[3 * b], &c->faces[3 * (b - 1)], sizeof f);
+                b--;
+            }
+            memcpy(&c->faces[3 * b], f, sizeof f);
+        }
+    }
+    for (size_t i = 0; i < 3 * nf; i++)
+        c->faces[i] += base;
+    return GDT_OK;
+}
+
+static gdt_status tile_path(tr_ctx *c, const gdt_tile_desc *d, const char *ext, char **out,
+                            gdt_error *err)
+{
+    char name[96];
+    snprintf(name, sizeof name, "tile_%" PRId64 "_%" PRId64 ".%s", d->i, d->j, ext);
+    *out = path_join(c->tiles_dir, name);
+    return *out == NULL ? gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory") : GDT_OK;
+}
+
+/* Stage 2 for tile k: core, certification, .tri file, seam. */
+static gdt_status run_tile(tr_ctx *c, uint64_t k, gdt_error *err)
+{
+    const gdt_tile_plan *pl = c->plan;
+    gdt_tile_desc d;
+    gdt_cert_region r;
+    gdt_core_stats cs;
+    size_t n, nh, nf, nv0 = c->seam.nv, ne0 = c->seam.ne, len;
+    int64_t h = pl->halo * pl->cell;
+    char *path = NULL;
+    unsigned char *p;
+    double t0;
+    gdt_status st;
+
+    st = gdt_tiler_tile_info(c->tiler, k, &d, err);
+    if (st == GDT_OK)
+        st = gdt_tiler_load_tile(c->tiler, k, &c->pts, &c->halo, err);
+    if (st != GDT_OK)
+        return st;
+    n = c->pts.n;
+    nh = c->halo.n;
+    if (n > c->s.max_tile_points)
+        c->s.max_tile_points = n;
+    if (nh > c->s.max_halo_points)
+        c->s.max_halo_points = nh;
+    if (reserve((void **)&c->lp, &c->cap_lp, n + 1, sizeof *c->lp) != 0 ||
+        reserve((void **)&c->lh, &c->cap_lh, nh + 1, sizeof *c->lh) != 0)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    for (size_t i = 0; i < n; i++) {
+        c->lp[i].x = c->pts.pts[i].x - d.local_x0;
+        c->lp[i].y = c->pts.pts[i].y - d.local_y0;
+    }
+    for (size_t i = 0; i < nh; i++) {
+        c->lh[i].x = c->halo.pts[i].x - d.local_x0;
+        c->lh[i].y = c->halo.pts[i].y - d.local_y0;
+    }
+
+    t0 = gdt_now();
+    memset(&cs, 0, sizeof cs);
+    st = gdt_core_triangulate(c->core, c->lp, n, c->opts->tile, &c->mesh, &cs, err);
+    if (st != GDT_OK)
+        return st;
+    if (strcmp(cs.path, "insert") == 0)
+        c->s.insert_tiles++;
+    else
+        c->s.gcd_tiles++;
+    c->s.t_core += gdt_now() - t0;
+
+    t0 = gdt_now();
+    r.own[0] = h;
+    r.own[1] = h;
+    r.own[2] = h + pl->span - 1;
+    r.own[3] = h + pl->span - 1;
+    r.known[0] = 0;
+    r.known[1] = 0;
+    r.known[2] = d.local_extent - 1;
+    r.known[3] = d.local_extent - 1;
+    r.open[GDT_SIDE_WEST] = d.local_x0 <= pl->min_x;
+    r.open[GDT_SIDE_SOUTH] = d.local_y0 <= pl->min_y;
+    r.open[GDT_SIDE_EAST] = d.local_x0 + d.local_extent - 1 >= pl->max_x;
+    r.open[GDT_SIDE_NORTH] = d.local_y0 + d.local_extent - 1 >= pl->max_y;
+    if (reserve((void **)&c->cert, &c->cap_cert, c->mesh.ntris + 1, 1) != 0)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    st = gdt_certify_tile(c->certifier, &c->mesh, c->lh, nh, &r, c->cert, &c->s.cert, err);
+    if (st != GDT_OK)
+        return st;
+    nf = 0;
+    for (size_t t = 0; t < c->mesh.ntris; t++)
+        nf += c->cert[t];
+    st = sort_faces(c, nf, (uint32_t)c->base[k], err);
+    if (st != GDT_OK)
+        return st;
+    st = gdt_seam_extract(&c->seam, &c->mesh, c->cert, c->base[k], d.local_x0 - pl->min_x,
+                          d.local_y0 - pl->min_y, err);
+    if (st != GDT_OK)
+        return st;
+    c->s.certified += nf;
+    c->s.t_certify += gdt_now() - t0;
+
+    len = TR_HEADER + 12 * nf + 24 * (c->seam.nv - nv0) + 16 * (c->seam.ne - ne0);
+    if (reserve((void **)&c->fbuf, &c->cap_fbuf, len, 1) != 0)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    p = c->fbuf;
+    memset(p, 0, TR_HEADER);
+    memcpy(p, TR_MAGIC, 8);
+    put_u64(p + 8, c->base[k]);
+    put_u64(p + 16, n);
+    put_u64(p + 24, nf);
+    put_u64(p + 32, c->seam.nv - nv0);
+    put_u64(p + 40, c->seam.ne - ne0);
+    p += TR_HEADER;
+    for (size_t i = 0; i < 3 * nf; i++, p += 4)
+        put_u32(p, c->faces[i]);
+    for (size_t i = nv0; i < c->seam.nv; i++, p += 24) {
+        put_u64(p, c->seam.v[i].id);
+        put_u64(p + 8, (uint64_t)c->seam.v[i].x);
+        put_u64(p + 16, (uint64_t)c->seam.v[i].y);
+    }
+    for (size_t i = ne0; i < c->seam.ne; i++, p += 16) {
+        put_u64(p, c->seam.e[i].a);
+        put_u64(p + 8, c->seam.e[i].b);
+    }
+    st = tile_path(c, &d, "tri", &path, err);
+    if (st == GDT_OK)
+        st = write_atomic(path, c->fbuf, len, 0, err);
+    free(path);
+    return st;
+}
+
+/* Reads the certified faces of tile k's .tri file into the PLY. */
+static gdt_status copy_faces(tr_ctx *c, uint64_t k, gdt_ply_writer *w, gdt_error *err)
+{
+    gdt_tile_desc d;
+    unsigned char hdr[TR_HEADER];
+    char *path = NULL;
+    FILE *f = NULL;
+    uint64_t nf;
+    int32_t *tri = NULL;
+    unsigned char *raw = NULL;
+    gdt_status st = gdt_tiler_tile_info(c->tiler, k, &d, err);
+
+    if (st == GDT_OK)
+        st = tile_path(c, &d, "tri", &path, err);
+    if (st != GDT_OK)
+        return st;
+    f = fopen(path, "rb");
+    if (f == NULL) {
+        st = gdt_error_set(err, GDT_EIO, 4805, "%s: cannot open: %s", path, strerror(errno));
+        goto fail;
+    }
+    if (fread(hdr, 1, TR_HEADER, f) != TR_HEADER || memcmp(hdr, TR_MAGIC, 8) != 0 ||
+        get_u64(hdr + 8) != c->base[k] || get_u64(hdr + 16) != d.points) {
+        st = gdt_error_set(err, GDT_EJOB, 6801, "%s: not the tile file this run wrote", path);
+        goto fail;
+    }
+    nf = get_u64(hdr + 24);
+    tri = malloc(3 * TR_CHUNK * sizeof *tri);
+    raw = malloc(12 * TR_CHUNK);
+    if (tri == NULL || raw == NULL) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        goto fail;
+    }
+    for (uint64_t done = 0; done < nf;) {
+        size_t m = nf - done < TR_CHUNK ? (size_t)(nf - done) : TR_CHUNK;
+        if (fread(raw, 12, m, f) != m) {
+            st = gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
+            goto fail;
+        }
+        for (size_t i = 0; i < 3 * m; i++)
+            tri[i] = (int32_t)get_u32(raw + 4 * i);
+        st = gdt_ply_write_faces(w, tri, m, err);
+        if (st != GDT_OK)
+            goto fail;
+        done += m;
+    }
+fail:
+    if (f != NULL)
+        fclose(f);
+    free(raw);
+    free(tri);
+    free(path);
+    return st;
+}
+
+static gdt_status write_vertices(tr_ctx *c, uint64_t k, gdt_ply_writer *w, double *xyz,
+                                 gdt_point *buf, gdt_error *err)
+{
+    const gdt_lattice *L = &gdt_cloud_get_info(c->cloud)->lattice;
+    gdt_tile_desc d;
+    tl_rfile rf;
+    char *path = NULL;
+    gdt_status st = gdt_tiler_tile_info(c->tiler, k, &d, err);
+
+    memset(&rf, 0, sizeof rf);
+    rf.fd = -1;
+    if (st == GDT_OK)
+        st = tile_path(c, &d, "pts", &path, err);
+    if (st == GDT_OK)
+        st = tl_rfile_open(&rf, path, d.points, TR_CHUNK, err);
+    free(path);
+    if (st != GDT_OK)
+        return st;
+    for (;;) {
+        size_t m = 0;
+        st = tl_rfile_read(&rf, buf, TR_CHUNK, &m, err);
+        if (st != GDT_OK || m == 0)
+            break;
+        for (size_t i = 0; i < m; i++) {
+            xyz[3 * i + 0] = L->ox + L->sx * (double)buf[i].x;
+            xyz[3 * i + 1] = L->oy + L->sy * (double)buf[i].y;
+            xyz[3 * i + 2] = buf[i].z;
+        }
+        st = gdt_ply_write_vertices(w, xyz, m, err);
+        if (st != GDT_OK)
+            break;
+    }
+    tl_rfile_close(&rf);
+    return st;
+}
+
+/* Stage 4: the PLY. */
+static gdt_status write_ply(tr_ctx *c, const uint64_t *mfaces, size_t nmf, gdt_error *err)
+{
+    const gdt_cloud_info *ci = gdt_cloud_get_info(c->cloud);
+    uint64_t ntiles = gdt_tiler_tile_count(c->tiler);
+    gdt_ply_writer *w = NULL;
+    gdt_ply_meta meta;
+    double *xyz = malloc(3 * TR_CHUNK * sizeof *xyz);
+    gdt_point *buf = malloc(TR_CHUNK * sizeof *buf);
+    int32_t *tri = malloc(3 * TR_CHUNK * sizeof *tri);
+    gdt_status st;
+
+    memset(&meta, 0, sizeof meta);
+    meta.lattice = ci->lattice;
+    meta.epsg = ci->epsg;
+    meta.crs_wkt = ci->crs_wkt;
+    if (xyz == NULL || buf == NULL || tri == NULL) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        goto fail;
+    }
+    st = gdt_ply_create(&w, c->opts->output, &meta, err);
+    for (uint64_t k = 0; st == GDT_OK && k < ntiles; k++)
+        st = write_vertices(c, k, w, xyz, buf, err);
+    for (uint64_t k = 0; st == GDT_OK && k < ntiles; k++)
+        st = copy_faces(c, k, w, err);
+    for (size_t i = 0; st == GDT_OK && i < nmf; i += TR_CHUNK) {
+        size_t m = nmf - i < TR_CHUNK ? nmf - i : TR_CHUNK;
+        for (size_t q = 0; q < 3 * m; q++)
+            tri[q] = (int32_t)mfaces[3 * i + q];
+        st = gdt_ply_write_faces(w, tri, m, err);
+    }
+    if (st == GDT_OK) {
+        st = gdt_ply_finish(w, err);
+        w = NULL;
+    }
+fail:
+    gdt_ply_abort(w);
+    free(tri);
+    free(buf);
+    free(xyz);
+    return st;
+}
+
+/* --check for a tiled run: reads the written PLY back into one mesh (merge
+ * frame coordinates) and runs both exact verifiers.  Holds the whole mesh. */
+static gdt_status check_output(tr_ctx *c, const uint64_t *mfaces, size_t nmf, gdt_error *err)
+{
+    uint64_t ntiles = gdt_tiler_tile_count(c->tiler);
+    gdt_mesh m;
+    gdt_pred_stats ps;
+    size_t nt = 0;
+    gdt_status st;
+
+    memset(&ps, 0, sizeof ps);
+    gdt_mesh_init(&m);
+    st = gdt_mesh_reserve(&m, c->s.vertices, c->s.faces, 0, err);
+    if (st != GDT_OK)
+        goto fail;
+    m.nverts = c->s.vertices;
+    for (uint64_t k = 0; k < ntiles; k++) {
+        gdt_tile_desc d;
+        tl_rfile rf;
+        char *path = NULL;
+        size_t got = 0;
+        memset(&rf, 0, sizeof rf);
+        rf.fd = -1;
+        st = gdt_tiler_tile_info(c->tiler, k, &d, err);
+        if (st == GDT_OK)
+            st = tile_path(c, &d, "pts", &path, err);
+        if (st == GDT_OK && reserve((void **)&c->pts.pts, &c->pts.cap, d.points + 1,
+                                    sizeof *c->pts.pts) != 0)
+            st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        if (st == GDT_OK)
+            st = tl_rfile_open(&rf, path, d.points, TR_CHUNK, err);
+        free(path);
+        if (st == GDT_OK)
+            st = tl_rfile_read(&rf, c->pts.pts, d.points, &got, err);
+        tl_rfile_close(&rf);
+        if (st != GDT_OK)
+            goto fail;
+        for (size_t i = 0; i < got; i++) {
+            m.pts[c->base[k] + i].x = c->pts.pts[i].x - c->plan->min_x;
+            m.pts[c->base[k] + i].y = c->pts.pts[i].y - c->plan->min_y;
+        }
+    }
+    c->pts.n = 0;
+    for (uint64_t k = 0; k < ntiles; k++) {
+        gdt_tile_desc d;
+        char *path = NULL;
+        FILE *f;
+        unsigned char hdr[TR_HEADER], rec[12];
+        st = gdt_tiler_tile_info(c->tiler, k, &d, err);
+        if (st == GDT_OK)
+            st = tile_path(c, &d, "tri", &path, err);
+        if (st != GDT_OK)
+            goto fail;
+        f = fopen(path, "rb");
+        if (f == NULL || fread(hdr, 1, TR_HEADER, f) != TR_HEADER) {
+            st = gdt_error_set(err, GDT_EIO, 4805, "%s: cannot read", path);
+            if (f != NULL)
+                fclose(f);
+            free(path);
+            goto fail;
+        }
+        for (uint64_t i = 0; i < get_u64(hdr + 24); i++, nt++) {
+            if (fread(rec, 12, 1, f) != 1)
+                break;
+            for (int q = 0; q < 3; q++)
+                m.tri[3 * nt + (size_t)q] = (int32_t)get_u32(rec + 4 * q);
+        }
+        fclose(f);
+        free(path);
+    }
+    for (size_t i = 0; i < nmf; i++, nt++)
+        for (int q = 0; q < 3; q++)
+            m.tri[3 * nt + (size_t)q] = (int32_t)mfaces[3 * i + (size_t)q];
+    m.ntris = nt;
+    st = gdt_mesh_link(&m, err);
+    if (st == GDT_OK)
+        st = gdt_check_mesh(&ps, &m, err);
+    if (st == GDT_OK)
+        st = gdt_check_delaunay(&ps, &m, err);
+fail:
+    gdt_mesh_free(&m);
+    return st;
+}
+
+static gdt_status write_summary(const tr_ctx *c, gdt_error *err)
+{
+    const tr_summary *s = &c->s;
+    const gdt_tile_plan *pl = c->plan;
+    gdt_json j;
+    gdt_status st = gdt_json_open(&j, c->opts->json, err);
+    if (st != GDT_OK)
+        return st;
+    gdt_json_begin_object(&j, NULL);
+    gdt_json_string(&j, "mode", "tiled");
+    gdt_json_string(&j, "output", c->opts->output);
+    gdt_json_string(&j, "device", s->device);
+    gdt_json_uint(&j, "points_read", s->points_read);
+    gdt_json_uint(&j, "vertices", s->vertices);
+    gdt_json_uint(&j, "faces", s->faces);
+    gdt_json_uint(&j, "tiles", s->tiles);
+    gdt_json_uint(&j, "tile", (uint64_t)pl->tile);
+    gdt_json_int(&j, "cell", pl->cell);
+    gdt_json_int(&j, "halo", pl->halo);
+    gdt_json_uint(&j, "gcd_tiles", s->gcd_tiles);
+    gdt_json_uint(&j, "insert_tiles", s->insert_tiles);
+    gdt_json_uint(&j, "max_tile_points", s->max_tile_points);
+    gdt_json_uint(&j, "max_halo_points", s->max_halo_points);
+    gdt_json_uint(&j, "certified_faces", s->certified);
+    gdt_json_uint(&j, "merge_faces", s->merge_faces);
+    gdt_json_double(&j, "certified_fraction",
+                    s->faces > 0 ? (double)s->certified / (double)s->faces : 1.0);
+    gdt_json_uint(&j, "seam_vertices", s->merge.seam_vertices);
+    gdt_json_uint(&j, "barrier_edges", s->merge.barrier_edges);
+    gdt_json_uint(&j, "seam_triangles", s->merge.seam_triangles);
+    gdt_json_uint(&j, "hull_vertices", s->merge.hull_vertices);
+    gdt_json_begin_object(&j, "certification");
+    gdt_json_uint(&j, "triangles", s->cert.triangles);
+    gdt_json_uint(&j, "inner", s->cert.inner);
+    gdt_json_uint(&j, "outside_known", s->cert.outside_known);
+    gdt_json_uint(&j, "halo_hit", s->cert.halo_hit);
+    gdt_json_uint(&j, "halo_tests", s->cert.halo_tests);
+    gdt_json_end_object(&j);
+    gdt_json_begin_object(&j, "times");
+    gdt_json_double(&j, "pass1", s->t_pass1);
+    gdt_json_double(&j, "pass2", s->t_pass2);
+    gdt_json_double(&j, "tiles", s->t_tiles);
+    gdt_json_double(&j, "core", s->t_core);
+    gdt_json_double(&j, "certify", s->t_certify);
+    gdt_json_double(&j, "merge", s->t_merge);
+    gdt_json_double(&j, "write", s->t_write);
+    if (s->checked)
+        gdt_json_double(&j, "check", s->t_check);
+    gdt_json_double(&j, "total", s->t_total);
+    gdt_json_end_object(&j);
+    gdt_json_bool(&j, "checked", s->checked);
+    gdt_json_uint(&j, "peak_rss_bytes", gdt_peak_rss());
+    gdt_json_end_object(&j);
+    return gdt_json_close(&j, err);
+}
+
+static char *default_job(const char *output)
+{
+    size_t l = strlen(output);
+    char *p = malloc(l + 9);
+    if (p != NULL) {
+        memcpy(p, output, l);
+        memcpy(p + l, ".gdt-job", 9);
+    }
+    return p;
+}
+
+gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
+{
+    tr_ctx c;
+    gdt_cloud_opts co;
+    gdt_tiler_opts to;
+    gdt_core_opts copt;
+    uint64_t *mfaces = NULL, ntiles, hull;
+    size_t nmf = 0;
+    double t_start = gdt_now(), t0;
+    gdt_status st;
+
+    memset(&c, 0, sizeof c);
+    c.opts = opts;
+    gdt_mesh_init(&c.mesh);
+    gdt_log_init(&c.log, opts->verbosity);
+    c.job = opts->job != NULL ? strdup(opts->job) : default_job(opts->output);
+    c.tiles_dir = c.job != NULL ? path_join(c.job, "tiles") : NULL;
+    if (c.job == NULL || c.tiles_dir == NULL) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        goto fail;
+    }
+    /* the device first: a missing or broken device fails before any work */
+    memset(&copt, 0, sizeof copt);
+    copt.device = opts->device;
+    copt.log = &c.log;
+    st = gdt_core_create(&c.core, &copt, err);
+    if (st == GDT_OK)
+        st = gdt_certifier_create(&c.certifier, err);
+    if (st != GDT_OK)
+        goto fail;
+    snprintf(c.s.device, sizeof c.s.device, "%s", gdt_core_device_name(c.core));
+    st = make_dir(c.job, err);
+    if (st != GDT_OK)
+        goto fail;
+
+    memset(&co, 0, sizeof co);
+    co.log = &c.log;
+    co.quantum = opts->quantum;
+    st = gdt_cloud_open(&c.cloud, opts->inputs, opts->ninputs, &co, err);
+    if (st != GDT_OK)
+        goto fail;
+    memset(&to, 0, sizeof to);
+    to.tile = opts->tile;
+    to.cell = opts->cell;
+    to.halo = opts->halo;
+    to.mem_budget = opts->mem_budget;
+    to.dup = opts->dup;
+    to.job_dir = c.job;
+    to.log = &c.log;
+    st = gdt_tiler_create(&c.tiler, &to, c.cloud, err);
+    if (st == GDT_OK)
+        st = gdt_tiler_pass1(c.tiler, err);
+    if (st != GDT_OK)
+        goto fail;
+    c.plan = gdt_tiler_get_plan(c.tiler);
+    st = gdt_tiler_pass2(c.tiler, err);
+    if (st != GDT_OK)
+        goto fail;
+    c.s.t_pass1 = gdt_tiler_get_stats(c.tiler)->t_pass1;
+    c.s.t_pass2 = gdt_now() - t_start - c.s.t_pass1;
+    c.s.points_read = c.plan->points;
+
+    ntiles = gdt_tiler_tile_count(c.tiler);
+    c.s.tiles = ntiles;
+    c.base = malloc((ntiles + 1) * sizeof *c.base);
+    if (c.base == NULL) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        goto fail;
+    }
+    c.base[0] = 0;
+    for (uint64_t k = 0; k < ntiles; k++) {
+        gdt_tile_desc d;
+        st = gdt_tiler_tile_info(c.tiler, k, &d, err);
+        if (st != GDT_OK)
+            goto fail;
+        c.base[k + 1] = c.base[k] + d.points;
+    }
+    c.s.vertices = c.base[ntiles];
+    if (c.s.vertices > (uint64_t)INT32_MAX) {
+        st = gdt_error_set(err, GDT_EINPUT, 3801,
+                           "%s: %" PRIu64 " distinct points; a PLY face index holds at most "
+                           "2^31 - 1",
+                           opts->inputs[0], c.s.vertices);
+        goto fail;
+    }
+
+    t0 = gdt_now();
+    for (uint64_t k = 0; k < ntiles; k++) {
+        st = run_tile(&c, k, err);
+        if (st != GDT_OK)
+            goto fail;
+    }
+    c.s.t_tiles = gdt_now() - t0;
+    gdt_core_destroy(c.core);
+    c.core = NULL;
+    gdt_mesh_free(&c.mesh);
+    gdt_mesh_init(&c.mesh);
+    st = tl_sync_dir(c.tiles_dir, err);
+    if (st != GDT_OK)
+        goto fail;
+
+    t0 = gdt_now();
+    st = gdt_merge_seams(&c.seam, &mfaces, &nmf, &c.s.merge, err);
+    if (st != GDT_OK)
+        goto fail;
+    gdt_seam_free(&c.seam);
+    c.s.merge_faces = nmf;
+    c.s.faces = c.s.certified + nmf;
+    c.s.t_merge = gdt_now() - t0;
+
+    /* Euler: a triangulation of V points with h on the hull has 2V - h - 2
+     * faces (none when the points are collinear: then the seam holds them
+     * all and has no triangle). */
+    hull = c.s.merge.hull_vertices;
+    if (c.s.merge.seam_triangles == 0 && c.s.certified == 0 ? c.s.faces != 0
+                                                            : c.s.faces + hull + 2 !=
+                                                                  2 * c.s.vertices) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7820,
+                           "the tiled mesh has %" PRIu64 " faces for %" PRIu64
+                           " vertices with %" PRIu64 " on the hull (Euler: %" PRIu64 ")",
+                           c.s.faces, c.s.vertices, hull, 2 * c.s.vertices - hull - 2);
+        goto fail;
+    }
+
+    t0 = gdt_now();
+    st = write_ply(&c, mfaces, nmf, err);
+    if (st != GDT_OK)
+        goto fail;
+    c.s.t_write = gdt_now() - t0;
+    if (opts->check) {
+        t0 = gdt_now();
+        st = check_output(&c, mfaces, nmf, err);
+        if (st != GDT_OK)
+            goto fail;
+        c.s.checked = 1;
+        c.s.t_check = gdt_now() - t0;
+    }
+    c.s.t_total = gdt_now() - t_start;
+    if (opts->json != NULL) {
+        st = write_summary(&c, err);
+        if (st != GDT_OK)
+            goto fail;
+    }
+    if (opts->verbosity >= 0)
+        fprintf(stderr,
+                "gdt-tile: %s: %" PRIu64 " points, %" PRIu64 " vertices, %" PRIu64
+                " faces in %" PRIu64 " tiles (%.1f%% certified, %" PRIu64
+                " seam vertices) on %s, %.2f s%s\n",
+                opts->output, c.s.points_read, c.s.vertices, c.s.faces, c.s.tiles,
+                c.s.faces > 0 ? 100.0 * (double)c.s.certified / (double)c.s.faces : 100.0,
+                c.s.merge.seam_vertices, c.s.device, c.s.t_total,
+                c.s.checked ? ", checked exactly" : "");
+    gdt_log_note(&c.log,
+                 "times: pass 1 %.2f s, pass 2 %.2f s, tiles %.2f s (core %.2f, certify %.2f), "
+                 "merge %.2f s, write %.2f s",
+                 c.s.t_pass1, c.s.t_pass2, c.s.t_tiles, c.s.t_core, c.s.t_certify, c.s.t_merge,
+                 c.s.t_write);
+    if (!opts->keep_job) {
+        gdt_tiler_destroy(c.tiler);
+        c.tiler = NULL;
+        if (nftw(c.job, rm_entry, 16, FTW_DEPTH | FTW_PHYS) != 0)
+            gdt_log_warn(&c.log, 4806, "%s: could not remove the job directory: %s", c.job,
+                         strerror(errno));
+    }
+fail:
+    free(mfaces);
+    gdt_seam_free(&c.seam);
+    free(c.fbuf);
+    free(c.count);
+    free(c.faces);
+    free(c.cert);
+    gdt_mesh_free(&c.mesh);
+    free(c.lh);
+    free(c.lp);
+    gdt_point_buf_free(&c.halo);
+    gdt_point_buf_free(&c.pts);
+    free(c.base);
+    gdt_certifier_destroy(c.certifier);
+    gdt_core_destroy(c.core);
+    gdt_tiler_destroy(c.tiler);
+    gdt_cloud_close(c.cloud);
+    free(c.tiles_dir);
+    free(c.job);
+    return st;
+}
