@@ -6,6 +6,7 @@
 #include "private/tiled_run.h"
 
 #include <errno.h>
+#include <signal.h>
 #include <limits.h>
 #include <math.h>
 #include <stdio.h>
@@ -376,14 +377,14 @@ static gdt_status check_one_tile(const gdt_options *opts, gdt_error *err)
  * rather than silently ignored. */
 static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
 {
-    if (opts->mode == GDT_MODE_RESUME || opts->restart)
-        return gdt_error_set(err, GDT_EUSAGE, 2101,
-                             "resuming jobs (--restart, --resume) is not available in this "
-                             "build yet");
-    if ((opts->job != NULL || opts->keep_job) && (opts->mode != GDT_MODE_RUN || opts->single_tile))
+    if ((opts->job != NULL || opts->keep_job || opts->restart) &&
+        (opts->mode != GDT_MODE_RUN || opts->single_tile) && opts->mode != GDT_MODE_RESUME)
         return gdt_error_set(err, GDT_EUSAGE, 2104,
-                             "--job and --keep-job only apply to a tiled run");
-    if (opts->device != NULL && opts->mode != GDT_MODE_RUN)
+                             "--job, --keep-job and --restart only apply to a tiled run");
+    if (opts->mode == GDT_MODE_RESUME && (opts->job != NULL || opts->restart))
+        return gdt_error_set(err, GDT_EUSAGE, 2107,
+                             "--resume DIR names the job itself (no --job, no --restart)");
+    if (opts->device != NULL && opts->mode != GDT_MODE_RUN && opts->mode != GDT_MODE_RESUME)
         return gdt_error_set(err, GDT_EUSAGE, 2103,
                              "--device only applies to a triangulation run (not --info or "
                              "--reference)");
@@ -391,6 +392,27 @@ static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
         return gdt_error_set(err, GDT_EUSAGE, 2105,
                              "--single-tile only applies to a triangulation run");
     return GDT_OK;
+}
+
+/* SIGINT / SIGTERM ask the run to stop at its next check (between read
+ * batches, tiles and output chunks); a second signal kills at once
+ * (SA_RESETHAND). */
+static volatile sig_atomic_t g_stop;
+
+static void on_signal(int sig)
+{
+    g_stop = sig;
+}
+
+static void install_handlers(void)
+{
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_signal;
+    sigemptyset(&sa.sa_mask);
+    sa.sa_flags = SA_RESTART | SA_RESETHAND;
+    sigaction(SIGINT, &sa, NULL);
+    sigaction(SIGTERM, &sa, NULL);
 }
 
 int gdt_cli_main(int argc, char **argv)
@@ -425,7 +447,13 @@ int gdt_cli_main(int argc, char **argv)
         st = gdt_predicates_selftest(&faults, &err);
         if (st == GDT_OK && opts.mode == GDT_MODE_REFERENCE) {
             st = gdt_cli_reference(&opts, &err);
+        } else if (st == GDT_OK && opts.mode == GDT_MODE_RESUME) {
+            install_handlers();
+            opts.stop = &g_stop;
+            st = gdt_cli_resume(&opts, &err);
         } else if (st == GDT_OK && opts.mode == GDT_MODE_RUN) {
+            install_handlers();
+            opts.stop = &g_stop;
             if (opts.single_tile) {
                 st = check_one_tile(&opts, &err);
                 if (st == GDT_OK)

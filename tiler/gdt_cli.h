@@ -7,6 +7,7 @@
 #ifndef GDT_CLI_H
 #define GDT_CLI_H
 
+#include <signal.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -49,6 +50,8 @@ typedef struct gdt_options {
     int check;               /* --check */
     const char *json;        /* --json FILE */
     int verbosity;           /* -q = -1, default 0, -v = 1 (-vv = 2) */
+    volatile sig_atomic_t *stop; /* set (nonzero) by a signal handler: stop cleanly;
+                                    NULL = never */
 } gdt_options;
 
 /* Parses argv into opts.  Ownership: opts->inputs is allocated; release with

@@ -2,10 +2,11 @@
 #define _XOPEN_SOURCE 700
 #include "private/tiled_run.h"
 
+#include <dirent.h>
 #include <errno.h>
 #include <fcntl.h>
-#include <ftw.h>
 #include <inttypes.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -19,7 +20,9 @@
 #include "gdt_ply.h"
 #include "gdt_seam.h"
 #include "gdt_tiler.h"
+#include "private/job.h"
 #include "private/json_out.h"
+#include "private/progress.h"
 #include "private/run_stats.h"
 #include "private/tiler_io.h"
 
@@ -35,6 +38,8 @@ typedef struct tr_summary {
     gdt_merge_stats merge;
     int checked;
     char device[256];
+    int resumed, pass2_reused;
+    uint64_t tiles_reused, tiles_redone;
 } tr_summary;
 
 typedef struct tr_ctx {
@@ -61,8 +66,23 @@ typedef struct tr_ctx {
     unsigned char *fbuf; /* the .tri file image */
     size_t cap_fbuf;
     gdt_seam seam;
+    gdt_job *jobdb;
+    gdt_progress prog;
     tr_summary s;
 } tr_ctx;
+
+static int stopped(const tr_ctx *c)
+{
+    return c->opts->stop != NULL && *c->opts->stop != 0;
+}
+
+static gdt_status interrupted_in(const char *job, const char *where, gdt_error *err)
+{
+    return gdt_error_set(err, GDT_EINTERRUPTED, 1302,
+                         "stopped by a signal during %s; rerun the same command (or "
+                         "gdt-tile --resume %s) to continue",
+                         where, job);
+}
 
 static void put_u64(unsigned char *p, uint64_t v)
 {
@@ -178,14 +198,6 @@ fail:
     unlink(tmp);
     free(tmp);
     return st;
-}
-
-static int rm_entry(const char *path, const struct stat *sb, int flag, struct FTW *ftw)
-{
-    (void)sb;
-    (void)flag;
-    (void)ftw;
-    return remove(path);
 }
 
 /* Certified faces of the current tile as output indices, each rotated to
@@ -358,8 +370,77 @@ static gdt_status run_tile(tr_ctx *c, uint64_t k, gdt_error *err)
     st = tile_path(c, &d, "tri", &path, err);
     if (st == GDT_OK)
         st = write_atomic(path, c->fbuf, len, 0, err);
+    if (st == GDT_OK)
+        st = gdt_job_put_tile(c->jobdb, k, path, len, gdt_hash64(c->fbuf, len, k), err);
     free(path);
     return st;
+}
+
+/* A tile recorded as finished: its .tri file is reused when its size and
+ * checksum match the record; its seam goes back into the merge.
+ * *ok = 0: the file is missing or damaged (the tile must be redone). */
+static gdt_status reuse_tile(tr_ctx *c, uint64_t k, uint64_t size, uint64_t sum, int *ok,
+                             gdt_error *err)
+{
+    gdt_tile_desc d;
+    char *path = NULL;
+    FILE *f = NULL;
+    const unsigned char *p;
+    uint64_t nf, nv, ne;
+    size_t off;
+    gdt_status st = gdt_tiler_tile_info(c->tiler, k, &d, err);
+
+    *ok = 0;
+    if (st == GDT_OK)
+        st = tile_path(c, &d, "tri", &path, err);
+    if (st != GDT_OK)
+        return st;
+    if (size < TR_HEADER || size > SIZE_MAX ||
+        reserve((void **)&c->fbuf, &c->cap_fbuf, (size_t)size, 1) != 0) {
+        free(path);
+        return size < TR_HEADER ? GDT_OK
+                                : gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    }
+    f = fopen(path, "rb");
+    free(path);
+    if (f == NULL)
+        return GDT_OK;
+    if (fread(c->fbuf, 1, (size_t)size, f) != size || fgetc(f) != EOF ||
+        gdt_hash64(c->fbuf, (size_t)size, k) != sum) {
+        fclose(f);
+        return GDT_OK;
+    }
+    fclose(f);
+    p = c->fbuf;
+    nf = get_u64(p + 24);
+    nv = get_u64(p + 32);
+    ne = get_u64(p + 40);
+    if (memcmp(p, TR_MAGIC, 8) != 0 || get_u64(p + 8) != c->base[k] ||
+        get_u64(p + 16) != d.points || TR_HEADER + 12 * nf + 24 * nv + 16 * ne != size)
+        return GDT_OK;
+    off = TR_HEADER + 12 * (size_t)nf;
+    for (uint64_t i = 0; i < nv; i++, off += 24) {
+        if (c->seam.nv == c->seam.cap_v &&
+            reserve((void **)&c->seam.v, &c->seam.cap_v,
+                    c->seam.cap_v > 0 ? 2 * c->seam.cap_v : 1024, sizeof *c->seam.v) != 0)
+            return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        c->seam.v[c->seam.nv].id = get_u64(p + off);
+        c->seam.v[c->seam.nv].x = (int64_t)get_u64(p + off + 8);
+        c->seam.v[c->seam.nv].y = (int64_t)get_u64(p + off + 16);
+        c->seam.nv++;
+    }
+    for (uint64_t i = 0; i < ne; i++, off += 16) {
+        if (c->seam.ne == c->seam.cap_e &&
+            reserve((void **)&c->seam.e, &c->seam.cap_e,
+                    c->seam.cap_e > 0 ? 2 * c->seam.cap_e : 1024, sizeof *c->seam.e) != 0)
+            return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        c->seam.e[c->seam.ne].a = get_u64(p + off);
+        c->seam.e[c->seam.ne].b = get_u64(p + off + 8);
+        c->seam.ne++;
+    }
+    c->s.certified += nf;
+    *ok = 1;
+    return GDT_OK;
 }
 
 /* Reads the certified faces of tile k's .tri file into the PLY. */
@@ -474,10 +555,15 @@ static gdt_status write_ply(tr_ctx *c, const uint64_t *mfaces, size_t nmf, gdt_e
         goto fail;
     }
     st = gdt_ply_create(&w, c->opts->output, &meta, err);
-    for (uint64_t k = 0; st == GDT_OK && k < ntiles; k++)
-        st = write_vertices(c, k, w, xyz, buf, err);
-    for (uint64_t k = 0; st == GDT_OK && k < ntiles; k++)
-        st = copy_faces(c, k, w, err);
+    gdt_progress_stage(&c->prog, "write", 2 * ntiles, "tiles");
+    for (uint64_t k = 0; st == GDT_OK && k < ntiles; k++) {
+        st = stopped(c) ? interrupted_in(c->job, "the output", err) : write_vertices(c, k, w, xyz, buf, err);
+        gdt_progress_update(&c->prog, k + 1);
+    }
+    for (uint64_t k = 0; st == GDT_OK && k < ntiles; k++) {
+        st = stopped(c) ? interrupted_in(c->job, "the output", err) : copy_faces(c, k, w, err);
+        gdt_progress_update(&c->prog, ntiles + k + 1);
+    }
     for (size_t i = 0; st == GDT_OK && i < nmf; i += TR_CHUNK) {
         size_t m = nmf - i < TR_CHUNK ? nmf - i : TR_CHUNK;
         for (size_t q = 0; q < 3 * m; q++)
@@ -631,6 +717,15 @@ static gdt_status write_summary(const tr_ctx *c, gdt_error *err)
     gdt_json_double(&j, "total", s->t_total);
     gdt_json_end_object(&j);
     gdt_json_bool(&j, "checked", s->checked);
+    gdt_json_bool(&j, "resumed", s->resumed);
+    gdt_json_begin_object(&j, "reused");
+    gdt_json_bool(&j, "pass2", s->pass2_reused);
+    gdt_json_uint(&j, "tiles", s->tiles_reused);
+    gdt_json_end_object(&j);
+    gdt_json_begin_object(&j, "redone");
+    gdt_json_bool(&j, "pass2", !s->pass2_reused);
+    gdt_json_uint(&j, "tiles", s->tiles_redone);
+    gdt_json_end_object(&j);
     gdt_json_uint(&j, "peak_rss_bytes", gdt_peak_rss());
     gdt_json_end_object(&j);
     return gdt_json_close(&j, err);
@@ -647,6 +742,230 @@ static char *default_job(const char *output)
     return p;
 }
 
+/* A growing text buffer. */
+typedef struct tr_text {
+    char *s;
+    size_t len, cap;
+    int failed;
+} tr_text;
+
+static void text_add(tr_text *t, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static void text_add(tr_text *t, const char *fmt, ...)
+{
+    va_list ap;
+    int n;
+    if (t->failed)
+        return;
+    va_start(ap, fmt);
+    n = vsnprintf(NULL, 0, fmt, ap);
+    va_end(ap);
+    if (n < 0 || reserve((void **)&t->s, &t->cap, t->len + (size_t)n + 1 + 256, 1) != 0) {
+        t->failed = 1;
+        return;
+    }
+    va_start(ap, fmt);
+    vsnprintf(t->s + t->len, t->cap - t->len, fmt, ap);
+    va_end(ap);
+    t->len += (size_t)n;
+}
+
+/* Absolute form of a path (the current directory prefixed to a relative
+ * one), so that a job keeps meaning the same files from any directory. */
+static void text_abs(tr_text *t, const char *key, const char *path)
+{
+    char cwd[4096];
+    if (path[0] == '/' || getcwd(cwd, sizeof cwd) == NULL)
+        text_add(t, "%s=%s\n", key, path);
+    else
+        text_add(t, "%s=%s/%s\n", key, cwd, path);
+}
+
+/* The options that fix the output, one "key=value" per line. */
+static gdt_status build_params(const gdt_options *o, char **out, gdt_error *err)
+{
+    tr_text t = {NULL, 0, 0, 0};
+    text_add(&t, "tile=%d\ncell=%.17g\nhalo=%ld\ndup=%d\nquantum=%.17g\n", o->tile, o->cell,
+             o->halo, (int)o->dup, o->quantum);
+    text_abs(&t, "output", o->output);
+    text_add(&t, "inputs=%zu\n", o->ninputs);
+    for (size_t i = 0; i < o->ninputs; i++) {
+        if (strchr(o->inputs[i], '\n') != NULL) {
+            free(t.s);
+            return gdt_error_set(err, GDT_EUSAGE, 2106, "input path with a line break: %s",
+                                 o->inputs[i]);
+        }
+        text_abs(&t, "input", o->inputs[i]);
+    }
+    if (t.failed) {
+        free(t.s);
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    }
+    *out = t.s;
+    return GDT_OK;
+}
+
+/* Per input: size, modification time and a hash of its first and last
+ * 64 KiB (the header and the tail of the records). */
+static gdt_status build_fingerprint(const gdt_options *o, char **out, gdt_error *err)
+{
+    enum { PART = 65536 };
+    tr_text t = {NULL, 0, 0, 0};
+    unsigned char *buf = malloc(PART);
+    gdt_status st = GDT_OK;
+
+    if (buf == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    for (size_t i = 0; i < o->ninputs && st == GDT_OK; i++) {
+        struct stat sb;
+        uint64_t h1 = 0, h2 = 0;
+        FILE *f = fopen(o->inputs[i], "rb");
+        if (f == NULL || fstat(fileno(f), &sb) != 0) {
+            st = gdt_error_set(err, GDT_EINPUT, 3802, "%s: cannot read: %s", o->inputs[i],
+                               strerror(errno));
+        } else {
+            size_t n = fread(buf, 1, PART, f);
+            h1 = gdt_hash64(buf, n, 1);
+            if (sb.st_size > PART && fseeko(f, sb.st_size - PART, SEEK_SET) == 0) {
+                n = fread(buf, 1, PART, f);
+                h2 = gdt_hash64(buf, n, 2);
+            }
+            text_add(&t, "input %zu: size %lld, mtime %lld.%09ld, hash %016llx %016llx\n", i,
+                     (long long)sb.st_size, (long long)sb.st_mtim.tv_sec,
+                     (long)sb.st_mtim.tv_nsec, (unsigned long long)h1,
+                     (unsigned long long)h2);
+        }
+        if (f != NULL)
+            fclose(f);
+    }
+    free(buf);
+    if (st == GDT_OK && t.failed)
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    if (st != GDT_OK) {
+        free(t.s);
+        return st;
+    }
+    *out = t.s != NULL ? t.s : strdup("");
+    return *out != NULL ? GDT_OK : gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+}
+
+/* The first line where a and b differ, as "was X, now Y". */
+static void first_difference(const char *a, const char *b, char *msg, size_t len)
+{
+    while (*a != '\0' || *b != '\0') {
+        size_t la = strcspn(a, "\n"), lb = strcspn(b, "\n");
+        if (la != lb || memcmp(a, b, la) != 0) {
+            snprintf(msg, len, "was '%.*s', now '%.*s'", (int)(la < 200 ? la : 200), a,
+                     (int)(lb < 200 ? lb : 200), b);
+            return;
+        }
+        a += la + (a[la] == '\n');
+        b += lb + (b[lb] == '\n');
+    }
+    snprintf(msg, len, "no difference");
+}
+
+/* Removes the files a job directory holds (job.db and its WAL files,
+ * index.vdb, tiles/ with our tile files), then the directories if empty.
+ * Never removes anything else: --job may name a directory the user owns. */
+static void remove_job_files(const char *job)
+{
+    static const char *const names[] = {"job.db", "job.db-wal", "job.db-shm", "job.db-journal",
+                                        "index.vdb", "index.vdb.tmp"};
+    char *tiles = path_join(job, "tiles");
+    if (tiles != NULL) {
+        DIR *d = opendir(tiles);
+        struct dirent *e;
+        if (d != NULL) {
+            while ((e = readdir(d)) != NULL)
+                if (strncmp(e->d_name, "tile_", 5) == 0 ||
+                    strncmp(e->d_name, "bucket_", 7) == 0 ||
+                    strncmp(e->d_name, "merge_", 6) == 0)
+                    unlinkat(dirfd(d), e->d_name, 0);
+            closedir(d);
+        }
+        rmdir(tiles);
+        free(tiles);
+    }
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
+        char *p = path_join(job, names[i]);
+        if (p != NULL)
+            unlink(p);
+        free(p);
+    }
+    rmdir(job);
+}
+
+/* The tiler's progress hook: shows progress and carries the stop request. */
+static int tiler_progress(void *ctx, int stage, uint64_t done, uint64_t total)
+{
+    tr_ctx *c = ctx;
+    static const char *const names[] = {"", "pass 1", "pass 2", "dup merge"};
+    const char *name = stage >= 1 && stage <= 3 ? names[stage] : "tiler";
+    if (!c->prog.open || strcmp(c->prog.stage, name) != 0)
+        gdt_progress_stage(&c->prog, name, total, stage == 3 ? "tiles" : "points");
+    gdt_progress_update(&c->prog, done);
+    return stopped(c);
+}
+
+/* Opens or creates the journal and checks that it belongs to this command.
+ * returns GDT_EJOB 6903 (options differ), 6904 (an input changed). */
+static gdt_status open_journal(tr_ctx *c, gdt_error *err)
+{
+    char *params = NULL, *fp = NULL, *old_params = NULL, *old_fp = NULL;
+    char diff[512];
+    int is_new = 0;
+    gdt_status st = build_params(c->opts, &params, err);
+
+    if (st == GDT_OK)
+        st = build_fingerprint(c->opts, &fp, err);
+    if (st == GDT_OK)
+        st = gdt_job_open(&c->jobdb, c->job, 1, &is_new, err);
+    if (st == GDT_OK && !is_new)
+        st = gdt_job_get_meta(c->jobdb, "params", &old_params, err);
+    if (st == GDT_OK && !is_new)
+        st = gdt_job_get_meta(c->jobdb, "fingerprint", &old_fp, err);
+    if (st != GDT_OK)
+        goto done;
+    if (old_params != NULL && strcmp(old_params, params) != 0) {
+        first_difference(old_params, params, diff, sizeof diff);
+        st = gdt_error_set(err, GDT_EJOB, 6903,
+                           "%s: the job there was started with other options or paths (%s); "
+                           "rerun with --restart to discard it, or use another --job",
+                           c->job, diff);
+        goto done;
+    }
+    if (old_params != NULL && old_fp != NULL && strcmp(old_fp, fp) != 0) {
+        size_t i = 0;
+        const char *a = old_fp, *b = fp;
+        while (*a != '\0' && *a == *b) {
+            if (*a == '\n')
+                i++;
+            a++;
+            b++;
+        }
+        first_difference(old_fp, fp, diff, sizeof diff);
+        st = gdt_error_set(err, GDT_EJOB, 6904,
+                           "%s: input changed since the job in %s started (%s); rerun with "
+                           "--restart to start again",
+                           i < c->opts->ninputs ? c->opts->inputs[i] : c->opts->inputs[0],
+                           c->job, diff);
+        goto done;
+    }
+    if (old_params == NULL || old_fp == NULL) {
+        st = gdt_job_set_meta(c->jobdb, "fingerprint", fp, err);
+        if (st == GDT_OK)
+            st = gdt_job_set_meta(c->jobdb, "params", params, err);
+    } else {
+        c->s.resumed = 1;
+    }
+done:
+    free(params);
+    free(fp);
+    free(old_params);
+    free(old_fp);
+    return st;
+}
+
 gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
 {
     tr_ctx c;
@@ -655,6 +974,7 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     gdt_core_opts copt;
     uint64_t *mfaces = NULL, ntiles, hull;
     size_t nmf = 0;
+    int done = 0;
     double t_start = gdt_now(), t0;
     gdt_status st;
 
@@ -662,12 +982,14 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     c.opts = opts;
     gdt_mesh_init(&c.mesh);
     gdt_log_init(&c.log, opts->verbosity);
+    gdt_progress_init(&c.prog, opts->verbosity);
     c.job = opts->job != NULL ? strdup(opts->job) : default_job(opts->output);
     c.tiles_dir = c.job != NULL ? path_join(c.job, "tiles") : NULL;
     if (c.job == NULL || c.tiles_dir == NULL) {
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         goto fail;
     }
+
     /* the device first: a missing or broken device fails before any work */
     memset(&copt, 0, sizeof copt);
     copt.device = opts->device;
@@ -678,7 +1000,11 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     if (st != GDT_OK)
         goto fail;
     snprintf(c.s.device, sizeof c.s.device, "%s", gdt_core_device_name(c.core));
+    if (opts->restart)
+        remove_job_files(c.job);
     st = make_dir(c.job, err);
+    if (st == GDT_OK)
+        st = open_journal(&c, err);
     if (st != GDT_OK)
         goto fail;
 
@@ -696,17 +1022,45 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     to.dup = opts->dup;
     to.job_dir = c.job;
     to.log = &c.log;
+    to.progress = tiler_progress;
+    to.progress_ctx = &c;
     st = gdt_tiler_create(&c.tiler, &to, c.cloud, err);
     if (st == GDT_OK)
         st = gdt_tiler_pass1(c.tiler, err);
+    if (st == GDT_EINTERRUPTED)
+        st = interrupted_in(c.job, "pass 1", err);
     if (st != GDT_OK)
         goto fail;
     c.plan = gdt_tiler_get_plan(c.tiler);
-    st = gdt_tiler_pass2(c.tiler, err);
+    c.s.t_pass1 = gdt_tiler_get_stats(c.tiler)->t_pass1;
+    t0 = gdt_now();
+    st = gdt_job_stage_done(c.jobdb, "pass2", &done, err);
     if (st != GDT_OK)
         goto fail;
-    c.s.t_pass1 = gdt_tiler_get_stats(c.tiler)->t_pass1;
-    c.s.t_pass2 = gdt_now() - t_start - c.s.t_pass1;
+    if (done) {
+        gdt_error e2;
+        gdt_error_clear(&e2);
+        if (gdt_tiler_adopt_pass2(c.tiler, &e2) == GDT_OK) {
+            c.s.pass2_reused = 1;
+        } else {
+            gdt_log_note(&c.log, "redoing pass 2: %s", e2.msg);
+            done = 0;
+        }
+    }
+    if (!done) {
+        st = gdt_job_set_stage(c.jobdb, "pass2", 0, err);
+        if (st == GDT_OK)
+            st = gdt_job_clear_tiles(c.jobdb, err);
+        if (st == GDT_OK)
+            st = gdt_tiler_pass2(c.tiler, err);
+        if (st == GDT_EINTERRUPTED)
+            st = interrupted_in(c.job, "pass 2", err);
+        if (st == GDT_OK)
+            st = gdt_job_set_stage(c.jobdb, "pass2", 1, err);
+        if (st != GDT_OK)
+            goto fail;
+    }
+    c.s.t_pass2 = gdt_now() - t0;
     c.s.points_read = c.plan->points;
 
     ntiles = gdt_tiler_tile_count(c.tiler);
@@ -734,10 +1088,26 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     }
 
     t0 = gdt_now();
+    gdt_progress_stage(&c.prog, "tiles", c.s.vertices, "points");
     for (uint64_t k = 0; k < ntiles; k++) {
-        st = run_tile(&c, k, err);
+        uint64_t size = 0, sum = 0;
+        int found = 0, ok = 0;
+        if (stopped(&c)) {
+            st = interrupted_in(c.job, "the tile stage", err);
+            goto fail;
+        }
+        st = gdt_job_get_tile(c.jobdb, k, &found, &size, &sum, err);
+        if (st == GDT_OK && found)
+            st = reuse_tile(&c, k, size, sum, &ok, err);
+        if (st == GDT_OK && !ok)
+            st = run_tile(&c, k, err);
         if (st != GDT_OK)
             goto fail;
+        if (ok)
+            c.s.tiles_reused++;
+        else
+            c.s.tiles_redone++;
+        gdt_progress_update(&c.prog, c.base[k + 1]);
     }
     c.s.t_tiles = gdt_now() - t0;
     gdt_core_destroy(c.core);
@@ -749,9 +1119,11 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
         goto fail;
 
     t0 = gdt_now();
+    gdt_progress_stage(&c.prog, "merge", c.seam.nv, "points");
     st = gdt_merge_seams(&c.seam, &mfaces, &nmf, &c.s.merge, err);
     if (st != GDT_OK)
         goto fail;
+    gdt_progress_update(&c.prog, c.seam.nv);
     gdt_seam_free(&c.seam);
     c.s.merge_faces = nmf;
     c.s.faces = c.s.certified + nmf;
@@ -773,8 +1145,11 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
 
     t0 = gdt_now();
     st = write_ply(&c, mfaces, nmf, err);
+    if (st == GDT_OK)
+        st = gdt_job_set_stage(c.jobdb, "ply", 1, err);
     if (st != GDT_OK)
         goto fail;
+    gdt_progress_end(&c.prog);
     c.s.t_write = gdt_now() - t0;
     if (opts->check) {
         t0 = gdt_now();
@@ -794,24 +1169,25 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
         fprintf(stderr,
                 "gdt-tile: %s: %" PRIu64 " points, %" PRIu64 " vertices, %" PRIu64
                 " faces in %" PRIu64 " tiles (%.1f%% certified, %" PRIu64
-                " seam vertices) on %s, %.2f s%s\n",
+                " seam vertices) on %s, %.2f s%s%s\n",
                 opts->output, c.s.points_read, c.s.vertices, c.s.faces, c.s.tiles,
                 c.s.faces > 0 ? 100.0 * (double)c.s.certified / (double)c.s.faces : 100.0,
                 c.s.merge.seam_vertices, c.s.device, c.s.t_total,
-                c.s.checked ? ", checked exactly" : "");
+                c.s.resumed ? ", resumed" : "", c.s.checked ? ", checked exactly" : "");
     gdt_log_note(&c.log,
                  "times: pass 1 %.2f s, pass 2 %.2f s, tiles %.2f s (core %.2f, certify %.2f), "
-                 "merge %.2f s, write %.2f s",
+                 "merge %.2f s, write %.2f s; tiles reused %" PRIu64 ", computed %" PRIu64,
                  c.s.t_pass1, c.s.t_pass2, c.s.t_tiles, c.s.t_core, c.s.t_certify, c.s.t_merge,
-                 c.s.t_write);
+                 c.s.t_write, c.s.tiles_reused, c.s.tiles_redone);
     if (!opts->keep_job) {
         gdt_tiler_destroy(c.tiler);
         c.tiler = NULL;
-        if (nftw(c.job, rm_entry, 16, FTW_DEPTH | FTW_PHYS) != 0)
-            gdt_log_warn(&c.log, 4806, "%s: could not remove the job directory: %s", c.job,
-                         strerror(errno));
+        gdt_job_close(c.jobdb);
+        c.jobdb = NULL;
+        remove_job_files(c.job);
     }
 fail:
+    gdt_progress_end(&c.prog);
     free(mfaces);
     gdt_seam_free(&c.seam);
     free(c.fbuf);
@@ -828,7 +1204,110 @@ fail:
     gdt_core_destroy(c.core);
     gdt_tiler_destroy(c.tiler);
     gdt_cloud_close(c.cloud);
+    gdt_job_close(c.jobdb);
     free(c.tiles_dir);
     free(c.job);
+    return st;
+}
+
+/* Reads one "key=value" line of params (the first match); NULL if absent. */
+static char *param_get(const char *params, const char *key, const char **next)
+{
+    size_t kl = strlen(key);
+    const char *p = next != NULL && *next != NULL ? *next : params;
+    while (*p != '\0') {
+        size_t l = strcspn(p, "\n");
+        if (l > kl && memcmp(p, key, kl) == 0 && p[kl] == '=') {
+            char *v = malloc(l - kl);
+            if (v != NULL) {
+                memcpy(v, p + kl + 1, l - kl - 1);
+                v[l - kl - 1] = '\0';
+            }
+            if (next != NULL)
+                *next = p + l + (p[l] == '\n');
+            return v;
+        }
+        p += l + (p[l] == '\n');
+    }
+    return NULL;
+}
+
+gdt_status gdt_cli_resume(const gdt_options *opts, gdt_error *err)
+{
+    gdt_options o = *opts;
+    gdt_job *j = NULL;
+    char *params = NULL, *v = NULL;
+    char **inputs = NULL;
+    size_t n = 0;
+    gdt_status st = gdt_job_open(&j, opts->resume, 0, NULL, err);
+
+    if (st == GDT_OK)
+        st = gdt_job_get_meta(j, "params", &params, err);
+    gdt_job_close(j);
+    if (st != GDT_OK)
+        return st;
+    if (params == NULL)
+        return gdt_error_set(err, GDT_EJOB, 6905,
+                             "%s: the job there never recorded its options; start it again "
+                             "with the original command",
+                             opts->resume);
+#define NEED(key)                                                                            \
+    do {                                                                                     \
+        free(v);                                                                             \
+        v = param_get(params, key, NULL);                                                    \
+        if (v == NULL) {                                                                     \
+            st = gdt_error_set(err, GDT_EJOB, 6905, "%s: job record lacks '%s'",             \
+                               opts->resume, key);                                           \
+            goto done;                                                                       \
+        }                                                                                    \
+    } while (0)
+    NEED("tile");
+    o.tile = atoi(v);
+    NEED("cell");
+    o.cell = strtod(v, NULL);
+    NEED("halo");
+    o.halo = strtol(v, NULL, 10);
+    NEED("dup");
+    o.dup = (gdt_dup_policy)atoi(v);
+    NEED("quantum");
+    o.quantum = strtod(v, NULL);
+    NEED("inputs");
+    n = (size_t)strtoull(v, NULL, 10);
+#undef NEED
+    inputs = calloc(n + 1, sizeof *inputs);
+    if (inputs == NULL) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        goto done;
+    }
+    {
+        const char *next = NULL;
+        for (size_t i = 0; i < n; i++) {
+            inputs[i] = param_get(params, "input", &next);
+            if (inputs[i] == NULL) {
+                st = gdt_error_set(err, GDT_EJOB, 6905, "%s: job record lacks input %zu",
+                                   opts->resume, i + 1);
+                goto done;
+            }
+        }
+    }
+    free(v);
+    v = param_get(params, "output", NULL);
+    if (v == NULL || n == 0) {
+        st = gdt_error_set(err, GDT_EJOB, 6905, "%s: job record lacks the output or inputs",
+                           opts->resume);
+        goto done;
+    }
+    o.output = v;
+    o.inputs = (const char **)inputs;
+    o.ninputs = n;
+    o.job = opts->resume;
+    o.mode = GDT_MODE_RUN;
+    st = gdt_cli_tiled(&o, err);
+done:
+    for (size_t i = 0; inputs != NULL && i < n; i++)
+        free(inputs[i]);
+    free(inputs);
+    free(v);
+    free(params);
     return st;
 }

@@ -77,19 +77,12 @@ def test_version(gdt_bin, runner):
     assert re.match(r"gdt-tile \d+\.\d+\.\d+\n", r.stdout)
 
 
-@pytest.mark.parametrize("args", [
-    ["--resume", "somejob"],
-    ["IN", "--restart"],
-    ["IN", "--restart", "--reference"],
-])
-def test_unavailable_stages_say_so(gdt_bin, runner, tmp_path, args):
-    src = tmp_path / "in.las"
-    src.write_bytes(b"LASF")
-    args = [str(src) if a == "IN" else a for a in args]
-    r = runner([gdt_bin, *args], cwd=tmp_path)
+def test_resume_without_a_job_says_so(gdt_bin, runner, tmp_path):
+    r = runner([gdt_bin, "--resume", tmp_path / "nojob"], cwd=tmp_path)
+    assert r.returncode == 6, r.stderr
+    assert "GDT-6902" in r.stderr and "no job" in r.stderr
+    r = runner([gdt_bin, "--resume", tmp_path / "nojob", "--restart"], cwd=tmp_path)
     assert r.returncode == 2, r.stderr
-    assert "not available" in r.stderr
-    assert not (tmp_path / "out.ply").exists()
 
 
 @pytest.mark.sanitize

@@ -30,4 +30,11 @@
  * fails: a bug), 73xx (--check). */
 gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err);
 
+/* gdt-tile --resume DIR: the tiled run recorded in DIR/job.db (inputs,
+ * output and options from the record; verbosity, --json, --device, --check
+ * and --keep-job from this command line).
+ * returns: as gdt_cli_tiled; GDT_EJOB 6902 (no job in DIR), 6905 (record
+ * incomplete). */
+gdt_status gdt_cli_resume(const gdt_options *opts, gdt_error *err);
+
 #endif
