@@ -8,6 +8,7 @@
  * Memory: about 150 bytes per point on the host, plus the device buffers of
  * the core (about 60 bytes per texel and 250 per point). */
 #include "private/single_tile.h"
+#include "private/memcloud.h"
 
 #include <inttypes.h>
 #include <stdio.h>
@@ -22,9 +23,6 @@
 #include "private/json_out.h"
 #include "private/run_stats.h"
 
-#define ST_READ_CHUNK 65536
-#define ST_WRITE_CHUNK 65536
-
 typedef struct st_summary {
     uint64_t points_read, vertices, duplicates_merged, faces;
     double t_read, t_device, t_triangulate, t_check, t_write;
@@ -33,109 +31,6 @@ typedef struct st_summary {
     int checked;
     const char *device;
 } st_summary;
-
-static int st_cmp_ord(const void *a, const void *b)
-{
-    const gdt_point *p = a, *q = b;
-    return (p->ord > q->ord) - (p->ord < q->ord);
-}
-
-/* Every point of the cloud in one growing array.
- * Ownership: *out is malloc'ed, the caller frees it. */
-static gdt_status st_read_all(gdt_cloud *cloud, gdt_point **out, size_t *n_out, gdt_error *err)
-{
-    size_t n = 0, cap = ST_READ_CHUNK;
-    gdt_point *pts = malloc(cap * sizeof *pts);
-    gdt_status st = GDT_OK;
-
-    if (pts == NULL)
-        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-    for (;;) {
-        size_t got = 0;
-        if (cap - n < ST_READ_CHUNK) {
-            gdt_point *grown;
-            if (cap > SIZE_MAX / 2 / sizeof *pts) {
-                st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-                goto fail;
-            }
-            grown = realloc(pts, 2 * cap * sizeof *pts);
-            if (grown == NULL) {
-                st = gdt_error_set(err, GDT_EINTERNAL, 7001,
-                                   "out of memory reading %zu points into one tile", n);
-                goto fail;
-            }
-            pts = grown;
-            cap *= 2;
-        }
-        st = gdt_cloud_read(cloud, pts + n, ST_READ_CHUNK, &got, err);
-        if (st != GDT_OK)
-            goto fail;
-        if (got == 0)
-            break;
-        n += got;
-    }
-    *out = pts;
-    *n_out = n;
-    return GDT_OK;
-fail:
-    free(pts);
-    return st;
-}
-
-static gdt_status st_write_mesh(const gdt_options *opts, const gdt_cloud_info *ci,
-                                const gdt_point *verts, const gdt_mesh *mesh, gdt_error *err)
-{
-    gdt_ply_writer *w = NULL;
-    gdt_ply_meta meta;
-    int64_t *canon = NULL;
-    double *xyz = NULL;
-    int32_t *tri = NULL;
-    gdt_status st;
-
-    memset(&meta, 0, sizeof meta);
-    meta.lattice = ci->lattice;
-    meta.epsg = ci->epsg;
-    meta.crs_wkt = ci->crs_wkt;
-    xyz = malloc(3 * ST_WRITE_CHUNK * sizeof *xyz);
-    tri = malloc(3 * ST_WRITE_CHUNK * sizeof *tri);
-    canon = malloc((mesh->ntris > 0 ? 3 * mesh->ntris : 1) * sizeof *canon);
-    if (xyz == NULL || tri == NULL || canon == NULL) {
-        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-        goto fail;
-    }
-    st = gdt_ply_create(&w, opts->output, &meta, err);
-    if (st != GDT_OK)
-        goto fail;
-    for (size_t i = 0; i < mesh->nverts; i += ST_WRITE_CHUNK) {
-        size_t m = mesh->nverts - i < ST_WRITE_CHUNK ? mesh->nverts - i : ST_WRITE_CHUNK;
-        for (size_t k = 0; k < m; k++) {
-            const gdt_point *p = &verts[i + k];
-            xyz[3 * k + 0] = ci->lattice.ox + ci->lattice.sx * (double)p->x;
-            xyz[3 * k + 1] = ci->lattice.oy + ci->lattice.sy * (double)p->y;
-            xyz[3 * k + 2] = p->z;
-        }
-        st = gdt_ply_write_vertices(w, xyz, m, err);
-        if (st != GDT_OK)
-            goto fail;
-    }
-    gdt_mesh_canonical(mesh, canon);
-    for (size_t i = 0; i < mesh->ntris; i += ST_WRITE_CHUNK) {
-        size_t m = mesh->ntris - i < ST_WRITE_CHUNK ? mesh->ntris - i : ST_WRITE_CHUNK;
-        for (size_t k = 0; k < 3 * m; k++)
-            tri[k] = (int32_t)canon[3 * i + k];
-        st = gdt_ply_write_faces(w, tri, m, err);
-        if (st != GDT_OK)
-            goto fail;
-    }
-    st = gdt_ply_finish(w, err);
-    w = NULL;
-fail:
-    gdt_ply_abort(w);
-    free(canon);
-    free(tri);
-    free(xyz);
-    return st;
-}
 
 static gdt_status st_write_summary(const gdt_options *opts, const gdt_cloud_info *ci,
                                    const st_summary *s, gdt_error *err)
@@ -220,16 +115,12 @@ static gdt_status st_write_summary(const gdt_options *opts, const gdt_cloud_info
 
 gdt_status gdt_cli_single_tile(const gdt_options *opts, gdt_error *err)
 {
-    gdt_cloud *cloud = NULL;
-    gdt_cloud_opts co;
+    gdt_memcloud mc;
     gdt_core_opts copt;
     gdt_core *core = NULL;
     gdt_log log;
-    gdt_point *pts = NULL;
-    gdt_ipt *local = NULL;
     gdt_mesh mesh;
     st_summary s;
-    size_t n = 0, kept = 0;
     unsigned faults = 0;
     double t0;
     gdt_status st;
@@ -238,55 +129,18 @@ gdt_status gdt_cli_single_tile(const gdt_options *opts, gdt_error *err)
     gdt_mesh_init(&mesh);
     gdt_log_init(&log, opts->verbosity);
     /* the filters' error analysis needs IEEE double without contraction */
+    memset(&mc, 0, sizeof mc);
     st = gdt_predicates_selftest(&faults, err);
     if (st != GDT_OK)
         return st;
 
-    t0 = gdt_now();
-    memset(&co, 0, sizeof co);
-    co.log = &log;
-    co.quantum = opts->quantum;
-    st = gdt_cloud_open(&cloud, opts->inputs, opts->ninputs, &co, err);
+    st = gdt_memcloud_load(&mc, opts, &log, "--single-tile", err);
     if (st != GDT_OK)
         goto fail;
-    st = st_read_all(cloud, &pts, &n, err);
-    if (st != GDT_OK)
-        goto fail;
-    st = gdt_points_dedup(pts, n, opts->dup, &kept, err);
-    if (st != GDT_OK)
-        goto fail;
-    qsort(pts, kept, sizeof *pts, st_cmp_ord);
-    s.points_read = n;
-    s.vertices = kept;
-    s.duplicates_merged = n - kept;
-    s.t_read = gdt_now() - t0;
-
-    local = malloc((kept > 0 ? kept : 1) * sizeof *local);
-    if (local == NULL) {
-        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-        goto fail;
-    }
-    if (kept > 0) {
-        int64_t min_x = pts[0].x, min_y = pts[0].y, max_x = pts[0].x, max_y = pts[0].y;
-        for (size_t i = 1; i < kept; i++) {
-            if (pts[i].x < min_x) min_x = pts[i].x;
-            if (pts[i].x > max_x) max_x = pts[i].x;
-            if (pts[i].y < min_y) min_y = pts[i].y;
-            if (pts[i].y > max_y) max_y = pts[i].y;
-        }
-        if (max_x - min_x > GDT_COORD_MAX || max_y - min_y > GDT_COORD_MAX) {
-            st = gdt_error_set(err, GDT_EINPUT, 3603,
-                               "%s: the cloud spans %" PRId64 " x %" PRId64 " lattice steps; "
-                               "one tile holds at most 2^31-1 per axis (use a coarser "
-                               "--quantum or the tiled pipeline)",
-                               opts->inputs[0], max_x - min_x, max_y - min_y);
-            goto fail;
-        }
-        for (size_t i = 0; i < kept; i++) {
-            local[i].x = pts[i].x - min_x;
-            local[i].y = pts[i].y - min_y;
-        }
-    }
+    s.points_read = mc.read;
+    s.vertices = mc.kept;
+    s.duplicates_merged = mc.read - mc.kept;
+    s.t_read = mc.t_read;
 
     t0 = gdt_now();
     memset(&copt, 0, sizeof copt);
@@ -299,33 +153,19 @@ gdt_status gdt_cli_single_tile(const gdt_options *opts, gdt_error *err)
     s.t_device = gdt_now() - t0;
 
     t0 = gdt_now();
-    st = gdt_core_triangulate(core, local, kept, opts->tile, &mesh, &s.cs, err);
+    st = gdt_core_triangulate(core, mc.local, mc.kept, opts->tile, &mesh, &s.cs, err);
     if (st != GDT_OK)
         goto fail;
     s.faces = mesh.ntris;
     s.t_triangulate = gdt_now() - t0;
-    free(local);
-    local = NULL;
 
-    if (opts->check) {
-        t0 = gdt_now();
-        st = gdt_check_mesh(&s.pred, &mesh, err);
-        if (st == GDT_OK)
-            st = gdt_check_delaunay(&s.pred, &mesh, err);
-        if (st != GDT_OK)
-            goto fail;
-        s.checked = 1;
-        s.t_check = gdt_now() - t0;
-    }
-
-    t0 = gdt_now();
-    st = st_write_mesh(opts, gdt_cloud_get_info(cloud), pts, &mesh, err);
+    st = gdt_memcloud_finish(&mc, opts, &mesh, &s.pred, &s.t_check, &s.t_write, &s.checked,
+                             err);
     if (st != GDT_OK)
         goto fail;
-    s.t_write = gdt_now() - t0;
 
     if (opts->json != NULL) {
-        st = st_write_summary(opts, gdt_cloud_get_info(cloud), &s, err);
+        st = st_write_summary(opts, gdt_cloud_get_info(mc.cloud), &s, err);
         if (st != GDT_OK)
             goto fail;
     }
@@ -345,8 +185,6 @@ gdt_status gdt_cli_single_tile(const gdt_options *opts, gdt_error *err)
 fail:
     gdt_core_destroy(core);
     gdt_mesh_free(&mesh);
-    free(local);
-    free(pts);
-    gdt_cloud_close(cloud);
+    gdt_memcloud_free(&mc);
     return st;
 }

@@ -1,0 +1,173 @@
+/* The whole cloud in memory (see private/memcloud.h). */
+#include "private/memcloud.h"
+
+#include <inttypes.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "gdt_ply.h"
+#include "private/run_stats.h"
+
+#define MC_CHUNK 65536
+
+static int cmp_ord(const void *a, const void *b)
+{
+    const gdt_point *p = a, *q = b;
+    return (p->ord > q->ord) - (p->ord < q->ord);
+}
+
+static gdt_status read_all(gdt_memcloud *mc, const char *mode, gdt_error *err)
+{
+    size_t cap = MC_CHUNK;
+    mc->pts = malloc(cap * sizeof *mc->pts);
+    if (mc->pts == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    for (;;) {
+        size_t got = 0;
+        gdt_status st;
+        if (cap - mc->read < MC_CHUNK) {
+            gdt_point *grown = NULL;
+            if (cap <= SIZE_MAX / 2 / sizeof *mc->pts)
+                grown = realloc(mc->pts, 2 * cap * sizeof *mc->pts);
+            if (grown == NULL)
+                return gdt_error_set(err, GDT_EINTERNAL, 7001,
+                                     "out of memory reading %zu points (%s holds the whole "
+                                     "cloud in memory)",
+                                     mc->read, mode);
+            mc->pts = grown;
+            cap *= 2;
+        }
+        st = gdt_cloud_read(mc->cloud, mc->pts + mc->read, MC_CHUNK, &got, err);
+        if (st != GDT_OK)
+            return st;
+        if (got == 0)
+            return GDT_OK;
+        mc->read += got;
+    }
+}
+
+gdt_status gdt_memcloud_load(gdt_memcloud *mc, const gdt_options *opts, gdt_log *log,
+                             const char *mode, gdt_error *err)
+{
+    gdt_cloud_opts co;
+    int64_t max_x, max_y;
+    double t0 = gdt_now();
+    gdt_status st;
+
+    memset(mc, 0, sizeof *mc);
+    memset(&co, 0, sizeof co);
+    co.log = log;
+    co.quantum = opts->quantum;
+    st = gdt_cloud_open(&mc->cloud, opts->inputs, opts->ninputs, &co, err);
+    if (st == GDT_OK)
+        st = read_all(mc, mode, err);
+    if (st == GDT_OK)
+        st = gdt_points_dedup(mc->pts, mc->read, opts->dup, &mc->kept, err);
+    if (st != GDT_OK)
+        return st;
+    qsort(mc->pts, mc->kept, sizeof *mc->pts, cmp_ord);
+    if (mc->kept > 0) {
+        mc->min_x = max_x = mc->pts[0].x;
+        mc->min_y = max_y = mc->pts[0].y;
+    }
+    for (size_t i = 1; i < mc->kept; i++) {
+        const gdt_point *p = &mc->pts[i];
+        if (p->x < mc->min_x) mc->min_x = p->x;
+        if (p->x > max_x) max_x = p->x;
+        if (p->y < mc->min_y) mc->min_y = p->y;
+        if (p->y > max_y) max_y = p->y;
+    }
+    if (mc->kept > 0 && (max_x - mc->min_x > GDT_COORD_MAX || max_y - mc->min_y > GDT_COORD_MAX))
+        return gdt_error_set(err, GDT_EINPUT, 3401,
+                             "%s: the cloud spans %" PRId64 " x %" PRId64 " lattice steps; %s "
+                             "handles at most 2^31-1 per axis (use a coarser --quantum or the "
+                             "tiled pipeline)",
+                             opts->inputs[0], max_x - mc->min_x, max_y - mc->min_y, mode);
+    mc->local = malloc((mc->kept > 0 ? mc->kept : 1) * sizeof *mc->local);
+    if (mc->local == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    for (size_t i = 0; i < mc->kept; i++) {
+        mc->local[i].x = mc->pts[i].x - mc->min_x;
+        mc->local[i].y = mc->pts[i].y - mc->min_y;
+    }
+    mc->t_read = gdt_now() - t0;
+    return GDT_OK;
+}
+
+void gdt_memcloud_free(gdt_memcloud *mc)
+{
+    free(mc->local);
+    free(mc->pts);
+    gdt_cloud_close(mc->cloud);
+    memset(mc, 0, sizeof *mc);
+}
+
+gdt_status gdt_memcloud_write(const gdt_memcloud *mc, const gdt_options *opts,
+                              const gdt_mesh *mesh, gdt_error *err)
+{
+    const gdt_cloud_info *ci = gdt_cloud_get_info(mc->cloud);
+    gdt_ply_writer *w = NULL;
+    gdt_ply_meta meta;
+    int64_t *canon = malloc((mesh->ntris > 0 ? 3 * mesh->ntris : 1) * sizeof *canon);
+    double *xyz = malloc(3 * MC_CHUNK * sizeof *xyz);
+    int32_t *tri = malloc(3 * MC_CHUNK * sizeof *tri);
+    gdt_status st;
+
+    memset(&meta, 0, sizeof meta);
+    meta.lattice = ci->lattice;
+    meta.epsg = ci->epsg;
+    meta.crs_wkt = ci->crs_wkt;
+    if (xyz == NULL || tri == NULL || canon == NULL) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        goto fail;
+    }
+    st = gdt_ply_create(&w, opts->output, &meta, err);
+    for (size_t i = 0; st == GDT_OK && i < mesh->nverts; i += MC_CHUNK) {
+        size_t m = mesh->nverts - i < MC_CHUNK ? mesh->nverts - i : MC_CHUNK;
+        for (size_t k = 0; k < m; k++) {
+            const gdt_point *p = &mc->pts[i + k];
+            xyz[3 * k + 0] = ci->lattice.ox + ci->lattice.sx * (double)p->x;
+            xyz[3 * k + 1] = ci->lattice.oy + ci->lattice.sy * (double)p->y;
+            xyz[3 * k + 2] = p->z;
+        }
+        st = gdt_ply_write_vertices(w, xyz, m, err);
+    }
+    gdt_mesh_canonical(mesh, canon);
+    for (size_t i = 0; st == GDT_OK && i < mesh->ntris; i += MC_CHUNK) {
+        size_t m = mesh->ntris - i < MC_CHUNK ? mesh->ntris - i : MC_CHUNK;
+        for (size_t k = 0; k < 3 * m; k++)
+            tri[k] = (int32_t)canon[3 * i + k];
+        st = gdt_ply_write_faces(w, tri, m, err);
+    }
+    if (st == GDT_OK) {
+        st = gdt_ply_finish(w, err);
+        w = NULL;
+    }
+fail:
+    gdt_ply_abort(w);
+    free(canon);
+    free(tri);
+    free(xyz);
+    return st;
+}
+
+gdt_status gdt_memcloud_finish(const gdt_memcloud *mc, const gdt_options *opts,
+                               const gdt_mesh *mesh, gdt_pred_stats *pred, double *t_check,
+                               double *t_write, int *checked, gdt_error *err)
+{
+    double t0 = gdt_now();
+    gdt_status st;
+    if (opts->check) {
+        st = gdt_check_mesh(pred, mesh, err);
+        if (st == GDT_OK)
+            st = gdt_check_delaunay(pred, mesh, err);
+        if (st != GDT_OK)
+            return st;
+        *checked = 1;
+        *t_check = gdt_now() - t0;
+    }
+    t0 = gdt_now();
+    st = gdt_memcloud_write(mc, opts, mesh, err);
+    *t_write = gdt_now() - t0;
+    return st;
+}

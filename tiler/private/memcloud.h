@@ -1,0 +1,55 @@
+/* memcloud.h — the whole cloud in memory, for the in-memory modes
+ * (--reference and --single-tile).  Memory grows with the input (about 40
+ * bytes per point here, plus the triangulator's), which is why the tiled
+ * pipeline exists; these modes are the oracles it is compared with.
+ *
+ * Both modes share this file so that their outputs are directly comparable:
+ * vertices by the lowest input ordinal of their (x, y), faces in canonical
+ * order (each rotated to start at its smallest vertex index, then sorted),
+ * so the bytes depend only on the point set and the input order. */
+#ifndef GDT_MEMCLOUD_H
+#define GDT_MEMCLOUD_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "gdt_cli.h"
+#include "gdt_cloud.h"
+#include "gdt_error.h"
+#include "gdt_mesh.h"
+#include "gdt_predicates.h"
+
+typedef struct gdt_memcloud {
+    gdt_cloud *cloud;   /* open; owned */
+    gdt_point *pts;     /* the kept points, sorted by ordinal; owned */
+    gdt_ipt *local;     /* pts minus (min_x, min_y): predicate coordinates; owned */
+    size_t read;        /* points read */
+    size_t kept;        /* after the --dup merge */
+    int64_t min_x, min_y;
+    double t_read;      /* seconds: open, read, merge, sort */
+} gdt_memcloud;
+
+/* Opens the inputs of opts, reads every point, merges duplicates (--dup),
+ * sorts by ordinal and computes the local coordinates.  mode names the
+ * mode in messages ("--reference").
+ * returns: the readers' errors; GDT_EINPUT 3401 (the cloud spans more than
+ *   2^31 - 1 lattice steps on an axis); GDT_EINTERNAL 7001.
+ * Ownership: mc is filled (zeroed first); release with gdt_memcloud_free,
+ * also after a failure. */
+gdt_status gdt_memcloud_load(gdt_memcloud *mc, const gdt_options *opts, gdt_log *log,
+                             const char *mode, gdt_error *err);
+void gdt_memcloud_free(gdt_memcloud *mc);
+
+/* Writes opts->output: vertex i = mc->pts[i] (mesh vertex i), faces in
+ * canonical order.  returns: the PLY writer's errors. */
+gdt_status gdt_memcloud_write(const gdt_memcloud *mc, const gdt_options *opts,
+                              const gdt_mesh *mesh, gdt_error *err);
+
+/* With opts->check, verifies mesh exactly (gdt_check_mesh, then
+ * gdt_check_delaunay; *t_check, *checked set), then writes it
+ * (gdt_memcloud_write; *t_write).  pred accumulates the counters. */
+gdt_status gdt_memcloud_finish(const gdt_memcloud *mc, const gdt_options *opts,
+                               const gdt_mesh *mesh, gdt_pred_stats *pred, double *t_check,
+                               double *t_write, int *checked, gdt_error *err);
+
+#endif
