@@ -238,6 +238,19 @@ gdt_status gdt_job_put_tile(gdt_job *j, uint64_t k, const char *file, uint64_t s
     return st;
 }
 
+gdt_status gdt_job_begin(gdt_job *j, gdt_error *err)
+{
+    return exec(j, "BEGIN IMMEDIATE", err);
+}
+
+gdt_status gdt_job_commit(gdt_job *j, gdt_error *err)
+{
+    gdt_status st = exec(j, "COMMIT", err);
+    if (st != GDT_OK)
+        sqlite3_exec(j->db, "ROLLBACK", NULL, NULL, NULL);
+    return st;
+}
+
 gdt_status gdt_job_clear_tiles(gdt_job *j, gdt_error *err)
 {
     return exec(j, "BEGIN; DELETE FROM tile; DELETE FROM stage WHERE name = 'ply'; COMMIT;",

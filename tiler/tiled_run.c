@@ -1,5 +1,5 @@
 /* The tiled pipeline (see private/tiled_run.h). */
-#define _XOPEN_SOURCE 700
+#define _GNU_SOURCE /* syncfs */
 #include "private/tiled_run.h"
 
 #include <dirent.h>
@@ -42,6 +42,11 @@ typedef struct tr_summary {
     uint64_t tiles_reused, tiles_redone;
 } tr_summary;
 
+/* A finished tile file waiting for its journal record. */
+typedef struct tr_pending {
+    uint64_t k, size, checksum;
+} tr_pending;
+
 typedef struct tr_ctx {
     const gdt_options *opts;
     gdt_log log;
@@ -67,6 +72,9 @@ typedef struct tr_ctx {
     size_t cap_fbuf;
     gdt_seam seam;
     gdt_job *jobdb;
+    tr_pending *pending;  /* finished tiles not yet recorded */
+    size_t npending, cap_pending;
+    double t_flushed;
     gdt_progress prog;
     tr_summary s;
 } tr_ctx;
@@ -368,11 +376,58 @@ static gdt_status run_tile(tr_ctx *c, uint64_t k, gdt_error *err)
         put_u64(p + 8, c->seam.e[i].b);
     }
     st = tile_path(c, &d, "tri", &path, err);
+    /* durability comes in batches: see flush_pending */
     if (st == GDT_OK)
-        st = write_atomic(path, c->fbuf, len, 0, err);
-    if (st == GDT_OK)
-        st = gdt_job_put_tile(c->jobdb, k, path, len, gdt_hash64(c->fbuf, len, k), err);
+        st = write_atomic(path, c->fbuf, len, 1, err);
     free(path);
+    if (st != GDT_OK)
+        return st;
+    if (reserve((void **)&c->pending, &c->cap_pending, c->npending + 1 + 64,
+                sizeof *c->pending) != 0)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    c->pending[c->npending].k = k;
+    c->pending[c->npending].size = len;
+    c->pending[c->npending].checksum = gdt_hash64(c->fbuf, len, k);
+    c->npending++;
+    return GDT_OK;
+}
+
+/* Makes the finished tile files durable (one syncfs of the job's file
+ * system, then the directory) and records them in one transaction.  Until
+ * then a crash only costs redoing them. */
+static gdt_status flush_pending(tr_ctx *c, gdt_error *err)
+{
+    gdt_status st = GDT_OK;
+    int fd;
+    if (c->npending == 0)
+        return GDT_OK;
+    fd = open(c->tiles_dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (fd < 0 || syncfs(fd) != 0) {
+        st = gdt_error_set(err, GDT_EIO, 4804, "%s: cannot sync the tile files: %s",
+                           c->tiles_dir, strerror(errno));
+        if (fd >= 0)
+            close(fd);
+        return st;
+    }
+    close(fd);
+    st = tl_sync_dir(c->tiles_dir, err);
+    if (st == GDT_OK)
+        st = gdt_job_begin(c->jobdb, err);
+    for (size_t i = 0; st == GDT_OK && i < c->npending; i++) {
+        gdt_tile_desc d;
+        char *path = NULL;
+        st = gdt_tiler_tile_info(c->tiler, c->pending[i].k, &d, err);
+        if (st == GDT_OK)
+            st = tile_path(c, &d, "tri", &path, err);
+        if (st == GDT_OK)
+            st = gdt_job_put_tile(c->jobdb, c->pending[i].k, path, c->pending[i].size,
+                                  c->pending[i].checksum, err);
+        free(path);
+    }
+    if (st == GDT_OK)
+        st = gdt_job_commit(c->jobdb, err);
+    c->npending = 0;
+    c->t_flushed = gdt_now();
     return st;
 }
 
@@ -980,6 +1035,7 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
 
     memset(&c, 0, sizeof c);
     c.opts = opts;
+    c.t_flushed = gdt_now();
     gdt_mesh_init(&c.mesh);
     gdt_log_init(&c.log, opts->verbosity);
     gdt_progress_init(&c.prog, opts->verbosity);
@@ -1093,6 +1149,10 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
         uint64_t size = 0, sum = 0;
         int found = 0, ok = 0;
         if (stopped(&c)) {
+            /* keep what is done: a rerun reuses it */
+            gdt_error e2;
+            gdt_error_clear(&e2);
+            flush_pending(&c, &e2);
             st = interrupted_in(c.job, "the tile stage", err);
             goto fail;
         }
@@ -1107,17 +1167,21 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
             c.s.tiles_reused++;
         else
             c.s.tiles_redone++;
+        if (c.npending >= 256 || (c.npending > 0 && gdt_now() - c.t_flushed > 1.0)) {
+            st = flush_pending(&c, err);
+            if (st != GDT_OK)
+                goto fail;
+        }
         gdt_progress_update(&c.prog, c.base[k + 1]);
     }
+    st = flush_pending(&c, err);
+    if (st != GDT_OK)
+        goto fail;
     c.s.t_tiles = gdt_now() - t0;
     gdt_core_destroy(c.core);
     c.core = NULL;
     gdt_mesh_free(&c.mesh);
     gdt_mesh_init(&c.mesh);
-    st = tl_sync_dir(c.tiles_dir, err);
-    if (st != GDT_OK)
-        goto fail;
-
     t0 = gdt_now();
     gdt_progress_stage(&c.prog, "merge", c.seam.nv, "points");
     st = gdt_merge_seams(&c.seam, &mfaces, &nmf, &c.s.merge, err);
@@ -1189,6 +1253,7 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
 fail:
     gdt_progress_end(&c.prog);
     free(mfaces);
+    free(c.pending);
     gdt_seam_free(&c.seam);
     free(c.fbuf);
     free(c.count);

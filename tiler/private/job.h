@@ -49,6 +49,9 @@ gdt_status gdt_job_get_tile(gdt_job *j, uint64_t k, int *found, uint64_t *size,
                             uint64_t *checksum, gdt_error *err);
 gdt_status gdt_job_put_tile(gdt_job *j, uint64_t k, const char *file, uint64_t size,
                             uint64_t checksum, gdt_error *err);
+/* Groups the following updates into one transaction (one sync). */
+gdt_status gdt_job_begin(gdt_job *j, gdt_error *err);
+gdt_status gdt_job_commit(gdt_job *j, gdt_error *err);
 /* Forgets every tile record and the "ply" stage (pass 2 was redone). */
 gdt_status gdt_job_clear_tiles(gdt_job *j, gdt_error *err);
 
