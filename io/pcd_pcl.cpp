@@ -98,7 +98,7 @@ gdt_status read_cloud(const char *path, gdt_pcd_pcl_point_fn fn, void *ctx, std:
                              path, cloud.data.size(), static_cast<unsigned long long>(n));
     for (std::uint64_t i = 0; i < n; i++) {
         const std::uint8_t *rec = cloud.data.data() + i * cloud.point_step;
-        double v[3];
+        double v[3] = {0.0, 0.0, 0.0};
         for (int a = 0; a < 3; a++)
             load_field(axis[a]->datatype, rec + axis[a]->offset, &v[a]);
         if (fn(ctx, v[0], v[1], v[2]) != 0)

@@ -73,7 +73,8 @@ static gdt_status coarsen(tl_density *d, gdt_error *err)
     st = extract(d, &v, &n, err);
     if (st != GDT_OK)
         return st;
-    memset(d->map.e, 0, d->map.cap * sizeof *d->map.e);
+    if (d->map.e != NULL)
+        memset(d->map.e, 0, d->map.cap * sizeof *d->map.e);
     d->map.n = 0;
     for (size_t k = 0; k < n && st == GDT_OK; k++) {
         uint64_t *c;

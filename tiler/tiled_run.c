@@ -211,17 +211,19 @@ fail:
 /* Certified faces of the current tile as output indices, each rotated to
  * start at its smallest index, in sorted order: a counting sort on the first
  * index, then insertion sort inside each (short) bucket.  The order depends
- * only on the face set, not on the order the core produced them in. */
-static gdt_status sort_faces(tr_ctx *c, size_t nf, uint32_t base, gdt_error *err)
+ * only on the face set, not on the order the core produced them in.
+ * scratch holds 3 * nf values (the unsorted faces); the result is in
+ * c->faces. */
+static gdt_status sort_faces(tr_ctx *c, size_t nf, uint32_t base, uint32_t *scratch,
+                             gdt_error *err)
 {
     const gdt_mesh *m = &c->mesh;
     size_t nv = m->nverts, k = 0;
-    uint32_t *tmp;
+    uint32_t *tmp = scratch;
 
     if (reserve((void **)&c->count, &c->cap_count, nv + 1, sizeof *c->count) != 0 ||
-        reserve((void **)&c->faces, &c->cap_faces, 6 * nf + 3, sizeof *c->faces) != 0)
+        reserve((void **)&c->faces, &c->cap_faces, 3 * nf + 3, sizeof *c->faces) != 0)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-    tmp = c->faces + 3 * nf;
     memset(c->count, 0, (nv + 1) * sizeof *c->count);
     for (size_t t = 0; t < m->ntris; t++) {
         const int32_t *v = &m->tri[3 * t];
@@ -310,11 +312,17 @@ static gdt_status run_tile(tr_ctx *c, uint64_t k, gdt_error *err)
         c->lh[i].y = c->halo.pts[i].y - d.local_y0;
     }
 
+    /* the points are on disk and in lp: their buffer is not needed while
+     * the core holds its own copies (peak memory is the core's) */
+    gdt_point_buf_free(&c->pts);
     t0 = gdt_now();
     memset(&cs, 0, sizeof cs);
     st = gdt_core_triangulate(c->core, c->lp, n, c->opts->tile, &c->mesh, &cs, err);
     if (st != GDT_OK)
         return st;
+    free(c->lp);
+    c->lp = NULL;
+    c->cap_lp = 0;
     if (strcmp(cs.path, "insert") == 0)
         c->s.insert_tiles++;
     else
@@ -342,19 +350,21 @@ static gdt_status run_tile(tr_ctx *c, uint64_t k, gdt_error *err)
     nf = 0;
     for (size_t t = 0; t < c->mesh.ntris; t++)
         nf += c->cert[t];
-    st = sort_faces(c, nf, (uint32_t)c->base[k], err);
-    if (st != GDT_OK)
-        return st;
     st = gdt_seam_extract(&c->seam, &c->mesh, c->cert, c->base[k], d.local_x0 - pl->min_x,
                           d.local_y0 - pl->min_y, err);
+    if (st != GDT_OK)
+        return st;
+    len = TR_HEADER + 12 * nf + 24 * (c->seam.nv - nv0) + 16 * (c->seam.ne - ne0);
+    if (reserve((void **)&c->fbuf, &c->cap_fbuf, len, 1) != 0)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    /* the face area of the file image (64-byte aligned offset) is the
+     * sort's scratch before it receives the sorted faces */
+    st = sort_faces(c, nf, (uint32_t)c->base[k], (uint32_t *)(void *)(c->fbuf + TR_HEADER), err);
     if (st != GDT_OK)
         return st;
     c->s.certified += nf;
     c->s.t_certify += gdt_now() - t0;
 
-    len = TR_HEADER + 12 * nf + 24 * (c->seam.nv - nv0) + 16 * (c->seam.ne - ne0);
-    if (reserve((void **)&c->fbuf, &c->cap_fbuf, len, 1) != 0)
-        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     p = c->fbuf;
     memset(p, 0, TR_HEADER);
     memcpy(p, TR_MAGIC, 8);
