@@ -18,6 +18,7 @@
 #include "gdt_core.h"
 #include "gdt_mesh.h"
 #include "gdt_ply.h"
+#include "gdt_plycheck.h"
 #include "gdt_seam.h"
 #include "gdt_tiler.h"
 #include "private/job.h"
@@ -647,87 +648,36 @@ fail:
     return st;
 }
 
-/* --check for a tiled run: reads the written PLY back into one mesh (merge
- * frame coordinates) and runs both exact verifiers.  Holds the whole mesh. */
-static gdt_status check_output(tr_ctx *c, const uint64_t *mfaces, size_t nmf, gdt_error *err)
+/* --check: the exact streaming validator on the written PLY (bounded
+ * memory, temporary files in the job directory).  A mesh that fails is
+ * renamed to OUT.ply.rejected, so no invalid file stays at the output path. */
+static gdt_status check_output(tr_ctx *c, gdt_error *err)
 {
-    uint64_t ntiles = gdt_tiler_tile_count(c->tiler);
-    gdt_mesh m;
-    gdt_pred_stats ps;
-    size_t nt = 0;
+    gdt_plycheck_opts po;
+    gdt_plycheck_result res;
     gdt_status st;
 
-    memset(&ps, 0, sizeof ps);
-    gdt_mesh_init(&m);
-    st = gdt_mesh_reserve(&m, c->s.vertices, c->s.faces, 0, err);
-    if (st != GDT_OK)
-        goto fail;
-    m.nverts = c->s.vertices;
-    for (uint64_t k = 0; k < ntiles; k++) {
-        gdt_tile_desc d;
-        tl_rfile rf;
-        char *path = NULL;
-        size_t got = 0;
-        memset(&rf, 0, sizeof rf);
-        rf.fd = -1;
-        st = gdt_tiler_tile_info(c->tiler, k, &d, err);
-        if (st == GDT_OK)
-            st = tile_path(c, &d, "pts", &path, err);
-        if (st == GDT_OK && reserve((void **)&c->pts.pts, &c->pts.cap, d.points + 1,
-                                    sizeof *c->pts.pts) != 0)
-            st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-        if (st == GDT_OK)
-            st = tl_rfile_open(&rf, path, d.points, TR_CHUNK, err);
-        free(path);
-        if (st == GDT_OK)
-            st = tl_rfile_read(&rf, c->pts.pts, d.points, &got, err);
-        tl_rfile_close(&rf);
-        if (st != GDT_OK)
-            goto fail;
-        for (size_t i = 0; i < got; i++) {
-            m.pts[c->base[k] + i].x = c->pts.pts[i].x - c->plan->min_x;
-            m.pts[c->base[k] + i].y = c->pts.pts[i].y - c->plan->min_y;
+    gdt_plycheck_opts_init(&po);
+    if (c->opts->mem_budget != 0)
+        po.mem_budget = (size_t)c->opts->mem_budget;
+    po.temp_dir = c->job;
+    st = gdt_ply_check(&po, c->opts->output, &res, err);
+    if (st == GDT_OK && (res.vertices != c->s.vertices || res.faces != c->s.faces))
+        st = gdt_error_set(err, GDT_EINTERNAL, 7821,
+                           "%s: holds %" PRIu64 " vertices and %" PRIu64 " faces, the run made %"
+                           PRIu64 " and %" PRIu64,
+                           c->opts->output, res.vertices, res.faces, c->s.vertices, c->s.faces);
+    if (st == GDT_EINTERNAL) {
+        size_t l = strlen(c->opts->output);
+        char *bad = malloc(l + 10);
+        if (bad != NULL) {
+            memcpy(bad, c->opts->output, l);
+            memcpy(bad + l, ".rejected", 10);
+            if (rename(c->opts->output, bad) == 0)
+                gdt_log_warn(&c->log, 7822, "the mesh that failed --check is kept as %s", bad);
+            free(bad);
         }
     }
-    c->pts.n = 0;
-    for (uint64_t k = 0; k < ntiles; k++) {
-        gdt_tile_desc d;
-        char *path = NULL;
-        FILE *f;
-        unsigned char hdr[TR_HEADER], rec[12];
-        st = gdt_tiler_tile_info(c->tiler, k, &d, err);
-        if (st == GDT_OK)
-            st = tile_path(c, &d, "tri", &path, err);
-        if (st != GDT_OK)
-            goto fail;
-        f = fopen(path, "rb");
-        if (f == NULL || fread(hdr, 1, TR_HEADER, f) != TR_HEADER) {
-            st = gdt_error_set(err, GDT_EIO, 4805, "%s: cannot read", path);
-            if (f != NULL)
-                fclose(f);
-            free(path);
-            goto fail;
-        }
-        for (uint64_t i = 0; i < get_u64(hdr + 24); i++, nt++) {
-            if (fread(rec, 12, 1, f) != 1)
-                break;
-            for (int q = 0; q < 3; q++)
-                m.tri[3 * nt + (size_t)q] = (int32_t)get_u32(rec + 4 * q);
-        }
-        fclose(f);
-        free(path);
-    }
-    for (size_t i = 0; i < nmf; i++, nt++)
-        for (int q = 0; q < 3; q++)
-            m.tri[3 * nt + (size_t)q] = (int32_t)mfaces[3 * i + (size_t)q];
-    m.ntris = nt;
-    st = gdt_mesh_link(&m, err);
-    if (st == GDT_OK)
-        st = gdt_check_mesh(&ps, &m, err);
-    if (st == GDT_OK)
-        st = gdt_check_delaunay(&ps, &m, err);
-fail:
-    gdt_mesh_free(&m);
     return st;
 }
 
@@ -1227,7 +1177,7 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     c.s.t_write = gdt_now() - t0;
     if (opts->check) {
         t0 = gdt_now();
-        st = check_output(&c, mfaces, nmf, err);
+        st = check_output(&c, err);
         if (st != GDT_OK)
             goto fail;
         c.s.checked = 1;
