@@ -103,3 +103,14 @@ void gdt_progress_end(gdt_progress *p)
                 (unsigned long long)p->done, p->unit, gdt_now() - p->t_stage, "");
     fflush(stderr);
 }
+
+void gdt_progress_abort(gdt_progress *p)
+{
+    if (p->mode == 0 || !p->open)
+        return;
+    p->open = 0;
+    if (p->mode == 2) {
+        fputc('\n', stderr);
+        fflush(stderr);
+    }
+}

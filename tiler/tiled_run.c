@@ -6,6 +6,7 @@
 #include <errno.h>
 #include <fcntl.h>
 #include <inttypes.h>
+#include <signal.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -600,6 +601,46 @@ static gdt_status write_vertices(tr_ctx *c, uint64_t k, gdt_ply_writer *w, doubl
     return st;
 }
 
+/* Removes what a killed writer left beside the output: "<name>.tmp-<pid>"
+ * files (gdt_ply.h) whose process no longer exists. */
+static void remove_stale_temps(const char *output)
+{
+    const char *slash = strrchr(output, '/');
+    const char *base = slash != NULL ? slash + 1 : output;
+    size_t dl = slash != NULL ? (size_t)(slash - output) : 0, bl = strlen(base);
+    char *dir = malloc(dl + 2);
+    DIR *d;
+    struct dirent *e;
+    if (dir == NULL)
+        return;
+    if (slash != NULL) {
+        memcpy(dir, output, dl);
+        dir[dl] = '\0';
+        if (dl == 0)
+            strcpy(dir, "/");
+    } else {
+        strcpy(dir, ".");
+    }
+    d = opendir(dir);
+    while (d != NULL && (e = readdir(d)) != NULL) {
+        const char *nm = e->d_name, *q;
+        long pid;
+        char *end;
+        if (strncmp(nm, base, bl) != 0 || strncmp(nm + bl, ".tmp-", 5) != 0)
+            continue;
+        q = nm + bl + 5;
+        errno = 0;
+        pid = strtol(q, &end, 10);
+        if (*q == '\0' || *end != '\0' || errno != 0 || pid <= 0 || (pid_t)pid == getpid())
+            continue;
+        if (kill((pid_t)pid, 0) != 0 && errno == ESRCH)
+            unlinkat(dirfd(d), nm, 0);
+    }
+    if (d != NULL)
+        closedir(d);
+    free(dir);
+}
+
 /* Stage 4: the PLY. */
 static gdt_status write_ply(tr_ctx *c, const uint64_t *mfaces, size_t nmf, gdt_error *err)
 {
@@ -620,6 +661,7 @@ static gdt_status write_ply(tr_ctx *c, const uint64_t *mfaces, size_t nmf, gdt_e
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         goto fail;
     }
+    remove_stale_temps(c->opts->output);
     st = gdt_ply_create(&w, c->opts->output, &meta, err);
     gdt_progress_stage(&c->prog, "write", 2 * ntiles, "tiles");
     for (uint64_t k = 0; st == GDT_OK && k < ntiles; k++) {
@@ -887,6 +929,14 @@ static void remove_job_files(const char *job)
     static const char *const names[] = {"job.db", "job.db-wal", "job.db-shm", "job.db-journal",
                                         "index.vdb", "index.vdb.tmp"};
     char *tiles = path_join(job, "tiles");
+    /* the journal first: a removal cut short by a crash must not leave a
+     * journal that vouches for files already gone */
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
+        char *p = path_join(job, names[i]);
+        if (p != NULL)
+            unlink(p);
+        free(p);
+    }
     if (tiles != NULL) {
         DIR *d = opendir(tiles);
         struct dirent *e;
@@ -900,12 +950,6 @@ static void remove_job_files(const char *job)
         }
         rmdir(tiles);
         free(tiles);
-    }
-    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
-        char *p = path_join(job, names[i]);
-        if (p != NULL)
-            unlink(p);
-        free(p);
     }
     rmdir(job);
 }
@@ -1211,7 +1255,10 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
         remove_job_files(c.job);
     }
 fail:
-    gdt_progress_end(&c.prog);
+    if (st == GDT_OK)
+        gdt_progress_end(&c.prog);
+    else
+        gdt_progress_abort(&c.prog);
     free(mfaces);
     free(c.pending);
     gdt_seam_free(&c.seam);

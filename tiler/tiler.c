@@ -543,20 +543,30 @@ gdt_status gdt_tiler_pass2(gdt_tiler *t, gdt_error *err)
 
 gdt_status gdt_tiler_adopt_pass2(gdt_tiler *t, gdt_error *err)
 {
+    uint64_t *points = NULL, *edges = NULL;
+    gdt_status st = GDT_OK;
+
     if (t->state != 1 || t->job_dir == NULL)
         return gdt_error_set(err, GDT_EUSAGE, 2505,
                              "adopting tile files needs pass 1 and a job directory");
-    for (uint64_t k = 0; k < t->ntiles; k++) {
-        tl_tile *tl = &t->tiles[k];
+    /* every file is checked before any state changes: a refused adoption
+     * leaves the tiler exactly after pass 1, ready for pass 2 */
+    points = malloc((t->ntiles + 1) * sizeof *points);
+    edges = malloc((t->ntiles + 1) * sizeof *edges);
+    if (points == NULL || edges == NULL) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        goto done;
+    }
+    for (uint64_t k = 0; k < t->ntiles && st == GDT_OK; k++) {
+        const tl_tile *tl = &t->tiles[k];
         char *pts = tl_tile_file(t, k, "pts", 0), *edge = tl_tile_file(t, k, "edge", 0);
         gdt_error e2;
-        gdt_status st = GDT_OK;
         gdt_error_clear(&e2);
         if (pts == NULL || edge == NULL)
             st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-        else if (tl_file_records(pts, &tl->points, &e2) != GDT_OK ||
-                 tl_file_records(edge, &tl->edge, &e2) != GDT_OK || tl->points == 0 ||
-                 tl->points > tl->count || tl->edge > tl->points)
+        else if (tl_file_records(pts, &points[k], &e2) != GDT_OK ||
+                 tl_file_records(edge, &edges[k], &e2) != GDT_OK || points[k] == 0 ||
+                 points[k] > tl->count || edges[k] > points[k])
             st = gdt_error_set(err, GDT_EJOB, 6501,
                                "tile (%" PRId64 ", %" PRId64 ") of the job in %s is missing or "
                                "damaged%s%s: run again with --restart",
@@ -564,15 +574,23 @@ gdt_status gdt_tiler_adopt_pass2(gdt_tiler *t, gdt_error *err)
                                e2.status != GDT_OK ? e2.msg : "");
         free(pts);
         free(edge);
-        if (st != GDT_OK)
-            return st;
+    }
+    if (st != GDT_OK)
+        goto done;
+    for (uint64_t k = 0; k < t->ntiles; k++) {
+        tl_tile *tl = &t->tiles[k];
+        tl->points = points[k];
+        tl->edge = edges[k];
         tl->written = tl->count;
         t->stats.merged_duplicates += tl->count - tl->points;
         if (tl->points > t->stats.max_tile_points)
             t->stats.max_tile_points = tl->points;
     }
     t->state = 2;
-    return GDT_OK;
+done:
+    free(points);
+    free(edges);
+    return st;
 }
 
 gdt_status gdt_tiler_plan(const gdt_tiler_opts *opts, gdt_cloud *cloud, gdt_tile_plan *out,

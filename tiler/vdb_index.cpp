@@ -17,6 +17,11 @@
 #include <exception>
 #include <new>
 #include <string>
+#include <cstring>
+#include <cerrno>
+#include <sys/statvfs.h>
+#include <sys/stat.h>
+#include <sys/resource.h>
 
 namespace {
 
@@ -155,6 +160,24 @@ extern "C" gdt_status gdt_vdb_tiles_set(gdt_vdb_index *ix, int64_t ci, int64_t c
     }
 }
 
+/* Why a written file came out short, as far as the system can tell: the
+ * process's file size limit reached (EFBIG) or no space left (ENOSPC). */
+static const char *short_write_reason(const char *path)
+{
+    struct stat sb;
+    struct rlimit rl;
+    struct statvfs vfs;
+    std::string dir(path);
+    size_t slash = dir.rfind('/');
+    dir = slash == std::string::npos ? std::string(".") : dir.substr(0, slash + 1);
+    if (stat(path, &sb) == 0 && getrlimit(RLIMIT_FSIZE, &rl) == 0 &&
+        rl.rlim_cur != RLIM_INFINITY && (rlim_t)sb.st_size >= rl.rlim_cur)
+        return std::strerror(EFBIG);
+    if (statvfs(dir.c_str(), &vfs) == 0 && vfs.f_bavail == 0)
+        return std::strerror(ENOSPC);
+    return "short write (disk full?)";
+}
+
 extern "C" gdt_status gdt_vdb_index_write(gdt_vdb_index *ix, const gdt_vdb_meta *meta,
                                           const char *path, gdt_error *err)
 {
@@ -178,6 +201,20 @@ extern "C" gdt_status gdt_vdb_index_write(gdt_vdb_index *ix, const gdt_vdb_meta 
         openvdb::io::File file(path);
         file.write(grids);
         file.close();
+        /* io::File does not report a short write (a full disk, a file size
+         * limit): read the file back, which fails on any missing byte. */
+        try {
+            openvdb::io::File check(path);
+            check.open();
+            openvdb::GridBase::Ptr a = check.readGrid("tile_points");
+            openvdb::GridBase::Ptr b = check.readGrid("density");
+            check.close();
+        } catch (...) {
+            return gdt_error_set(err, GDT_EIO, 4512,
+                                 "cannot write the index %s: the file is incomplete after "
+                                 "writing: %s",
+                                 path, short_write_reason(path));
+        }
         return GDT_OK;
     } catch (const std::bad_alloc &) {
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory writing %s", path);

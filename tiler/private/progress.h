@@ -25,5 +25,8 @@ void gdt_progress_stage(gdt_progress *p, const char *stage, uint64_t total, cons
 void gdt_progress_update(gdt_progress *p, uint64_t done);
 /* Ends the current stage (prints its time). */
 void gdt_progress_end(gdt_progress *p);
+/* Ends the current stage without claiming it finished (after an error or a
+ * stop): a terminal bar is closed with a newline, nothing else is printed. */
+void gdt_progress_abort(gdt_progress *p);
 
 #endif
