@@ -19,7 +19,7 @@
  * kernel binary cache keyed on the source text never serves a stale build
  * after a header changed), and the program is built with
  *   -cl-std=CL1.2 -I <kernel dir> [-DGDT_X_NO_F64] [extra options]
- * and never with -cl-fast-relaxed-math or -cl-unsafe-math-optimizations (the
+ * and never with any of OpenCL's relaxed or unsafe math build options (the
  * exact predicates rely on IEEE double rounding).  -DGDT_X_NO_F64 is passed
  * when the device lacks cl_khr_fp64, or when the caller forces the integer
  * path; kernels then never use double.

@@ -105,8 +105,8 @@ int gdt_circumdisk_bounds(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c, d
  * returns: GDT_OK, or GDT_EINTERNAL (message GDT-7601) naming the faults.
  * faults (may be NULL) receives the GDT_FPENV_* mask, 0 when all is well.
  * notes: the checks use volatile operands so the compiler cannot fold them;
- *   they detect what the build actually did (e.g. -ffast-math,
- *   -ffp-contract=fast), whatever the flags claim. */
+ *   they detect what the build actually did (e.g. fast-math or contraction
+ *   options), whatever the flags claim. */
 gdt_status gdt_predicates_selftest(unsigned *faults, gdt_error *err);
 
 #ifdef __cplusplus

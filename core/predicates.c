@@ -246,7 +246,7 @@ gdt_status gdt_predicates_selftest(unsigned *faults, gdt_error *err)
         return gdt_error_set(
             err, GDT_EINTERNAL, 7601,
             "core/predicates.c: floating-point environment breaks the exact predicates "
-            "(faults 0x%x:%s%s%s%s%s); rebuild without -ffast-math / -ffp-contract=fast and "
+            "(faults 0x%x:%s%s%s%s%s); rebuild without fast-math or FP contraction options and "
             "run with the default rounding mode",
             f, (f & GDT_FPENV_CONTRACTION) ? " contraction" : "",
             (f & GDT_FPENV_REASSOC) ? " reassociation-or-extended-precision" : "",
