@@ -60,6 +60,11 @@ gdt_status gcd_buf_grow_keep(gdt_core *c, gcd_buf *b, size_t bytes, size_t keep,
 
 gdt_status gcd_fill(gdt_core *c, gcd_buf *b, size_t n_u32, uint32_t v, gdt_error *err)
 {
+    if (n_u32 >= GCD_KERNEL_FILL && n_u32 <= UINT32_MAX) {
+        if (gcd_args(c->k.fill_u32, err, "buu", b, (unsigned)n_u32, (unsigned)v) != GDT_OK)
+            return err->status;
+        return gcd_launch(c, c->k.fill_u32, n_u32, err);
+    }
     return gdt_ocl_fill_u32(c->ocl, b->b, 0, v, 4 * n_u32, err);
 }
 
@@ -234,7 +239,9 @@ static const kdef KERNELS[] = {
     KD("gcd_scan.cl", compact_index),
     KD("gcd_scan.cl", radix_hist),
     KD("gcd_scan.cl", radix_scatter),
+    KD("gcd_scan.cl", fill_u32),
     KD("gcd_pba.cl", p1_missing_keys),
+    KD("gcd_pba.cl", p1_missing_range),
     KD("gcd_pba.cl", p1_splat),
     KD("gcd_pba.cl", p1_missing_flags),
     KD("gcd_pba.cl", p1_plant),
@@ -243,13 +250,13 @@ static const kdef KERNELS[] = {
     KD("gcd_pba.cl", p1_number_kept),
     KD("gcd_pba.cl", p1_number_missing),
     KD("gcd_pba.cl", p1_permute),
-    KD("gcd_mesh.cl", m_map_out),
     KD("gcd_mesh.cl", m_sort_count),
     KD("gcd_mesh.cl", m_sort_scatter),
     KD("gcd_mesh.cl", m_sort_bucket),
     KD("gcd_mesh.cl", m_sort_inverse),
     KD("gcd_mesh.cl", m_sort_apply),
     KD("gcd_mesh.cl", m_sort_vt),
+    KD("gcd_mesh.cl", m_slots_seq),
     KD("gcd_pba.cl", p1_cols_band),
     KD("gcd_pba.cl", p1_cols_link),
     KD("gcd_pba.cl", p1_cols),
@@ -263,10 +270,8 @@ static const kdef KERNELS[] = {
     KD("gcd_mesh.cl", m_vcount),
     KD("gcd_mesh.cl", m_vfill),
     KD("gcd_mesh.cl", m_link),
-    KD("gcd_mesh.cl", m_vt_min),
     KD("gcd_mesh.cl", m_snap),
     KD("gcd_mesh.cl", m_frame_pos),
-    KD("gcd_mesh.cl", m_live_flags),
     KD("gcd_mesh.cl", m_real_flags),
     KD("gcd_mesh.cl", m_compact_tris),
     KD("gcd_mesh.cl", m_fix_vt_collect),
@@ -279,7 +284,8 @@ static const kdef KERNELS[] = {
     KD("gcd_flip.cl", p5_all),
     KD("gcd_flip.cl", p5_from_list),
     KD("gcd_flip.cl", p5_round_flags),
-    KD("gcd_mesh.cl", m_remap_vt),
+    KD("gcd_flip.cl", p5_local),
+    KD("gcd_flip.cl", p5_local_lists),
     KD("gcd_shift.cl", p3_shift),
     KD("gcd_shift.cl", p3_bulk_check),
     KD("gcd_shift.cl", p3_bulk_star),
@@ -336,6 +342,7 @@ gdt_status gdt_core_create(gdt_core **out, const gdt_core_opts *opts, gdt_error 
     c->strip = gdt_ocl_is_cpu(c->ocl) ? 16 : 1;
     c->bands = gdt_ocl_is_cpu(c->ocl) ? 1 : 8;
     c->wg = 256;
+    gcd_test_set_flip_blocks(c, SIZE_MAX, 0, 0);
     snprintf(extra, sizeof extra, "-DSTRIP=%u", c->strip);
     for (size_t p = 0; p < sizeof PROGRAMS / sizeof PROGRAMS[0]; p++) {
         gdt_ocl_program *prog = NULL;
@@ -419,6 +426,12 @@ gdt_status gdt_core_create(gdt_core **out, const gdt_core_opts *opts, gdt_error 
     NAME(d_rv);
     NAME(d_rhist);
     NAME(d_mkeys);
+    NAME(d_queue);
+    NAME(d_nlist);
+    NAME(d_nlist2);
+    NAME(d_piv);
+    NAME(d_rslot);
+    NAME(d_mrange);
 #undef NAME
     st = gcd_buf_need(c, &c->d_small, 64, err);
     if (st == GDT_OK)
@@ -508,9 +521,9 @@ static gdt_status setup_run(gdt_core *c, gcd_run *r, const gdt_ipt *pts, size_t 
     r->nframe = gcd_frame_count(r->W, r->H);
     r->frame_base = n + GCD_NFAKE;
     r->nv = n + GCD_NFAKE + r->nframe;
-    /* 2 nv - 14 triangles in the end; slack for the slots Phase 3 frees
-     * (2 per deleted vertex), so that it rarely needs to compact */
-    r->cap_tris = 2 * r->nv + 16 + r->nv / 8;
+    /* slots: the gcd path uses 2 nv - 14 (dual and ring, 2 per vertex
+     * not in them reserved), the insertion path 10 + 2 n */
+    r->cap_tris = 2 * r->nv + 16;
     if (st != NULL) {
         st->points = n;
         st->grid_w = r->W;
@@ -690,13 +703,23 @@ static gdt_status fake_fan(gdt_core *c, gcd_run *r, gdt_error *err)
         tri[3 * (k - 1) + 2] = base + k + 1;
     }
     r->ntris = GCD_NFAKE - 2;
+    if (r->ntris + 2 * r->n > r->cap_tris)
+        return gdt_error_set(err, GDT_EINTERNAL, 7643, "no room for %zu points", r->n);
+    /* point p is inserted into the dead slots r->ntris + 2p and the next */
     if (gcd_buf_need(c, &c->d_tri, 12 * r->cap_tris, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_opp, 12 * r->cap_tris, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_pos, 8 * r->nv, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_rslot, 8 * r->n + 8, err) != GDT_OK ||
         gdt_ocl_copy(c->ocl, c->d_pts.b, 0, c->d_pos.b, 0, 8 * r->n, err) != GDT_OK ||
-        gdt_ocl_write(c->ocl, c->d_tri.b, 0, tri, sizeof tri, err) != GDT_OK)
+        gdt_ocl_write(c->ocl, c->d_tri.b, 0, tri, sizeof tri, err) != GDT_OK ||
+        gcd_args(c->k.m_slots_seq, err, "uuubb", 0u, (unsigned)r->n, (unsigned)r->ntris,
+                 &c->d_tri, &c->d_rslot) != GDT_OK ||
+        gcd_launch(c, c->k.m_slots_seq, r->n, err) != GDT_OK)
         return err->status;
-    return gcd_link_all(c, r, err);
+    r->ntris += 2 * r->n;
+    if (gcd_link_start(c, r, err) != GDT_OK)
+        return err->status;
+    return gcd_link_all(c, r, 0, err);
 }
 
 /* Real triangles to the output mesh. */
@@ -714,11 +737,9 @@ static gdt_status extract(gdt_core *c, gcd_run *r, gdt_mesh *out, gdt_error *err
                   &c->d_flags) != GDT_OK ||
          gcd_launch(c, c->k.m_real_flags, T, err) != GDT_OK ||
          gcd_scan(c, &c->d_flags, T, &nreal, err) != GDT_OK ||
-         gcd_args(c->k.m_compact_tris, err, "bbububb", &c->d_tri, &c->d_opp, (unsigned)T,
-                  &c->d_flags, nreal, &c->d_tri2, &c->d_opp2) != GDT_OK ||
-         gcd_launch(c, c->k.m_compact_tris, T, err) != GDT_OK ||
-         gcd_args(c->k.m_map_out, err, "bub", &c->d_tri2, 3 * nreal, &c->d_int2in) != GDT_OK ||
-         gcd_launch(c, c->k.m_map_out, 3 * (size_t)nreal, err) != GDT_OK))
+         gcd_args(c->k.m_compact_tris, err, "bbububbb", &c->d_tri, &c->d_opp, (unsigned)T,
+                  &c->d_flags, nreal, &c->d_int2in, &c->d_tri2, &c->d_opp2) != GDT_OK ||
+         gcd_launch(c, c->k.m_compact_tris, T, err) != GDT_OK))
         return err->status;
     st = gdt_mesh_reserve(out, r->n, nreal, out->ids != NULL, err);
     if (st != GDT_OK)
@@ -743,7 +764,10 @@ gdt_status gdt_core_triangulate(gdt_core *core, const gdt_ipt *pts, size_t n, in
     gcd_run r;
     double t0 = gcd_now(), t1;
     gdt_core_stats *st = stats != NULL ? stats : &local;
-    double limit = core->opts.missing_limit > 0 ? core->opts.missing_limit : 0.5;
+    /* default: the digital-Voronoi path whatever the missing fraction: with
+     * Phase 4's slots and hints and Phase 5's block-local flipping it beats
+     * the insertion path even with 99.9% of the points in a few texels */
+    double limit = core->opts.missing_limit > 0 ? core->opts.missing_limit : 1.0;
 
     memset(st, 0, sizeof *st);
     out->nverts = 0;
@@ -808,7 +832,8 @@ gdt_status gdt_core_triangulate(gdt_core *core, const gdt_ipt *pts, size_t n, in
             return err->status;
     }
     t1 = gcd_now();
-    r.sort_tris = 1;
+    /* the insertion path appends in insertion order: sort for locality */
+    r.sort_tris = r.all_missing;
     if (gcd_phase5(core, &r, err) != GDT_OK || gdt_ocl_finish(core->ocl, err) != GDT_OK)
         return err->status;
     st->t_phase5 = gcd_now() - t1;
@@ -849,6 +874,18 @@ gdt_status gcd_test_scan(gdt_core *c, const uint32_t *in, size_t n, uint32_t *ou
         return err->status;
     *nflagged = cnt;
     return GDT_OK;
+}
+
+void gcd_test_set_flip_blocks(gdt_core *c, size_t blocks, size_t min_block, size_t queue)
+{
+    /* Block-local flipping needs few long work-items: CPU devices only.
+     * More blocks than compute units balance the load; the blocks stay
+     * large so that few slots lie next to another block. */
+    if (blocks == SIZE_MAX)
+        blocks = gdt_ocl_is_cpu(c->ocl) ? 32 * (size_t)gdt_ocl_compute_units(c->ocl) : 0;
+    c->flip_blocks = blocks;
+    c->flip_min_block = min_block > 0 ? min_block : 4096;
+    c->flip_queue = queue >= 8 ? queue : 65536;
 }
 
 gdt_status gcd_test_radix(gdt_core *c, uint32_t *keys, uint32_t *vals, size_t n, unsigned bits,

@@ -406,9 +406,11 @@ gdt_status gcd_phase1(gdt_core *c, gcd_run *r, gdt_error *err)
         gcd_compact(c, &c->d_flags, r->n, &c->d_list, &nmiss, err) != GDT_OK)
         return err->status;
     /* internal numbering: kept points in texel order, then the missing ones
-     * grouped by the vertex owning their texel (stable: input order within) */
+     * by home chunk (stable: input order within), and the index range of
+     * every chunk's missing points (Phase 2 reserves their slots) */
+    size_t nchunks = gcd_corner_chunks(r->W, r->H);
     unsigned bits = 8;
-    while (bits < 32 && ((size_t)1 << bits) <= r->nv)
+    while (bits < 32 && ((size_t)1 << bits) <= nchunks)
         bits += 8;
     if (gcd_args(c->k.p1_occ_flags, err, "buub", &c->d_seed, (unsigned)npix, (unsigned)r->n,
                  &c->d_flags) != GDT_OK ||
@@ -418,10 +420,15 @@ gdt_status gcd_phase1(gdt_core *c, gcd_run *r, gdt_error *err)
                  &c->d_flags, &c->d_int2in) != GDT_OK ||
         gcd_launch(c, c->k.p1_number_kept, npix, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_mkeys, 4 * nmiss + 4, err) != GDT_OK ||
-        gcd_args(c->k.p1_missing_keys, err, "bubbb", &c->d_list, (unsigned)nmiss,
-                 &c->d_texel_in, &c->d_seed, &c->d_mkeys) != GDT_OK ||
+        gcd_args(c->k.p1_missing_keys, err, "bubuub", &c->d_list, (unsigned)nmiss,
+                 &c->d_texel_in, r->W, r->H, &c->d_mkeys) != GDT_OK ||
         gcd_launch(c, c->k.p1_missing_keys, nmiss, err) != GDT_OK ||
         gcd_radix_sort(c, &c->d_mkeys, &c->d_list, nmiss, bits, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_mrange, 8 * (nchunks + 1), err) != GDT_OK ||
+        gcd_fill(c, &c->d_mrange, 2 * (nchunks + 1), 0, err) != GDT_OK ||
+        gcd_args(c->k.p1_missing_range, err, "bub", &c->d_mkeys, (unsigned)nmiss,
+                 &c->d_mrange) != GDT_OK ||
+        gcd_launch(c, c->k.p1_missing_range, nmiss, err) != GDT_OK ||
         gcd_args(c->k.p1_number_missing, err, "buub", &c->d_list, (unsigned)nmiss, kept,
                  &c->d_int2in) != GDT_OK ||
         gcd_launch(c, c->k.p1_number_missing, nmiss, err) != GDT_OK ||

@@ -6,7 +6,11 @@
  * After this phase the live triangles form a valid triangulation of the
  * kept points (at their texel corners, d_pos), the frame vertices and the
  * fakes, whose outer boundary is the fake polygon; the triangles without a
- * fake vertex triangulate the frame rectangle (Cao, Edelsbrunner, Tan). */
+ * fake vertex triangulate the frame rectangle (Cao, Edelsbrunner, Tan).
+ * Interleaved with the dual triangles, chunk by chunk, are two dead slots
+ * per missing point (gcd_geom.clh): Phase 4 fills them, so the triangles
+ * it makes lie next to their neighbours in memory and Phase 5 needs no
+ * sort. */
 #include "private/gcd_ctx.h"
 #include "private/gcd_hull.h"
 
@@ -15,44 +19,43 @@
 
 #include "gcd_geom.clh"
 
-#define P2_CHUNK 256u
+gdt_status gcd_link_start(gdt_core *c, gcd_run *r, gdt_error *err)
+{
+    if (gcd_buf_need(c, &c->d_cnt, 4 * r->nv, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_vt, 4 * r->nv, err) != GDT_OK ||
+        gcd_fill(c, &c->d_cnt, r->nv, 0, err) != GDT_OK ||
+        gcd_fill(c, &c->d_vt, r->nv, GCD_EMPTY, err) != GDT_OK)
+        return err->status;
+    return GDT_OK;
+}
 
-gdt_status gcd_link_all(gdt_core *c, gcd_run *r, gdt_error *err)
+gdt_status gcd_link_all(gdt_core *c, gcd_run *r, size_t counted, gdt_error *err)
 {
     uint32_t total = 0;
     size_t T = r->ntris, nv = r->nv;
 
-    if (gcd_buf_need(c, &c->d_cnt, 4 * nv, err) != GDT_OK ||
-        gcd_buf_need(c, &c->d_aux, 4 * nv, err) != GDT_OK ||
-        gcd_buf_need(c, &c->d_aux2, 12 * T, err) != GDT_OK ||
-        gcd_buf_need(c, &c->d_vt, 4 * nv, err) != GDT_OK ||
-        gcd_fill(c, &c->d_cnt, nv, 0, err) != GDT_OK ||
-        gcd_args(c->k.m_vcount, err, "bub", &c->d_tri, (unsigned)T, &c->d_cnt) != GDT_OK ||
-        gcd_launch(c, c->k.m_vcount, T, err) != GDT_OK ||
-        gdt_ocl_copy(c->ocl, c->d_cnt.b, 0, c->d_aux.b, 0, 4 * nv, err) != GDT_OK ||
-        gcd_scan(c, &c->d_aux, nv, &total, err) != GDT_OK ||
-        gcd_fill(c, &c->d_cnt, nv, 0, err) != GDT_OK ||
+    if (gcd_buf_need(c, &c->d_aux2, 12 * T, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_aux3, 12 * T, err) != GDT_OK ||
-        gcd_args(c->k.m_vfill, err, "bubbbb", &c->d_tri, (unsigned)T, &c->d_aux, &c->d_cnt,
-                 &c->d_aux2, &c->d_aux3) != GDT_OK ||
+        gcd_args(c->k.m_vcount, err, "buubb", &c->d_tri, (unsigned)counted, (unsigned)T,
+                 &c->d_cnt, &c->d_vt) != GDT_OK ||
+        gcd_launch(c, c->k.m_vcount, T - counted, err) != GDT_OK ||
+        gcd_scan(c, &c->d_cnt, nv, &total, err) != GDT_OK ||
+        gcd_args(c->k.m_vfill, err, "bubbb", &c->d_tri, (unsigned)T, &c->d_cnt, &c->d_aux2,
+                 &c->d_aux3) != GDT_OK ||
         gcd_launch(c, c->k.m_vfill, T, err) != GDT_OK ||
         gcd_fill(c, &c->d_opp, 3 * T, GCD_EMPTY, err) != GDT_OK ||
-        gcd_args(c->k.m_link, err, "bubbbbb", &c->d_tri, (unsigned)T, &c->d_aux, &c->d_cnt,
-                 &c->d_aux2, &c->d_aux3, &c->d_opp) != GDT_OK ||
-        gcd_launch(c, c->k.m_link, T, err) != GDT_OK ||
-        gcd_fill(c, &c->d_vt, nv, GCD_EMPTY, err) != GDT_OK ||
-        gcd_args(c->k.m_vt_min, err, "bub", &c->d_tri, (unsigned)T, &c->d_vt) != GDT_OK ||
-        gcd_launch(c, c->k.m_vt_min, T, err) != GDT_OK)
+        gcd_args(c->k.m_link, err, "bubbbb", &c->d_tri, (unsigned)T, &c->d_cnt, &c->d_aux2,
+                 &c->d_aux3, &c->d_opp) != GDT_OK ||
+        gcd_launch(c, c->k.m_link, T, err) != GDT_OK)
         return err->status;
     return GDT_OK;
 }
 
 gdt_status gcd_phase2(gdt_core *c, gcd_run *r, gdt_error *err)
 {
-    size_t ncorner = r->W >= 2 && r->H >= 2 ? (size_t)(r->W - 1) * (r->H - 1) : 0;
-    size_t nchunks = (ncorner + P2_CHUNK - 1) / P2_CHUNK;
-    size_t nf = r->nframe, nring = 0;
-    uint32_t ndual = 0;
+    size_t nchunks = gcd_corner_chunks(r->W, r->H);
+    size_t nf = r->nframe, nring = 0, nslots = 0, ndual = 0;
+    uint32_t total = 0;
     int32_t *cycle = NULL;
     gdt_ipt *cpos = NULL;
     gcd_tri_list extra;
@@ -73,21 +76,28 @@ gdt_status gcd_phase2(gdt_core *c, gcd_run *r, gdt_error *err)
         gcd_launch(c, c->k.m_frame_pos, nf, err) != GDT_OK)
         return err->status;
     if (gcd_buf_need(c, &c->d_tri, 12 * r->cap_tris, err) != GDT_OK ||
-        gcd_buf_need(c, &c->d_opp, 12 * r->cap_tris, err) != GDT_OK)
+        gcd_buf_need(c, &c->d_opp, 12 * r->cap_tris, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_rslot, 8 * r->n + 8, err) != GDT_OK ||
+        gcd_link_start(c, r, err) != GDT_OK)
         return err->status;
+    /* dual triangles and reserved slots, chunk by chunk */
     if (nchunks > 0) {
         if (gcd_buf_need(c, &c->d_flags, 4 * nchunks, err) != GDT_OK ||
-            gcd_args(c->k.p2_count, err, "buuub", &c->d_colour, r->W, r->H, P2_CHUNK,
+            gcd_args(c->k.p2_count, err, "buubb", &c->d_colour, r->W, r->H, &c->d_mrange,
                      &c->d_flags) != GDT_OK ||
             gcd_launch(c, c->k.p2_count, nchunks, err) != GDT_OK ||
-            gcd_scan(c, &c->d_flags, nchunks, &ndual, err) != GDT_OK)
+            gcd_scan(c, &c->d_flags, nchunks, &total, err) != GDT_OK)
             return err->status;
-        if ((size_t)ndual + nf + GCD_NFAKE > r->cap_tris)
+        nslots = total;
+        if (nslots < 2 * r->nmissing || nslots + nf + GCD_NFAKE > r->cap_tris)
             return gdt_error_set(err, GDT_EINTERNAL, 7622,
-                                 "the dual has %u triangles for %zu vertices", ndual, r->nv);
-        if (ndual > 0 &&
-            (gcd_args(c->k.p2_write, err, "bbuuubb", &c->d_colour, &c->d_seed, r->W, r->H,
-                      P2_CHUNK, &c->d_flags, &c->d_tri) != GDT_OK ||
+                                 "the dual has %zu slots for %zu vertices, %zu missing", nslots,
+                                 r->nv, r->nmissing);
+        ndual = nslots - 2 * r->nmissing;
+        if (nslots > 0 &&
+            (gcd_args(c->k.p2_write, err, "bbuubbubbbb", &c->d_colour, &c->d_seed, r->W, r->H,
+                      &c->d_flags, &c->d_mrange, (unsigned)r->kept, &c->d_tri, &c->d_rslot,
+                      &c->d_cnt, &c->d_vt) != GDT_OK ||
              gcd_launch(c, c->k.p2_write, nchunks, err) != GDT_OK))
             return err->status;
     }
@@ -111,21 +121,36 @@ gdt_status gcd_phase2(gdt_core *c, gcd_run *r, gdt_error *err)
         st = gcd_hull_degenerate(&fr, cycle, cpos, nf, &extra, &nring, err);
     if (st != GDT_OK)
         goto fail;
-    if ((size_t)ndual + extra.n != 2 * (r->nv - r->nmissing) - GCD_NFAKE - 2) {
+    if (ndual + extra.n != 2 * (r->nv - r->nmissing) - GCD_NFAKE - 2) {
         st = gdt_error_set(err, GDT_EINTERNAL, 7622,
-                           "phase 2 made %u dual and %zu ring triangles for %zu vertices", ndual,
+                           "phase 2 made %zu dual and %zu ring triangles for %zu vertices", ndual,
                            extra.n, r->nv - r->nmissing);
         goto fail;
     }
-    st = gdt_ocl_write(c->ocl, c->d_tri.b, 12 * (size_t)ndual, extra.v, 12 * extra.n, err);
+    st = gdt_ocl_write(c->ocl, c->d_tri.b, 12 * nslots, extra.v, 12 * extra.n, err);
     if (st != GDT_OK)
         goto fail;
-    r->ntris = (size_t)ndual + extra.n;
+    r->ntris = nslots + extra.n;
+    if (nchunks == 0 && r->nmissing > 0) {
+        /* no corners: every point is missing; its slots go at the end */
+        if (r->ntris + 2 * r->nmissing > r->cap_tris) {
+            st = gdt_error_set(err, GDT_EINTERNAL, 7622, "no room for %zu missing points",
+                               r->nmissing);
+            goto fail;
+        }
+        if (gcd_args(c->k.m_slots_seq, err, "uuubb", (unsigned)r->kept, (unsigned)r->nmissing,
+                     (unsigned)r->ntris, &c->d_tri, &c->d_rslot) != GDT_OK ||
+            gcd_launch(c, c->k.m_slots_seq, r->nmissing, err) != GDT_OK) {
+            st = err->status;
+            goto fail;
+        }
+        r->ntris += 2 * r->nmissing;
+    }
     if (r->st != NULL) {
         r->st->dual_triangles = ndual;
         r->st->fake_triangles = nring;
     }
-    st = gcd_link_all(c, r, err);
+    st = gcd_link_all(c, r, nslots, err);
 fail:
     gcd_tri_list_free(&extra);
     free(cycle);

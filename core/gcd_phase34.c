@@ -39,36 +39,6 @@ static gdt_status fix_vt(gdt_core *c, gcd_run *r, size_t m, gdt_error *err)
     return GDT_OK;
 }
 
-/* Removes dead slots: triangles move to the front, links and vertex
- * entries are renumbered. */
-static gdt_status compact_tris(gdt_core *c, gcd_run *r, gdt_error *err)
-{
-    size_t T = r->ntris;
-    uint32_t live = 0;
-    gcd_buf tmp;
-    if (gcd_buf_need(c, &c->d_flags, 4 * T, err) != GDT_OK ||
-        gcd_buf_need(c, &c->d_tri2, 12 * r->cap_tris, err) != GDT_OK ||
-        gcd_buf_need(c, &c->d_opp2, 12 * r->cap_tris, err) != GDT_OK ||
-        gcd_args(c->k.m_live_flags, err, "bub", &c->d_tri, (unsigned)T, &c->d_flags) != GDT_OK ||
-        gcd_launch(c, c->k.m_live_flags, T, err) != GDT_OK ||
-        gcd_scan(c, &c->d_flags, T, &live, err) != GDT_OK ||
-        gcd_args(c->k.m_compact_tris, err, "bbububb", &c->d_tri, &c->d_opp, (unsigned)T,
-                 &c->d_flags, live, &c->d_tri2, &c->d_opp2) != GDT_OK ||
-        gcd_launch(c, c->k.m_compact_tris, T, err) != GDT_OK ||
-        gcd_args(c->k.m_remap_vt, err, "bubuu", &c->d_vt, (unsigned)r->nv, &c->d_flags,
-                 (unsigned)T, live) != GDT_OK ||
-        gcd_launch(c, c->k.m_remap_vt, r->nv, err) != GDT_OK)
-        return err->status;
-    tmp = c->d_tri;
-    c->d_tri = c->d_tri2;
-    c->d_tri2 = tmp;
-    tmp = c->d_opp;
-    c->d_opp = c->d_opp2;
-    c->d_opp2 = tmp;
-    r->ntris = live;
-    return GDT_OK;
-}
-
 gdt_status gcd_phase3(gdt_core *c, gcd_run *r, gdt_error *err)
 {
     size_t nl = 0, nd = 0;
@@ -190,10 +160,10 @@ gdt_status gcd_phase3(gdt_core *c, gcd_run *r, gdt_error *err)
                      &c->d_deg, &c->d_sc, &c->d_mark, &c->d_win) != GDT_OK ||
             gcd_launch(c, c->k.p3_del_win, nd, err) != GDT_OK ||
             gcd_fill(c, &c->d_small1, 1, 0, err) != GDT_OK ||
-            gcd_args(c->k.p3_del_apply, err, "bbbillbubbbbbbubbbb", &c->d_tri, &c->d_opp,
+            gcd_args(c->k.p3_del_apply, err, "bbbillbubbbbbbubbbbb", &c->d_tri, &c->d_opp,
                      &c->d_pos, (int)r->n, r->cx, r->cy, &c->d_list2, (unsigned)nd, &c->d_off,
                      &c->d_deg, &c->d_win, &c->d_sc, &c->d_exch, &c->d_flipped, round,
-                     &c->d_vt, &c->d_list3, &c->d_small1, &c->d_stat34) != GDT_OK ||
+                     &c->d_vt, &c->d_rslot, &c->d_list3, &c->d_small1, &c->d_stat34) != GDT_OK ||
             gcd_launch(c, c->k.p3_del_apply, nd, err) != GDT_OK ||
             gcd_args(c->k.p3_del_link, err, "bbbuubbbb", &c->d_opp, &c->d_exch, &c->d_flipped,
                      round, (unsigned)nd, &c->d_off, &c->d_deg, &c->d_win, &c->d_sc) != GDT_OK ||
@@ -224,10 +194,6 @@ gdt_status gcd_phase3(gdt_core *c, gcd_run *r, gdt_error *err)
         r->st->shifted += stat[0];
         r->st->bad_cases += stat[1];
     }
-    /* Phase 4 appends 2 slots per inserted point; the dead slots go away
-     * with Phase 5's sort, or here when they would not leave room. */
-    if (r->ntris + 2 * (r->nmissing + (size_t)stat[1]) > r->cap_tris)
-        return compact_tris(c, r, err);
     return GDT_OK;
 }
 
@@ -270,9 +236,10 @@ gdt_status gcd_phase4(gdt_core *c, gcd_run *r, int flip_between, gdt_error *err)
         gcd_buf_need(c, &c->d_list3, 4 * r->cap_tris, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_stat34, 64, err) != GDT_OK ||
         gcd_fill(c, &c->d_stat34, 16, 0, err) != GDT_OK ||
-        gcd_args(c->k.p4_hints, err, "bubbbbuub", &c->d_list2, (unsigned)nl, &c->d_texel,
+        gcd_buf_need(c, &c->d_piv, 4 * nl, err) != GDT_OK ||
+        gcd_args(c->k.p4_hints, err, "bubbbbuubb", &c->d_list2, (unsigned)nl, &c->d_texel,
                  &c->d_seed, &c->d_vt, &c->d_tri, (unsigned)r->ntris, (unsigned)r->all_missing,
-                 &c->d_hint) != GDT_OK ||
+                 &c->d_hint, &c->d_piv) != GDT_OK ||
         gcd_launch(c, c->k.p4_hints, nl, err) != GDT_OK)
         return err->status;
     if (flip_between && gcd_flip_prepare(c, r->cap_tris, err) != GDT_OK)
@@ -280,12 +247,13 @@ gdt_status gcd_phase4(gdt_core *c, gcd_run *r, int flip_between, gdt_error *err)
     /* the flip counters share d_stat[0..3] with nothing here: Phase 4
      * keeps its own at d_stat[8..13] */
     while (nl > 0) {
-        uint32_t wins = 0, nnew = 0, left = 0, round = r->epoch++;
+        uint32_t nnew = 0, left = 0, round = r->epoch++;
         if (++rounds > P4_MAX_ROUNDS)
             return gdt_error_set(err, GDT_EINTERNAL, 7641, "inserting did not end");
-        if (gcd_args(c->k.p4_locate, err, "bbbbillbubbbbub", &c->d_tri, &c->d_opp, &c->d_pos,
+        if (gcd_args(c->k.p4_locate, err, "bbbbillbubbbbbub", &c->d_tri, &c->d_opp, &c->d_pos,
                      &c->d_pts, (int)r->n, r->cx, r->cy, &c->d_list2, (unsigned)nl, &c->d_hint,
-                     &c->d_cont, &c->d_locep, &c->d_flipped, round, &c->d_stat34) != GDT_OK ||
+                     &c->d_piv, &c->d_cont, &c->d_locep, &c->d_flipped, round,
+                     &c->d_stat34) != GDT_OK ||
             gcd_launch(c, c->k.p4_locate, nl, err) != GDT_OK ||
             gcd_args(c->k.p4_nb, err, "bubb", &c->d_opp, (unsigned)nl, &c->d_cont,
                      &c->d_oldnb) != GDT_OK ||
@@ -313,28 +281,23 @@ gdt_status gcd_phase4(gdt_core *c, gcd_run *r, int flip_between, gdt_error *err)
             gcd_args(c->k.p4_win, err, "bbubbb", &c->d_opp, &c->d_list2, (unsigned)nl,
                      &c->d_cont, &c->d_mark, &c->d_win) != GDT_OK ||
             gcd_launch(c, c->k.p4_win, nl, err) != GDT_OK ||
-            gdt_ocl_copy(c->ocl, c->d_win.b, 0, c->d_rank.b, 0, 4 * nl, err) != GDT_OK ||
-            gcd_scan(c, &c->d_rank, nl, &wins, err) != GDT_OK)
-            return err->status;
-        if (wins == 0)
-            return gdt_error_set(err, GDT_EINTERNAL, 7641, "insertion round %u made no progress",
-                                 round);
-        if (r->ntris + 2 * (size_t)wins > r->cap_tris)
-            return gdt_error_set(err, GDT_EINTERNAL, 7643,
-                                 "triangle capacity %zu exceeded inserting %u points", r->cap_tris,
-                                 wins);
-        if (gcd_fill(c, &c->d_small1, 1, 0, err) != GDT_OK ||
-            gcd_args(c->k.p4_apply, err, "bbbbbubbbubbubbbb", &c->d_tri, &c->d_opp, &c->d_pos,
-                     &c->d_pts, &c->d_list2,
-                     (unsigned)nl, &c->d_cont, &c->d_win, &c->d_rank, (unsigned)r->ntris,
-                     &c->d_exch, &c->d_flipped, round, &c->d_vt, &c->d_fix, &c->d_list3,
-                     &c->d_small1) != GDT_OK ||
+            gcd_fill(c, &c->d_small1, 1, 0, err) != GDT_OK ||
+            gcd_args(c->k.p4_apply, err, "bbbbbubbbbbubbbb", &c->d_tri, &c->d_opp, &c->d_pos,
+                     &c->d_pts, &c->d_list2, (unsigned)nl, &c->d_cont, &c->d_win,
+                     &c->d_rslot, &c->d_exch, &c->d_flipped, round, &c->d_vt, &c->d_fix,
+                     &c->d_list3, &c->d_small1) != GDT_OK ||
             gcd_launch(c, c->k.p4_apply, nl, err) != GDT_OK ||
             gcd_args(c->k.p4_link, err, "bbbuubb", &c->d_opp, &c->d_exch, &c->d_flipped, round,
                      (unsigned)nl, &c->d_win, &c->d_fix) != GDT_OK ||
             gcd_launch(c, c->k.p4_link, nl, err) != GDT_OK ||
-            gcd_read_u32(c, &c->d_small1, 0, &nnew, err) != GDT_OK ||
-            fix_vt(c, r, nnew, err) != GDT_OK ||
+            gcd_read_u32(c, &c->d_small1, 0, &nnew, err) != GDT_OK)
+            return err->status;
+        if (nnew == 0)
+            return gdt_error_set(err, GDT_EINTERNAL, 7641, "insertion round %u made no progress",
+                                 round);
+        /* no kernel reads vt after p4_hints: the entries of the vertices
+         * around new triangles are repaired only for the phase check */
+        if ((c->opts.check_phases && !flip_between && fix_vt(c, r, nnew, err) != GDT_OK) ||
             gcd_args(c->k.p4_unmark, err, "bubbbbb", &c->d_list2, (unsigned)nl, &c->d_cont,
                      &c->d_oldnb, &c->d_mark, &c->d_win, &c->d_rank) != GDT_OK ||
             gcd_launch(c, c->k.p4_unmark, nl, err) != GDT_OK ||
@@ -344,7 +307,6 @@ gdt_status gcd_phase4(gdt_core *c, gcd_run *r, int flip_between, gdt_error *err)
                      &c->d_cont2, &c->d_locep2) != GDT_OK ||
             gcd_launch(c, c->k.p4_compact, nl, err) != GDT_OK)
             return err->status;
-        r->ntris += 2 * (size_t)wins;
         if (flip_between) {
             /* gDel2D style: restore local optimality around the new
              * triangles, so the triangulation stays Delaunay and later

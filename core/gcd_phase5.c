@@ -1,7 +1,9 @@
-/* gcd_phase5.c — Phase 5: parallel Lawson flipping with the exact in-circle
- * and the preferred-direction tie-break (kernels/gcd_flip.cl), until no
- * edge needs a flip.  The host only reads the list lengths between
- * launches. */
+/* gcd_phase5.c — Phase 5: Lawson flipping with the exact in-circle and the
+ * preferred-direction tie-break (kernels/gcd_flip.cl), until no edge needs
+ * a flip: on CPU devices first block-local sequential passes
+ * (local_flips), then the parallel rounds on whatever they left (on other
+ * devices the rounds alone, from every slot).  The host only reads the
+ * list lengths between launches. */
 #include "private/gcd_ctx.h"
 #include "private/gcd_test.h"
 
@@ -11,6 +13,12 @@
 /* Rounds after which flipping is declared stuck (a bug: Lawson's algorithm
  * with the tie-break terminates). */
 #define P5_MAX_ROUNDS 1000000u
+
+/* Block-local flipping: tests allowed per slot of a range before the rest
+ * is left to the parallel rounds (about 3 are needed on terrain data; many
+ * co-circular points need more), and most passes. */
+#define P5_BUDGET 64u
+#define P5_MAX_PASSES 64u
 
 /* Counters read back each round (d_small1..3 on the device). */
 enum { S_NCAND = 0, S_NEXACT = 1, S_NNEXT = 2 };
@@ -170,15 +178,79 @@ static gdt_status sort_tris(gdt_core *c, gcd_run *r, gdt_error *err)
     return GDT_OK;
 }
 
+/* Block-local Lawson flipping (kernels/gcd_flip.cl: p5_local, then
+ * p5_local_lists on the deferred slots, alternating the two partitions into
+ * blocks) over the live slots; *na receives the slots left over, listed in
+ * d_active and marked in d_inact with r->epoch (the first round of
+ * gcd_flip_run). */
+static gdt_status local_flips(gdt_core *c, gcd_run *r, size_t *na, gdt_error *err)
+{
+    size_t T = r->ntris, nb = c->flip_blocks;
+    size_t bsize = (T + nb - 1) / nb;
+    uint32_t nd = UINT32_MAX, prev = UINT32_MAX, round = r->epoch++;
+    gcd_buf *lists[2] = {&c->d_fnext, &c->d_cand}, *counts[2] = {&c->d_nlist, &c->d_nlist2};
+    size_t qcap = 8;
+    if (bsize < c->flip_min_block)
+        bsize = c->flip_min_block;
+    nb = (T + bsize - 1) / bsize;
+    /* room for a flip wave through the block, within the device's bound */
+    while (2 * qcap <= c->flip_queue && qcap < 4 * bsize)
+        qcap *= 2;
+    if (gcd_buf_need(c, &c->d_queue, 4 * (nb + 1) * qcap, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_nlist, 4 * (nb + 1), err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_nlist2, 4 * (nb + 1), err) != GDT_OK ||
+        gcd_args(c->k.p5_local, err, "bbbilluubuububbb", &c->d_tri, &c->d_opp, &c->d_pos,
+                 (int)r->n, r->cx, r->cy, (unsigned)T, (unsigned)bsize, &c->d_queue,
+                 (unsigned)qcap, P5_BUDGET, &c->d_inact, round, lists[0], counts[0],
+                 &c->d_stat) != GDT_OK ||
+        gcd_launch_wg(c, c->k.p5_local, nb, 1, err) != GDT_OK)
+        return err->status;
+    /* Later passes alternate the partitions while they at least halve the
+     * deferred slots; then one work-item takes what is left (the chains of
+     * flips that cross blocks, e.g. along the hull, whose ring triangles
+     * are stored after all others). */
+    for (unsigned pass = 1, whole = 0; pass <= P5_MAX_PASSES && !whole; pass++) {
+        uint32_t next = r->epoch++;
+        unsigned shift = pass & 1;
+        whole = pass > 1 && 2 * (uint64_t)nd > prev;
+        prev = nd;
+        if (gcd_fill(c, &c->d_small3, 1, 0, err) != GDT_OK ||
+            gcd_args(c->k.p5_local_lists, err, "bbbilluuuubuubuubbbbbbb", &c->d_tri,
+                     &c->d_opp, &c->d_pos, (int)r->n, r->cx, r->cy, (unsigned)T,
+                     (unsigned)bsize, shift, whole, &c->d_queue, (unsigned)qcap, P5_BUDGET,
+                     &c->d_inact, round, next, lists[(pass + 1) & 1], counts[(pass + 1) & 1],
+                     lists[pass & 1], counts[pass & 1], &c->d_active, &c->d_small3,
+                     &c->d_stat) != GDT_OK ||
+            gcd_launch_wg(c, c->k.p5_local_lists, whole ? 1 : nb + shift, 1, err) != GDT_OK ||
+            gcd_read_u32(c, &c->d_small3, 0, &nd, err) != GDT_OK)
+            return err->status;
+        round = next;
+        if (nd == 0)
+            break;
+    }
+    r->epoch = round;
+    *na = nd;
+    return GDT_OK;
+}
+
 gdt_status gcd_phase5(gdt_core *c, gcd_run *r, gdt_error *err)
 {
     uint64_t rounds = 0;
     uint32_t stat[4];
     if (r->sort_tris && sort_tris(c, r, err) != GDT_OK)
         return err->status;
-    if (gcd_flip_prepare(c, r->cap_tris, err) != GDT_OK ||
-        gcd_flip_run(c, r, 0, 1, &rounds, err) != GDT_OK ||
-        gdt_ocl_read(c->ocl, c->d_stat.b, 0, stat, sizeof stat, err) != GDT_OK)
+    if (gcd_flip_prepare(c, r->cap_tris, err) != GDT_OK)
+        return err->status;
+    if (c->flip_blocks > 0 && r->ntris > 0) {
+        size_t na = 0;
+        if (local_flips(c, r, &na, err) != GDT_OK)
+            return err->status;
+        if (gcd_flip_run(c, r, na, 0, &rounds, err) != GDT_OK)
+            return err->status;
+    } else if (gcd_flip_run(c, r, 0, 1, &rounds, err) != GDT_OK) {
+        return err->status;
+    }
+    if (gdt_ocl_read(c->ocl, c->d_stat.b, 0, stat, sizeof stat, err) != GDT_OK)
         return err->status;
     if (r->st != NULL) {
         r->st->flip_iterations += rounds;

@@ -25,13 +25,22 @@
  *              oriented, then Algorithm 1 for the rest; bad cases and the
  *              frame vertices deleted in independent rounds (Algorithm 2);
  *           4. missing points inserted in parallel rounds (atomic-min marks);
- *           5. parallel Lawson flipping with the exact in-circle and the
- *              tie-break.  Triangles touching a fake vertex are dropped at
- *              the end: what remains is T_{d1,d2} of the points.
- *   insert  when the grid fits the points badly (most points would be
- *           missing), phases 1-3 are replaced by a fan of the fake boundary
- *           and every point is inserted by phase 4, flipping after each
- *           round (gDel2D style); phase 5 follows as usual.
+ *              Phase 2 reserves two triangle slots per missing point, so
+ *              an insertion writes its new triangles without a scan; walks
+ *              start at the triangle of the owner of the point's texel;
+ *           5. Lawson flipping with the exact in-circle and the tie-break.
+ *              On CPU devices each work-item flips sequentially inside its
+ *              own block of triangle slots (a flip touching another block
+ *              is left for later); parallel rounds with symmetric votes and
+ *              two-phase flips finish the leftovers, and do all the work on
+ *              GPUs.  Triangles touching a fake vertex are dropped at the
+ *              end: what remains is T_{d1,d2} of the points.
+ *   insert  phases 1-3 replaced by a fan of the fake boundary and every
+ *           point inserted by phase 4, flipping after each round (gDel2D
+ *           style); phase 5 follows as usual.  Taken only when asked for
+ *           (opts.path, or AUTO with opts.missing_limit below the missing
+ *           fraction): with the slots and walk hints above the gcd path is
+ *           faster even when nearly all points fall into a few texels.
  * Every phase runs as OpenCL kernels; the host only orchestrates, plus two
  * small sequential steps the paper also does on the CPU: the debris
  * recolouring (a priority queue over the few debris texels) and the ring of
@@ -59,7 +68,7 @@ extern "C" {
 typedef struct gdt_core gdt_core;
 
 typedef enum gdt_core_path_choice {
-    GDT_CORE_PATH_AUTO = 0, /* gcd unless most points would be missing */
+    GDT_CORE_PATH_AUTO = 0, /* gcd unless more than missing_limit would be missing */
     GDT_CORE_PATH_GCD,      /* always the digital-Voronoi path */
     GDT_CORE_PATH_INSERT    /* always the insertion path */
 } gdt_core_path_choice;
@@ -72,7 +81,7 @@ typedef struct gdt_core_opts {
     gdt_core_path_choice path;
     int force_no_fp64;       /* test: integer predicates only */
     double missing_limit;    /* AUTO: insertion path above this missing fraction
-                                (0 = default 0.5) */
+                                (0 = default 1: never) */
     int full_grid;           /* use grid_n texels per side whatever the point count
                                 (default: at most about 4 texels per point) */
     int profile;             /* time every kernel (gdt_core_profile_dump) */

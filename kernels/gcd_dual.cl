@@ -9,7 +9,8 @@
  * counter-clockwise order of their texels form counter-clockwise triangles
  * (Consistent Orientation Lemma); four colours give (a, b, c) and (a, c, d).
  * Counting and writing are two passes over chunks of corners in row-major
- * order, so the triangle order is deterministic.
+ * order, so the triangle order is deterministic; each chunk's triangles
+ * are followed by the slots it reserves for Phase 4 (gcd_geom.clh).
  * CPU reference: dual_reference in tests/c/test_gcd_phase2.c. */
 #include "gcd_geom.clh"
 
@@ -37,15 +38,17 @@ inline int p2_corner(__global const uint *colour, uint W, uint x, uint y, uint *
     return 1;
 }
 
-__kernel void p2_count(__global const uint *colour, uint W, uint H, uint chunk,
+/* Slots per chunk: its dual triangles, then two reserved slots per
+ * missing point at home in it (range: p1_missing_range). */
+__kernel void p2_count(__global const uint *colour, uint W, uint H, __global const uint *range,
                        __global uint *counts)
 {
     size_t g = get_global_id(0);
     size_t ncorner = (size_t)(W - 1) * (H - 1);
-    size_t lo = g * chunk;
+    size_t lo = g * GCD_CORNER_CHUNK;
     if (lo >= ncorner)
         return;
-    size_t hi = lo + chunk < ncorner ? lo + chunk : ncorner;
+    size_t hi = lo + GCD_CORNER_CHUNK < ncorner ? lo + GCD_CORNER_CHUNK : ncorner;
     uint s = 0, t[6];
     uint x = (uint)(lo % (W - 1)), y = (uint)(lo / (W - 1));
     for (size_t i = lo; i < hi; i++) {
@@ -53,29 +56,46 @@ __kernel void p2_count(__global const uint *colour, uint W, uint H, uint chunk,
         if (++x == W - 1)
             x = 0, y++;
     }
-    counts[g] = s;
+    counts[g] = s + 2 * (range[2 * g + 1] - range[2 * g]);
 }
 
-/* Vertices are point indices: seed[site texel]. */
+/* Vertices are point indices: seed[site texel].  The reserved slots are
+ * written dead (tri[3s] = -1) and handed to their points: internal missing
+ * point kept + j gets rslot[2p], rslot[2p+1].  The vertex counts and the
+ * smallest incident triangles of m_vcount are done here for these slots
+ * (cnt preset to 0, vt to 0xffffffff). */
 __kernel void p2_write(__global const uint *colour, __global const uint *seed, uint W, uint H,
-                       uint chunk, __global const uint *offsets, __global int *tri)
+                       __global const uint *offsets, __global const uint *range, uint kept,
+                       __global int *tri, __global int *rslot, __global uint *cnt,
+                       __global uint *vt)
 {
     size_t g = get_global_id(0);
     size_t ncorner = (size_t)(W - 1) * (H - 1);
-    size_t lo = g * chunk;
+    size_t lo = g * GCD_CORNER_CHUNK;
     if (lo >= ncorner)
         return;
-    size_t hi = lo + chunk < ncorner ? lo + chunk : ncorner;
+    size_t hi = lo + GCD_CORNER_CHUNK < ncorner ? lo + GCD_CORNER_CHUNK : ncorner;
     size_t o = offsets[g];
     uint t[6];
     uint x = (uint)(lo % (W - 1)), y = (uint)(lo / (W - 1));
     for (size_t i = lo; i < hi; i++) {
         int k = p2_corner(colour, W, x, y, t);
-        for (int j = 0; j < 3 * k; j++)
-            tri[3 * o + j] = (int)seed[t[j]];
+        for (int j = 0; j < 3 * k; j++) {
+            uint v = seed[t[j]];
+            tri[3 * o + j] = (int)v;
+            atomic_inc(&cnt[v]);
+            atomic_min(&vt[v], (uint)(o + (size_t)(j / 3)));
+        }
         o += (size_t)k;
         if (++x == W - 1)
             x = 0, y++;
+    }
+    for (uint j = range[2 * g]; j < range[2 * g + 1]; j++, o += 2) {
+        size_t p = (size_t)kept + j;
+        for (int q = 0; q < 6; q++)
+            tri[3 * o + q] = GCD_NONE;
+        rslot[2 * p] = (int)o;
+        rslot[2 * p + 1] = (int)o + 1;
     }
 }
 

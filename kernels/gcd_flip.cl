@@ -1,7 +1,11 @@
-/* gcd_flip.cl — Phase 5 of the gCD core: parallel Lawson flipping to
- * T_{d1,d2} (and the shared flip machinery of the insertion path).
+/* gcd_flip.cl — Phase 5 of the gCD core: Lawson flipping to T_{d1,d2}
+ * (and the shared flip machinery of the insertion path).
  *
- * One round:
+ * On CPU devices Phase 5 starts with block-local sequential passes
+ * (p5_local, p5_local_lists: see "block-local Lawson flipping" below);
+ * the parallel rounds then finish from the slots they left.
+ *
+ * One parallel round:
  *   p5_check  over the active triangles: every edge is tested once (by the
  *             triangle of smaller index, or by the active side when the
  *             other is inactive) with the double-precision filter; a quad
@@ -299,4 +303,320 @@ __kernel void p5_round_flags(__global const uint *inact, uint T, uint round,
     uint t = get_global_id(0);
     if (t < T)
         flag[t] = inact[t] == round ? 1u : 0u;
+}
+
+/* ---- block-local Lawson flipping (CPU devices) ----
+ * A work-item owns a range [lo, lo + span) of triangle slots and runs the
+ * sequential Lawson algorithm inside it: edges wait in a private FIFO
+ * queue (first in, first out, like the parallel rounds: on sets of many
+ * co-circular points a depth-first order can take many more flips), and a
+ * flip appends its four outer edges.
+ *
+ * Ownership (why no two work-items ever touch the same slot): a slot whose
+ * neighbour lies outside the range is frozen — never rewritten.  A flip of
+ * t and u needs both in the range and their four outer neighbours in the
+ * range (or absent), so it reads and writes only slots of the range; the
+ * new triangles again have only neighbours in the range, so the set of
+ * frozen slots does not change while the kernel runs, and an edge between
+ * two ranges (two frozen slots) is never read by either side.
+ *
+ * Deferred slots (inact[t] = round, listed once): a slot with an edge out
+ * of the range (not tested here), both slots of an edge that must flip
+ * when the flip is not allowed here (a frozen slot, or a full queue), and
+ * every slot whose edges are still waiting when the work-item has spent
+ * its budget of tests (a bound on the time of one work-item).  An edge
+ * that is tested and not deferred is locally optimal until its quad
+ * changes again; a flip changes the quads of exactly its four outer edges,
+ * which it queues, and of its new diagonal, which is locally optimal by
+ * construction (the lifted determinant of the flipped quad is that of the
+ * old one with an odd permutation of the rows, and both tie-breaks are
+ * antisymmetric).  So every edge is locally optimal at the end unless one
+ * of its slots is deferred.
+ *
+ * Passes: p5_local over blocks of bsize slots tests every edge; then
+ * p5_local_lists over the blocks shifted by half a block takes the slots
+ * the first pass deferred (mostly near a block boundary, now mid-range)
+ * and tests all their edges, and so on, alternating the two partitions,
+ * while the deferred slots become fewer (a flip wave through co-circular
+ * points crosses half a block per pass).  What the last pass defers starts
+ * the parallel rounds (p5_check ...), which end at T_{d1,d2} as from a
+ * full start.  Slots are visited in a fixed order, so the result is
+ * deterministic. */
+#define P5_IN(x) ((uint)(x) - lo < span)
+
+/* gcd_flip_code for a quad with a fake vertex, or one the double filter
+ * left undecided: 1 to flip; *exact and *tie count its escalations. */
+inline int p5_exact_test(__global const int *pos, int nreal, long cx, long cy, int a, int b,
+                         int c, int d, uint *exact, uint *tie)
+{
+    unsigned code = gcd_flip_code(p5_pt(pos, a, nreal, cx, cy), p5_pt(pos, b, nreal, cx, cy),
+                                  p5_pt(pos, c, nreal, cx, cy), p5_pt(pos, d, nreal, cx, cy),
+                                  a, b, c, d);
+    *exact += (code & GDT_X_USED_EXACT) != 0;
+    *tie += (code & GDT_X_USED_TIEBREAK) != 0;
+    return (code & GDT_X_FLIP) != 0;
+}
+
+/* lists = 0 (the first pass): work-item b owns block [b bsize,
+ * (b+1) bsize) of the T slots and tests each edge between two of its live
+ * slots once (from the slot of smaller index when the scan reaches it,
+ * unless a flip queued it before).
+ * lists = 1 (a later pass): work-item b owns block b of the shifted
+ * (shift = 1) or unshifted partition (p5_range), which overlaps two blocks
+ * of the other partition, used by the previous pass; it takes the slots
+ * those blocks deferred in its range (still marked round_in: in_list at
+ * the start of their block, in_count per block) and tests all their edges.
+ * Every pass writes its deferred slots (marked round) to out_list[lo ...]
+ * and their number to out_count[b]; a later pass also appends them to
+ * all[] (count *nall).  queue: qcap edges per work-item (a power of two);
+ * budget: tests per slot of the range. */
+/* Range of block b of the unshifted (blocks [b bsize, (b+1) bsize)) or
+ * the shifted (blocks [b bsize - bsize/2, b bsize + bsize/2)) partition of
+ * [0, T); 0 if empty. */
+inline int p5_range(uint b, uint T, uint bsize, uint shifted, uint *lo, uint *hi)
+{
+    uint nb = (T + bsize - 1) / bsize;
+    if (shifted) {
+        if (b > nb)
+            return 0;
+        *lo = b == 0 ? 0 : b * bsize - bsize / 2;
+        *hi = b * bsize + bsize / 2 < T ? b * bsize + bsize / 2 : T;
+    } else {
+        if (b >= nb)
+            return 0;
+        *lo = b * bsize;
+        *hi = *lo + bsize < T ? *lo + bsize : T;
+    }
+    return *lo < *hi;
+}
+
+/* One work-item of a pass over [lo, lo + span), queue qe, at most left
+ * tests.  lists = 0: scan the range.  lists = 1: the candidates are the
+ * slots the previous pass deferred in blocks kfirst..klast of its
+ * partition (in_shift), in block order. */
+inline void p5_local_run(__global int *tri, __global int *opp, __global const int *pos,
+                         int nreal, long cx, long cy, uint lo, uint span, const uint lists,
+                         uint T, uint bsize, uint in_shift, uint kfirst, uint klast,
+                         __global int *qe, uint qcap, uint left, __global uint *inact,
+                         uint round_in, uint round, __global const int *in_list,
+                         __global const uint *in_count, __global int *lst, uint *ndeferred,
+                         __global uint *stat)
+{
+    uint qmask = qcap - 1, head = 0, tail = 0, nd = 0;
+    uint tested = 0, nexact = 0, tie = 0, flips = 0;
+    /* the source of fresh edges: slot (or candidate) gs, its edge gi; in
+     * lists mode, candidate gs of the list cur (ncur entries) of block k */
+    uint gs = 0, gi = 0, k = kfirst, ncur = 0;
+    __global const int *cur = in_list;
+    if (lists) {
+        uint ilo, ihi;
+        if (k <= klast && p5_range(k, T, bsize, in_shift, &ilo, &ihi)) {
+            cur = in_list + ilo;
+            ncur = in_count[k];
+        }
+    }
+    for (;;) {
+        int e = -1;
+        if (head != tail) {
+            e = qe[head++ & qmask];
+        } else if (!lists) {
+            while (gs < span) {
+                int t0 = (int)(lo + gs);
+                if (gi == 3 || (gi == 0 && tri[3 * t0] < 0)) {
+                    gs++;
+                    gi = 0;
+                    continue;
+                }
+                int o0 = opp[3 * t0 + gi], i0 = (int)gi++;
+                if (o0 < 0 || (P5_IN(o0 >> 2) && (o0 >> 2) < t0))
+                    continue; /* no neighbour, or tested from the other side */
+                e = (t0 << 2) | i0;
+                break;
+            }
+        } else {
+            while (k <= klast) {
+                if (gs >= ncur) {
+                    uint ilo, ihi;
+                    k++;
+                    gs = gi = ncur = 0;
+                    if (k <= klast && p5_range(k, T, bsize, in_shift, &ilo, &ihi)) {
+                        cur = in_list + ilo;
+                        ncur = in_count[k];
+                    }
+                    continue;
+                }
+                int t0 = cur[gs];
+                if (gi == 3 ||
+                    (gi == 0 && (!P5_IN(t0) || inact[t0] != round_in || tri[3 * t0] < 0))) {
+                    gs++;
+                    gi = 0;
+                    continue;
+                }
+                e = (t0 << 2) | (int)gi++;
+                break;
+            }
+        }
+        if (e < 0)
+            break;
+        int t = e >> 2, i = e & 3;
+        int o = opp[3 * t + i];
+        if (o < 0)
+            continue;
+        int u = o >> 2, j = o & 3;
+        if (!P5_IN(u) || left == 0) {
+            if (inact[t] != round) {
+                inact[t] = round;
+                lst[nd++] = t;
+            }
+            continue;
+        }
+        left--;
+        tested++;
+        int i1 = i == 2 ? 0 : i + 1, i2 = i == 0 ? 2 : i - 1;
+        int j1 = j == 2 ? 0 : j + 1, j2 = j == 0 ? 2 : j - 1;
+        int c = tri[3 * t + i], a = tri[3 * t + i1], bb = tri[3 * t + i2];
+        int d = tri[3 * u + j];
+        int flip;
+#if defined(GDT_X_HAVE_F64)
+        /* in Phase 5 a vertex index >= nreal is a fake */
+        if (max(max(a, bb), max(c, d)) < nreal) {
+            long ax = pos[2 * a], ay = pos[2 * a + 1], bx = pos[2 * bb], by = pos[2 * bb + 1];
+            long qx = pos[2 * c], qy = pos[2 * c + 1], dx = pos[2 * d], dy = pos[2 * d + 1];
+            int sg = gdt_x_incircle_filter_d(ax - dx, ay - dy, bx - dx, by - dy, qx - dx,
+                                             qy - dy);
+            if (sg == 1) {
+                flip = 1;
+            } else if (sg == -1) {
+                flip = 0;
+            } else if (sg == 0) {
+                flip = 0;
+                if (gdt_x_orient2d(dx, dy, bx, by, qx, qy) > 0 &&
+                    gdt_x_orient2d(qx, qy, ax, ay, dx, dy) > 0) {
+                    tie++;
+                    flip = gdt_x_prefer_diagonal(dx - qx, dy - qy, bx - ax, by - ay) > 0;
+                }
+            } else {
+                flip = p5_exact_test(pos, nreal, cx, cy, a, bb, c, d, &nexact, &tie);
+            }
+        } else
+#endif
+            flip = p5_exact_test(pos, nreal, cx, cy, a, bb, c, d, &nexact, &tie);
+        if (!flip)
+            continue;
+        int na = opp[3 * t + i1], nb2 = opp[3 * t + i2];
+        int mb = opp[3 * u + j1], ma = opp[3 * u + j2];
+        if ((na >= 0 && !P5_IN(na >> 2)) || (nb2 >= 0 && !P5_IN(nb2 >> 2)) ||
+            (ma >= 0 && !P5_IN(ma >> 2)) || (mb >= 0 && !P5_IN(mb >> 2)) ||
+            tail - head + 4 > qcap) {
+            if (inact[t] != round) {
+                inact[t] = round;
+                lst[nd++] = t;
+            }
+            if (inact[u] != round) {
+                inact[u] = round;
+                lst[nd++] = u;
+            }
+            continue;
+        }
+        tri[3 * t] = c, tri[3 * t + 1] = a, tri[3 * t + 2] = d;
+        tri[3 * u] = c, tri[3 * u + 1] = d, tri[3 * u + 2] = bb;
+        opp[3 * t] = mb, opp[3 * t + 1] = (u << 2) | 2, opp[3 * t + 2] = nb2;
+        opp[3 * u] = ma, opp[3 * u + 1] = na, opp[3 * u + 2] = (t << 2) | 1;
+        if (mb >= 0)
+            opp[3 * (mb >> 2) + (mb & 3)] = (t << 2) | 0;
+        if (nb2 >= 0)
+            opp[3 * (nb2 >> 2) + (nb2 & 3)] = (t << 2) | 2;
+        if (ma >= 0)
+            opp[3 * (ma >> 2) + (ma & 3)] = (u << 2) | 0;
+        if (na >= 0)
+            opp[3 * (na >> 2) + (na & 3)] = (u << 2) | 1;
+        flips++;
+        qe[tail++ & qmask] = (t << 2) | 0;
+        qe[tail++ & qmask] = (t << 2) | 2;
+        qe[tail++ & qmask] = (u << 2) | 0;
+        qe[tail++ & qmask] = (u << 2) | 1;
+    }
+    *ndeferred = nd;
+    if (tested)
+        atomic_add(&stat[P5_TESTED], tested);
+    if (nexact)
+        atomic_add(&stat[P5_EXACT], nexact);
+    if (tie)
+        atomic_add(&stat[P5_TIEBREAK], tie);
+    if (flips)
+        atomic_add(&stat[P5_FLIPS], flips);
+}
+
+/* Tests allowed for n slots or candidates: budget each, and some to spare. */
+inline uint p5_budget(uint budget, uint n)
+{
+    ulong b = (ulong)budget * n + 65536;
+    return b < 0xffffffffUL ? (uint)b : 0xffffffffu;
+}
+
+/* Appends list[0..n) to all[] (count *nall). */
+inline void p5_append(__global const int *list, uint n, __global int *all, __global uint *nall)
+{
+    if (n > 0) {
+        uint base = atomic_add(nall, n);
+        for (uint r = 0; r < n; r++)
+            all[base + r] = list[r];
+    }
+}
+
+/* The first pass (partition: unshifted). */
+__kernel void p5_local(__global int *tri, __global int *opp, __global const int *pos, int nreal,
+                       long cx, long cy, uint T, uint bsize, __global int *queue, uint qcap,
+                       uint budget, __global uint *inact, uint round,
+                       __global int *out_list, __global uint *out_count, __global uint *stat)
+{
+    uint b = get_global_id(0), lo, hi, nd = 0;
+    if (!p5_range(b, T, bsize, 0, &lo, &hi))
+        return;
+    p5_local_run(tri, opp, pos, nreal, cx, cy, lo, hi - lo, 0, T, bsize, 0, 0, 0,
+                 queue + (size_t)b * qcap, qcap, p5_budget(budget, hi - lo), inact, round, round,
+                 out_list, out_count, out_list + lo, &nd, stat);
+    out_count[b] = nd;
+}
+
+/* A later pass over the deferred slots of the previous one (in_list and
+ * in_count, partition !shift).  whole = 0: work-item b owns block b of
+ * partition shift and takes the two blocks of the previous partition that
+ * overlap it.  whole = 1: one work-item owns every slot and takes every
+ * block (the long chains of flips the blocks cut).  The deferred slots go
+ * to out_list / out_count per block and are appended to all[]. */
+__kernel void p5_local_lists(__global int *tri, __global int *opp, __global const int *pos,
+                             int nreal, long cx, long cy, uint T, uint bsize, uint shift,
+                             uint whole, __global int *queue, uint qcap, uint budget,
+                             __global uint *inact, uint round_in, uint round,
+                             __global const int *in_list, __global const uint *in_count,
+                             __global int *out_list, __global uint *out_count,
+                             __global int *all, __global uint *nall, __global uint *stat)
+{
+    uint b = get_global_id(0), lo, hi, nd = 0;
+    uint nb = (T + bsize - 1) / bsize;
+    if (whole) {
+        /* budget tests per candidate (and some to spare) */
+        uint klast = shift ? nb - 1 : nb, ncand = 0;
+        if (b > 0)
+            return;
+        for (uint k = 0; k <= klast; k++)
+            ncand += in_count[k];
+        p5_local_run(tri, opp, pos, nreal, cx, cy, 0, T, 1, T, bsize, !shift, 0, klast, queue,
+                     qcap, p5_budget(budget, ncand), inact, round_in, round, in_list, in_count,
+                     out_list, &nd, stat);
+        out_count[0] = nd;
+        p5_append(out_list, nd, all, nall);
+        return;
+    }
+    if (!p5_range(b, T, bsize, shift, &lo, &hi))
+        return;
+    /* the blocks of the other partition overlapping this one */
+    uint ka = shift ? b - 1 : b;
+    p5_local_run(tri, opp, pos, nreal, cx, cy, lo, hi - lo, 1, T, bsize, !shift,
+                 shift && b == 0 ? 0 : ka, ka + 1, queue + (size_t)b * qcap, qcap,
+                 p5_budget(budget, hi - lo), inact, round_in, round, in_list, in_count,
+                 out_list + lo, &nd, stat);
+    out_count[b] = nd;
+    p5_append(out_list + lo, nd, all, nall);
 }

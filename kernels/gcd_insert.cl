@@ -10,8 +10,9 @@
  *              duplicate;
  *   p4_mark    atomic_min of the point's priority on its container (both
  *              triangles for an edge);
- *   p4_win     a point holding all its marks inserts this round; the
- *              winners' new slots come from a scan of their flags;
+ *   p4_win     a point holding all its marks inserts this round, into
+ *              the two dead slots reserved for it (d_rslot, core/private/
+ *              gcd_ctx.h);
  *   p4_apply   1 -> 3 (inside) or 2 -> 4 (on an edge) split, phase A of the
  *              two-phase rewrite (kernels/gcd_tri.clh);
  *   p4_link    phase B; losers keep their container as the next hint.
@@ -27,53 +28,78 @@
 #define P4_DUPB 4
 #define P4_STEPS 5
 
-/* cont[g] = container: (t << 2 | e), e = 3 inside, else the slot of the
- * edge p lies on.  hint[g]: start triangle in, container out.  locep[g]:
- * the round that located the point (0: never); a point whose container
- * was not rewritten since (modified[] holds each slot's last rewrite round)
- * keeps it without walking. */
-__kernel void p4_locate(__global const int *tri, __global const int *opp,
-                        __global const int *pos, __global const int *pts, int nreal, long cx,
-                        long cy, __global const int *list, uint nl, __global int *hint,
-                        __global int *cont, __global uint *locep,
-                        __global const uint *modified, uint epoch, __global uint *stat)
+/* Rotation around vertex w (at slot k of t) to the triangle whose wedge at
+ * w holds q, returned; *steps counts the moves.  Gives up (returning the
+ * last triangle) after 64 moves or at a boundary: the walk that follows
+ * finds the container anyway. */
+inline int p4_wedge(__global const int *tri, __global const int *opp, __global const int *pos,
+                    int nreal, long cx, long cy, gcd_spt q, int t, int k, uint *steps)
 {
-    uint g = get_global_id(0);
-    if (g >= nl)
-        return;
-    /* a container untouched since the point found it is still its container */
-    if (locep[g] != 0 && cont[g] >= 0 && modified[cont[g] >> 2] < locep[g])
-        return;
-    locep[g] = epoch;
+    int w = tri[3 * t + k];
+    gcd_spt sw = gcd_vpt(pos, w, nreal, cx, cy);
+    for (int turn = 0; turn < 64; turn++) {
+        int a = tri[3 * t + (k + 1) % 3], b = tri[3 * t + (k + 2) % 3];
+        int nx;
+        if (gcd_orient(sw, gcd_vpt(pos, a, nreal, cx, cy), q) < 0)
+            nx = opp[3 * t + (k + 2) % 3]; /* clockwise: across w-a */
+        else if (gcd_orient(sw, gcd_vpt(pos, b, nreal, cx, cy), q) > 0)
+            nx = opp[3 * t + (k + 1) % 3]; /* counter-clockwise: across w-b */
+        else
+            break;
+        if (nx < 0)
+            break;
+        t = nx >> 2;
+        k = gcd_slot_of(tri, t, w);
+        (*steps)++;
+    }
+    return t;
+}
+
+/* The walk of one point (work-item g of p4_locate); returns its steps. */
+inline uint p4_walk(__global const int *tri, __global const int *opp, __global const int *pos,
+                    __global const int *pts, int nreal, long cx, long cy,
+                    __global const int *list, uint g, __global int *hint,
+                    __global const int *piv, __global int *cont, __global uint *locep,
+                    uint epoch, __global uint *stat)
+{
     int p = list[g];
-    gcd_spt q = gcd_spt_real((long)pts[2 * p], (long)pts[2 * p + 1], cx, cy);
+    long qx = pts[2 * p], qy = pts[2 * p + 1];
+    gcd_spt q = gcd_spt_real(qx, qy, cx, cy);
     int t = hint[g];
     uint steps = 0;
+    if (locep[g] == 0 && piv[g] >= 0) {
+        int k = gcd_slot_of(tri, t, piv[g]);
+        if (k >= 0)
+            t = p4_wedge(tri, opp, pos, nreal, cx, cy, q, t, k, &steps);
+    }
+    locep[g] = epoch;
+    int came = -1; /* slot of t through which the walk entered (q inside it) */
     for (;;) {
         int v0 = tri[3 * t], v1 = tri[3 * t + 1], v2 = tri[3 * t + 2];
         int o[3];
         if (!gcd_is_fake(v0, nreal) && !gcd_is_fake(v1, nreal) && !gcd_is_fake(v2, nreal)) {
             long x0 = pos[2 * v0], y0 = pos[2 * v0 + 1], x1 = pos[2 * v1], y1 = pos[2 * v1 + 1];
             long x2 = pos[2 * v2], y2 = pos[2 * v2 + 1];
-            long qx = pts[2 * p], qy = pts[2 * p + 1];
-            o[0] = gdt_x_orient2d(x1, y1, x2, y2, qx, qy);
-            o[1] = gdt_x_orient2d(x2, y2, x0, y0, qx, qy);
-            o[2] = gdt_x_orient2d(x0, y0, x1, y1, qx, qy);
+            o[0] = came == 0 ? 1 : gdt_x_orient2d(x1, y1, x2, y2, qx, qy);
+            o[1] = came == 1 ? 1 : gdt_x_orient2d(x2, y2, x0, y0, qx, qy);
+            o[2] = came == 2 ? 1 : gdt_x_orient2d(x0, y0, x1, y1, qx, qy);
         } else {
             gcd_spt s0 = gcd_vpt(pos, v0, nreal, cx, cy), s1 = gcd_vpt(pos, v1, nreal, cx, cy);
             gcd_spt s2 = gcd_vpt(pos, v2, nreal, cx, cy);
-            o[0] = gcd_orient(s1, s2, q);
-            o[1] = gcd_orient(s2, s0, q);
-            o[2] = gcd_orient(s0, s1, q);
+            o[0] = came == 0 ? 1 : gcd_orient(s1, s2, q);
+            o[1] = came == 1 ? 1 : gcd_orient(s2, s0, q);
+            o[2] = came == 2 ? 1 : gcd_orient(s0, s1, q);
         }
         /* leave through an edge that has q strictly outside (never the one
-         * just crossed: q is inside it); the first edge tried is random */
+         * just crossed: q is strictly inside it, o = 1 without a test); the
+         * first edge tried is random */
         int r = (int)(gcd_hash2((uint)p, steps) % 3u), moved = 0;
         for (int k = 0; k < 3 && !moved; k++) {
             int i = (r + k) % 3;
             int nb = opp[3 * t + i];
             if (o[i] < 0 && nb >= 0) {
                 t = nb >> 2;
+                came = nb & 3;
                 moved = 1;
             }
         }
@@ -82,7 +108,7 @@ __kernel void p4_locate(__global const int *tri, __global const int *opp,
             stat[P4_ERRV] = (uint)p;
             atomic_inc(&stat[P4_ERR]);
             cont[g] = -1;
-            return;
+            return steps;
         }
         if (!moved) {
             int zeros = (o[0] == 0) + (o[1] == 0) + (o[2] == 0);
@@ -99,16 +125,44 @@ __kernel void p4_locate(__global const int *tri, __global const int *opp,
                 cont[g] = (t << 2) | e;
             }
             hint[g] = t;
-            atomic_add(&stat[P4_STEPS], steps);
-            return;
+            return steps;
         }
         if (++steps > P4_MAX_STEPS) {
             stat[P4_ERRV] = (uint)p;
             atomic_inc(&stat[P4_ERR]);
             cont[g] = -1;
-            return;
+            return steps;
         }
     }
+}
+
+/* cont[g] = container: (t << 2 | e), e = 3 inside, else the slot of the
+ * edge p lies on.  hint[g]: start triangle in, container out; the first
+ * location first turns around piv[g] (a vertex of the hint, or -1) to the
+ * wedge holding the point.  locep[g]: the round that located the point (0:
+ * never); a point whose container was not rewritten since (modified[]
+ * holds each slot's last rewrite round) keeps it without walking. */
+__kernel void p4_locate(__global const int *tri, __global const int *opp,
+                        __global const int *pos, __global const int *pts, int nreal, long cx,
+                        long cy, __global const int *list, uint nl, __global int *hint,
+                        __global const int *piv, __global int *cont, __global uint *locep,
+                        __global const uint *modified, uint epoch, __global uint *stat)
+{
+    __local uint l_steps;
+    uint g = get_global_id(0), lid = get_local_id(0);
+    uint steps = 0;
+    if (lid == 0)
+        l_steps = 0;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    /* a container untouched since the point found it is still its container */
+    if (g < nl && !(locep[g] != 0 && cont[g] >= 0 && modified[cont[g] >> 2] < locep[g]))
+        steps = p4_walk(tri, opp, pos, pts, nreal, cx, cy, list, g, hint, piv, cont, locep,
+                        epoch, stat);
+    if (steps)
+        atomic_add(&l_steps, steps);
+    barrier(CLK_LOCAL_MEM_FENCE);
+    if (lid == 0 && l_steps)
+        atomic_add(&stat[P4_STEPS], l_steps);
 }
 
 __kernel void p4_mark(__global const int *opp, __global const int *list, uint nl,
@@ -140,13 +194,13 @@ __kernel void p4_win(__global const int *opp, __global const int *list, uint nl,
     win[g] = w;
 }
 
-/* Phase A.  rank[g]: exclusive scan of win[]; new slots base + 2 rank[g]
- * and the next.  fix[4g..4g+3]: the new slots holding old outer
+/* Phase A.  The new slots are the point's reserved dead slots rslot[2p],
+ * rslot[2p+1].  fix[4g..4g+3]: the new slots holding old outer
  * references. */
 __kernel void p4_apply(__global int *tri, __global int *opp, __global int *pos,
                        __global const int *pts, __global const int *list, uint nl,
                        __global const int *cont, __global const uint *win,
-                       __global const uint *rank, uint base, __global int *exch,
+                       __global const int *rslot, __global int *exch,
                        __global uint *modified, uint round, __global int *vt, __global int *fix,
                        __global int *newl, __global uint *nnew)
 {
@@ -154,7 +208,7 @@ __kernel void p4_apply(__global int *tri, __global int *opp, __global int *pos,
     if (g >= nl || !win[g])
         return;
     int p = list[g], t = cont[g] >> 2, e = cont[g] & 3;
-    int s1 = (int)(base + 2 * rank[g]), s2 = s1 + 1;
+    int s1 = rslot[2 * p], s2 = rslot[2 * p + 1];
     /* a deleted bad case still has its texel corner there */
     pos[2 * p] = pts[2 * p];
     pos[2 * p + 1] = pts[2 * p + 1];
@@ -252,16 +306,19 @@ __kernel void p4_nb(__global const int *opp, uint nl, __global const int *cont,
 
 /* Start hints of the missing points: a triangle of the vertex that owns the
  * point's texel, or of the point's former neighbour when it was deleted as a
- * bad case (following deleted neighbours).  Triangle 0 if all else fails. */
+ * bad case (following deleted neighbours), and that vertex as the pivot of
+ * the first walk.  Triangle 0 (no pivot) if all else fails. */
 __kernel void p4_hints(__global const int *list, uint nl, __global const uint *texel,
                        __global const uint *seed, __global const int *vt,
-                       __global const int *tri, uint T, uint all_missing, __global int *hint)
+                       __global const int *tri, uint T, uint all_missing, __global int *hint,
+                       __global int *piv)
 {
     uint g = get_global_id(0);
     if (g >= nl)
         return;
     if (all_missing) {
         hint[g] = 0;
+        piv[g] = -1;
         return;
     }
     int p = list[g];
@@ -271,9 +328,12 @@ __kernel void p4_hints(__global const int *list, uint nl, __global const uint *t
     for (int k = 0; k < 1024 && vt[v] <= -2; k++)
         v = -2 - vt[v];
     int h = vt[v];
-    if (h < 0 || (uint)h >= T || tri[3 * h] < 0)
+    if (h < 0 || (uint)h >= T || tri[3 * h] < 0) {
         h = 0;
+        v = -1;
+    }
     hint[g] = h;
+    piv[g] = v;
 }
 
 /* Compaction of the losers: their point, hint, container and location

@@ -8,42 +8,48 @@
  * checks of tests/c/test_gcd_phase2.c for the rest. */
 #include "gcd_geom.clh"
 
-/* cnt[v] += number of live triangles incident to v. */
-__kernel void m_vcount(__global const int *tri, uint T, __global uint *cnt)
+/* Over the slots [from, T): cnt[v] += number of live triangles incident to
+ * v; vt[v] = the smallest of them (cnt preset to 0, vt to 0xffffffff, or
+ * already counted for the slots before from). */
+__kernel void m_vcount(__global const int *tri, uint from, uint T, __global uint *cnt,
+                       __global uint *vt)
 {
-    uint t = get_global_id(0);
+    uint t = from + get_global_id(0);
     if (t >= T || tri[3 * t] < 0)
         return;
-    for (int i = 0; i < 3; i++)
+    for (int i = 0; i < 3; i++) {
         atomic_inc(&cnt[tri[3 * t + i]]);
+        atomic_min(&vt[tri[3 * t + i]], t);
+    }
 }
 
-/* Vertex arrays: list[off[v] .. off[v] + cnt[v]) receives v's corners
- * (t << 2 | slot of v in t) and pred[] the vertex before v in t, in
- * arbitrary order (fill[] counts them up again from zero). */
-__kernel void m_vfill(__global const int *tri, uint T, __global const uint *off,
-                      __global uint *fill, __global int *list, __global int *pred)
+/* Vertex arrays: off[v] is the exclusive scan of the counts; v's corners
+ * (t << 2 | slot of v in t) go to list[off[v] ...] in arbitrary order, and
+ * pred[] receives the vertex before v in t.  off[v] is counted up to the
+ * end of v's entries, i.e. the start of v + 1's. */
+__kernel void m_vfill(__global const int *tri, uint T, __global uint *off, __global int *list,
+                      __global int *pred)
 {
     uint t = get_global_id(0);
     if (t >= T || tri[3 * t] < 0)
         return;
     for (int i = 0; i < 3; i++) {
         int v = tri[3 * t + i];
-        uint k = off[v] + atomic_inc(&fill[v]);
+        uint k = atomic_inc(&off[v]);
         list[k] = ((int)t << 2) | i;
         pred[k] = tri[3 * t + (i + 2) % 3];
     }
 }
 
-/* Neighbour links from the vertex arrays: the triangle across edge a -> b
- * of t is the one of a's corners whose predecessor of a is b (it traverses
+/* Neighbour links from the vertex arrays (end[v]: off after m_vfill, so
+ * v's entries are [end[v-1], end[v])): the triangle across edge a -> b of
+ * t is the one of a's corners whose predecessor of a is b (it traverses
  * b -> a, opposite the slot after a's).  Each interior edge is searched
  * once, by the side with a < b, which sets both links; opp must be preset
  * to -1 (hull edges keep it).  The result does not depend on the order of
  * the vertex arrays. */
-__kernel void m_link(__global const int *tri, uint T, __global const uint *off,
-                     __global const uint *cnt, __global const int *list,
-                     __global const int *pred, __global int *opp)
+__kernel void m_link(__global const int *tri, uint T, __global const uint *end,
+                     __global const int *list, __global const int *pred, __global int *opp)
 {
     uint t = get_global_id(0);
     if (t >= T || tri[3 * t] < 0)
@@ -52,7 +58,7 @@ __kernel void m_link(__global const int *tri, uint T, __global const uint *off,
         int a = tri[3 * t + (i + 1) % 3], b = tri[3 * t + (i + 2) % 3];
         if (a > b)
             continue;
-        uint lo = off[a], hi = lo + cnt[a];
+        uint lo = a > 0 ? end[a - 1] : 0, hi = end[a];
         for (uint k = lo; k < hi; k++) {
             if (pred[k] == b) {
                 int u = list[k] >> 2, j = ((list[k] & 3) + 1) % 3;
@@ -62,17 +68,6 @@ __kernel void m_link(__global const int *tri, uint T, __global const uint *off,
             }
         }
     }
-}
-
-/* vt[v] = the smallest live triangle incident to v (vt preset to -1 read
- * as unsigned, i.e. 0xffffffff). */
-__kernel void m_vt_min(__global const int *tri, uint T, __global uint *vt)
-{
-    uint t = get_global_id(0);
-    if (t >= T || tri[3 * t] < 0)
-        return;
-    for (int i = 0; i < 3; i++)
-        atomic_min(&vt[tri[3 * t + i]], t);
 }
 
 /* Current positions: the texel corner for a point that owns its texel,
@@ -105,14 +100,6 @@ __kernel void m_frame_pos(uint W, uint H, int xmin, int ymin, int cell, uint bas
     pos[2 * (base + k) + 1] = ymin + (int)(t / W) * cell;
 }
 
-/* flag[t] = 1 for a live triangle. */
-__kernel void m_live_flags(__global const int *tri, uint T, __global uint *flag)
-{
-    uint t = get_global_id(0);
-    if (t < T)
-        flag[t] = tri[3 * t] >= 0 ? 1u : 0u;
-}
-
 /* flag[t] = 1 for a live triangle whose three vertices are real (< nreal). */
 __kernel void m_real_flags(__global const int *tri, uint T, int nreal, __global uint *flag)
 {
@@ -126,11 +113,12 @@ __kernel void m_real_flags(__global const int *tri, uint T, int nreal, __global 
 }
 
 /* Compaction of the triangle list by a scanned flag array pos (exclusive
- * sums; total = kept count): kept triangle t moves to pos[t]; links to
- * dropped triangles become -1.  Out-of-place (ntri/nopp). */
+ * sums; total = kept count): kept triangle t moves to pos[t] with its
+ * vertices renumbered by map (internal to input indices); links to dropped
+ * triangles become -1.  Out-of-place (ntri/nopp). */
 __kernel void m_compact_tris(__global const int *tri, __global const int *opp, uint T,
-                             __global const uint *pos, uint total, __global int *ntri,
-                             __global int *nopp)
+                             __global const uint *pos, uint total,
+                             __global const uint *map, __global int *ntri, __global int *nopp)
 {
     uint t = get_global_id(0);
     if (t >= T)
@@ -140,7 +128,7 @@ __kernel void m_compact_tris(__global const int *tri, __global const int *opp, u
         return;
     uint d = pos[t];
     for (int i = 0; i < 3; i++) {
-        ntri[3 * d + i] = tri[3 * t + i];
+        ntri[3 * d + i] = (int)map[tri[3 * t + i]];
         int o = opp[3 * t + i];
         if (o >= 0) {
             uint u = (uint)o >> 2;
@@ -188,27 +176,19 @@ __kernel void m_fix_vt_apply(__global const int *tri, __global const int *tl, ui
     }
 }
 
-/* After m_compact_tris with the scan pos[] of live flags: vt entries move
- * with their triangles; an entry naming a dead slot falls back to 0. */
-__kernel void m_remap_vt(__global int *vt, uint nv, __global const uint *pos, uint T,
-                         uint total)
+/* Reserved slots appended after the triangles in use: points first + j
+ * (j < m) get the dead slots base + 2j and base + 2j + 1 (a grid without
+ * corners, and the insertion path). */
+__kernel void m_slots_seq(uint first, uint m, uint base, __global int *tri, __global int *rslot)
 {
-    uint v = get_global_id(0);
-    if (v >= nv)
+    uint j = get_global_id(0);
+    if (j >= m)
         return;
-    int t = vt[v];
-    if (t < 0 || (uint)t >= T)
-        return;
-    uint next = (uint)t + 1 < T ? pos[t + 1] : total;
-    vt[v] = next != pos[t] ? (int)pos[t] : 0;
-}
-
-/* Output numbering: internal vertex indices back to input indices. */
-__kernel void m_map_out(__global int *tri, uint m, __global const uint *int2in)
-{
-    uint i = get_global_id(0);
-    if (i < m)
-        tri[i] = (int)int2in[tri[i]];
+    size_t s = (size_t)base + 2 * (size_t)j;
+    for (int q = 0; q < 6; q++)
+        tri[3 * s + q] = GCD_NONE;
+    rslot[2 * ((size_t)first + j)] = (int)s;
+    rslot[2 * ((size_t)first + j) + 1] = (int)s + 1;
 }
 
 /* ---- spatial re-ordering of the triangle list ----

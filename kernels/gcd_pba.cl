@@ -162,12 +162,11 @@ __kernel void p1_cols(__global const uint *seed, uint W, uint H, uint bands,
  * column u (u integer) iff u <= m_ab, where
  *   (u - xa)^2 + da^2 <= (u - xb)^2 + db^2   (ties to the left column)
  *   <=> 2u (xb - xa) <= xb^2 - xa^2 + db^2 - da^2,
- * so m_ab = floor((xb^2 - xa^2 + db^2 - da^2) / (2 (xb - xa))). */
-inline long p1_thresh(long xa, long da, long xb, long db)
+ * so m_ab = floor((xb^2 - xa^2 + db^2 - da^2) / (2 (xb - xa))) =
+ * p1_floor_div(num, den). */
+inline int p1_floor_div(int num, int den)
 {
     /* |num| < 2^29 and 0 < den < 2^15 (W, H <= 16384): 32-bit division */
-    int num = (int)(xb * xb - xa * xa + db * db - da * da);
-    int den = (int)(2 * (xb - xa));
     return num >= 0 ? num / den : -((-num + den - 1) / den);
 }
 
@@ -180,7 +179,12 @@ inline long p1_thresh(long xa, long da, long xb, long db)
  * integer dominance test (b between a and c is dropped iff m_ab >= m_bc,
  * i.e. no texel of the row has b as its least-key site), kept as a stack
  * written over the row's near[] entries (stack slot <= column read, so in
- * place is safe), then every texel takes the envelope site owning it.
+ * place is safe), with the threshold m_k between stack entries k and k+1
+ * (the last column site k owns) in the row's colour[] entry k.  The
+ * thresholds increase strictly and m_0 >= 0 (a bottom site beaten at
+ * every column >= 0 is dropped), so m_k >= k.  Then every texel takes the
+ * envelope site owning it, from the right: site k owns (m_{k-1}, m_k], so
+ * writing it never overwrites a threshold still to be read (index < k-1).
  * Precondition: W, H <= 16384 (15-bit packing); at least one site. */
 __kernel void p1_rows(__global uint *near, uint W, uint H, __global uint *colour)
 {
@@ -189,28 +193,37 @@ __kernel void p1_rows(__global uint *near, uint W, uint H, __global uint *colour
         return;
     __global uint *row = near + (size_t)y * W;
     __global uint *out = colour + (size_t)y * W;
+    __global int *thr = (__global int *)out;
     int top = -1;
-    long m_top = 0; /* threshold between stack[top-1] and stack[top] */
     for (uint x = 0; x < W; x++) {
         uint gy = row[x];
         if (gy == P1_NONE)
             continue;
         long dc = (long)gy - (long)y;
-        while (top >= 1) {
+        /* m_bc = p1_floor_div(num, den) with den > 0, so
+         * m < m_bc <=> (m + 1) den <= num: the divisions are left to the
+         * thresholds that stay on the stack */
+        int num = 0, den = 1;
+        while (top >= 0) {
             uint b = row[top];
-            long m_bc = p1_thresh(P1_X(b), P1_GY(b) - (long)y, (long)x, dc);
-            if (m_top < m_bc)
+            long xb = P1_X(b), db = P1_GY(b) - (long)y;
+            num = (int)((long)x * (long)x - xb * xb + dc * dc - db * db);
+            den = (int)(2 * ((long)x - xb));
+            if (top == 0) {
+                /* m_bc < 0: b beats c at no column u >= 0, so b owns no
+                 * texel of the row whatever follows; it leaves the stack,
+                 * and the bottom threshold is >= 0 */
+                if (num < 0)
+                    top = -1;
+                break;
+            }
+            /* thr[top-1]: threshold between stack[top-1] and stack[top] */
+            if ((long)(thr[top - 1] + 1) * den <= (long)num)
                 break;
             top--;
-            if (top >= 1) {
-                uint a = row[top - 1], bb = row[top];
-                m_top = p1_thresh(P1_X(a), P1_GY(a) - (long)y, P1_X(bb), P1_GY(bb) - (long)y);
-            }
         }
-        if (top >= 0) {
-            uint b = row[top];
-            m_top = p1_thresh(P1_X(b), P1_GY(b) - (long)y, (long)x, dc);
-        }
+        if (top >= 0)
+            thr[top] = p1_floor_div(num, den);
         row[++top] = P1_PACK(x, gy);
     }
     if (top < 0) {
@@ -218,23 +231,16 @@ __kernel void p1_rows(__global uint *near, uint W, uint H, __global uint *colour
             out[x] = P1_NONE;
         return;
     }
-    int k = 0;
-    uint cur = row[0];
-    long m_next = 0;
-    if (top >= 1) {
-        uint b = row[1];
-        m_next = p1_thresh(P1_X(cur), P1_GY(cur) - (long)y, P1_X(b), P1_GY(b) - (long)y);
-    }
-    for (uint x = 0; x < W; x++) {
-        while (k < top && (long)x > m_next) {
-            k++;
-            cur = row[k];
-            if (k < top) {
-                uint b = row[k + 1];
-                m_next = p1_thresh(P1_X(cur), P1_GY(cur) - (long)y, P1_X(b), P1_GY(b) - (long)y);
-            }
-        }
-        out[x] = (uint)P1_GY(cur) * W + (uint)P1_X(cur);
+    /* site top owns up to W - 1; a threshold beyond W - 1 owns nothing */
+    long hi = (long)W - 1;
+    for (int k = top; k >= 0 && hi >= 0; k--) {
+        long lo = k > 0 ? (long)thr[k - 1] : -1;
+        uint cur = row[k], c = (uint)P1_GY(cur) * W + (uint)P1_X(cur);
+        if (lo > hi)
+            lo = hi;
+        for (long x = hi; x > lo; x--)
+            out[x] = c;
+        hi = lo;
     }
 }
 
@@ -323,8 +329,9 @@ __kernel void p1_scatter(__global uint *colour, __global const uint *pix,
  * Kept points are renumbered in texel (row-major) order, so that points
  * near each other have near indices (the dual triangles, positions and
  * per-vertex arrays are then read with locality); missing points follow,
- * grouped by the vertex owning their texel and in input order within a
- * group.  int2in[k] is the input index of internal point k. */
+ * sorted by the corner chunk of their texel (gcd_home_chunk: where Phase 2
+ * reserves their triangle slots), in input order within a chunk.
+ * int2in[k] is the input index of internal point k. */
 
 /* flag[t] = 1 for a texel owned by a real point (seed < n). */
 __kernel void p1_occ_flags(__global const uint *seed, uint npix, uint n, __global uint *flag)
@@ -346,8 +353,8 @@ __kernel void p1_number_kept(__global uint *seed, uint npix, uint n, __global co
     seed[t] = rank[t];
 }
 
-/* Missing points (input indices, sorted by the vertex owning their texel)
- * become kept + j. */
+/* Missing points (input indices, sorted by their home chunk) become
+ * kept + j. */
 __kernel void p1_number_missing(__global const uint *missing, uint m, uint kept,
                                 __global uint *int2in)
 {
@@ -369,13 +376,26 @@ __kernel void p1_permute(__global const uint *int2in, uint n, __global const int
     texel[k] = texel_in[i];
 }
 
-/* Sort keys of the missing points: the vertex that owns their texel (a
- * kept point, numbered in texel order, or a frame vertex). */
+/* Sort keys of the missing points: the home chunk of their texel. */
 __kernel void p1_missing_keys(__global const uint *missing, uint m,
-                              __global const uint *texel_in, __global const uint *seed,
+                              __global const uint *texel_in, uint W, uint H,
                               __global uint *keys)
 {
     uint j = get_global_id(0);
     if (j < m)
-        keys[j] = seed[texel_in[missing[j]]];
+        keys[j] = gcd_home_chunk(texel_in[missing[j]], W, H);
+}
+
+/* range[2c], range[2c+1]: the first and one past the last index j of the
+ * sorted keys equal to c (both preset to 0 for chunks without any). */
+__kernel void p1_missing_range(__global const uint *keys, uint m, __global uint *range)
+{
+    uint j = get_global_id(0);
+    if (j >= m)
+        return;
+    uint k = keys[j];
+    if (j == 0 || keys[j - 1] != k)
+        range[2 * k] = j;
+    if (j + 1 == m || keys[j + 1] != k)
+        range[2 * k + 1] = j + 1;
 }

@@ -108,3 +108,12 @@ __kernel void radix_scatter(__global const uint *keys, __global const uint *vals
         ovals[p] = vals[i];
     }
 }
+
+/* b[0..n) = v: large fills, spread over the compute units (the fill of
+ * the OpenCL runtime may run on one thread). */
+__kernel void fill_u32(__global uint *b, uint n, uint v)
+{
+    uint i = get_global_id(0);
+    if (i < n)
+        b[i] = v;
+}

@@ -13,8 +13,9 @@
  * Deletion: every candidate marks its star triangles with atomic_min of its
  * priority; a candidate holding all its marks owns its star (winners are
  * pairwise non-adjacent) and re-triangulates the hole by ear clipping, in
- * its own star slots (k triangles become k - 2; two slots die), with the
- * two-phase link update of kernels/gcd_tri.clh.
+ * its own star slots (k triangles become k - 2; two slots die and are kept
+ * for the re-insertion of a bad case), with the two-phase link update of
+ * kernels/gcd_tri.clh.
  * CPU references: the validity checks of tests/c/test_gcd_core.c after the
  * phase, and the reference triangulator for the final result. */
 #include "gcd_tri.clh"
@@ -287,7 +288,8 @@ __kernel void p3_del_apply(__global int *tri, __global int *opp, __global const 
                            __global const uint *off, __global const uint *deg,
                            __global const uint *win, __global int *sc, __global int *exch,
                            __global uint *modified, uint round, __global int *vt,
-                           __global int *newl, __global uint *nnew, __global uint *stat)
+                           __global int *rslot, __global int *newl, __global uint *nnew,
+                           __global uint *stat)
 {
     uint g = get_global_id(0);
     if (g >= nl || !win[g])
@@ -355,8 +357,17 @@ __kernel void p3_del_apply(__global int *tri, __global int *opp, __global const 
     for (int q = used; q < m; q++)
         tri[3 * (s[SC_N * q + SC_STRI] >> 2)] = -1;
     /* p leaves the triangulation; its entry now names one of its former
-     * neighbours (encoded -2 - q), where its re-insertion walk starts. */
-    vt[p] = -2 - s[SC_V];
+     * neighbours (encoded -2 - q), where its re-insertion walk starts (a
+     * real one if there is one: a walk from a fake, far away, is long),
+     * and a bad case is re-inserted into the two slots it freed. */
+    int nbv = s[SC_V];
+    for (int q = 0; q < m && nbv >= nreal; q++)
+        nbv = s[SC_N * q + SC_V] < nreal ? s[SC_N * q + SC_V] : nbv;
+    vt[p] = -2 - nbv;
+    if (p < nreal) {
+        rslot[2 * p] = s[SC_N * used + SC_STRI] >> 2;
+        rslot[2 * p + 1] = s[SC_N * (used + 1) + SC_STRI] >> 2;
+    }
 }
 
 /* Phase B of the deletions. */

@@ -4,7 +4,8 @@
  *   d_pts_in int2 per point: true tile-local coordinates, input order
  *   d_int2in uint per point: input index of internal point k; internally
  *            the kept points come first in texel order, then the missing
- *            ones grouped by texel owner (locality: see p1_number_kept)
+ *            ones by the corner chunk of their texel (locality, and the
+ *            order of their reserved slots: see p1_number_kept)
  *   d_pts    int2 per point: true coordinates, internal order
  *   d_pos    int2 per vertex: current coordinates (texel corner of a kept
  *            point until phase 3 shifts it; true position after)
@@ -18,6 +19,13 @@
  *   d_vt     int per vertex: one live triangle incident to it; a vertex
  *            deleted in Phase 3 holds -2 - q instead, q a former neighbour
  *            (where its re-insertion walk starts)
+ *   d_rslot  int2 per real point: the two dead triangle slots Phase 4
+ *            inserts it into (reserved by Phase 2 next to the dual
+ *            triangles of its home chunk, freed by its own deletion for a
+ *            bad case, appended for the insertion path); meaningful only
+ *            for points not in the triangulation
+ *   d_mrange uint2 per corner chunk: the internal missing points at home
+ *            there are kept + [range[2c], range[2c+1])
  * plus scratch buffers named by use.  Vertex indices: real points 0..n-1,
  * fake boundary n..n+GCD_NFAKE-1 (kernels/gcd_geom.clh), then the frame
  * vertices (one per border texel, deleted in Phase 3).
@@ -39,6 +47,15 @@
 #include "gcd_geom.clh" /* GCD_NFAKE, GCD_NONE, GCD_EMPTY, the frame layout */
 
 #define GCD_SCAN_CHUNK 256u
+/* Fills of at least this many uints run as a kernel (gcd_fill). */
+#define GCD_KERNEL_FILL 65536u
+
+/* Corner chunks of a W x H grid (kernels/gcd_geom.clh). */
+static inline size_t gcd_corner_chunks(uint32_t W, uint32_t H)
+{
+    size_t ncorner = W >= 2 && H >= 2 ? (size_t)(W - 1) * (H - 1) : 0;
+    return (ncorner + GCD_CORNER_CHUNK - 1) / GCD_CORNER_CHUNK;
+}
 
 /* A growable device buffer. */
 typedef struct gcd_buf {
@@ -50,18 +67,19 @@ typedef struct gcd_buf {
 typedef struct gcd_kernels {
     /* gcd_scan.cl */
     gdt_ocl_kernel *scan_reduce, *scan_single, *scan_down, *compact_index, *radix_hist,
-        *radix_scatter;
+        *radix_scatter, *fill_u32;
     /* gcd_pba.cl */
     gdt_ocl_kernel *p1_splat, *p1_missing_flags, *p1_plant, *p1_frame, *p1_occ_flags,
-        *p1_number_kept, *p1_number_missing, *p1_permute, *p1_missing_keys, *p1_cols_band, *p1_cols_link,
+        *p1_number_kept, *p1_number_missing, *p1_permute, *p1_missing_keys, *p1_missing_range,
+        *p1_cols_band, *p1_cols_link,
         *p1_cols, *p1_rows, *p1_debris, *p1_gather, *p1_scatter;
     /* gcd_dual.cl */
     gdt_ocl_kernel *p2_count, *p2_write, *p2_kept_flags;
     /* gcd_mesh.cl */
-    gdt_ocl_kernel *m_vcount, *m_vfill, *m_link, *m_vt_min, *m_snap, *m_frame_pos, *m_live_flags,
-        *m_real_flags, *m_compact_tris, *m_fix_vt_collect, *m_fix_vt_apply, *m_remap_vt,
-        *m_map_out, *m_sort_count, *m_sort_scatter, *m_sort_bucket, *m_sort_inverse,
-        *m_sort_apply, *m_sort_vt;
+    gdt_ocl_kernel *m_vcount, *m_vfill, *m_link, *m_snap, *m_frame_pos,
+        *m_real_flags, *m_compact_tris, *m_fix_vt_collect, *m_fix_vt_apply,
+        *m_sort_count, *m_sort_scatter, *m_sort_bucket, *m_sort_inverse,
+        *m_sort_apply, *m_sort_vt, *m_slots_seq;
     /* gcd_shift.cl */
     gdt_ocl_kernel *p3_shift, *p3_bulk_check, *p3_bulk_star, *p3_bulk_apply, *p3_del_deg, *p3_del_mark, *p3_del_win, *p3_del_apply,
         *p3_del_link, *p3_del_next, *p3_del_flags;
@@ -70,7 +88,7 @@ typedef struct gcd_kernels {
         *p4_hints, *p4_compact, *p4_absent_flags;
     /* gcd_flip.cl */
     gdt_ocl_kernel *p5_check, *p5_exact, *p5_flip, *p5_link, *p5_next, *p5_all, *p5_from_list,
-        *p5_round_flags;
+        *p5_round_flags, *p5_local, *p5_local_lists;
 } gcd_kernels;
 
 struct gdt_core {
@@ -87,11 +105,16 @@ struct gdt_core {
     gcd_buf d_chk, d_bad, d_vnew, d_list3, d_tri2, d_opp2, d_deg, d_off, d_sc, d_hint, d_hint2;
     gcd_buf d_cont, d_oldnb, d_rank, d_fix, d_stat34, d_fnext, d_pts_in, d_texel_in, d_int2in,
         d_inm, d_inm2, d_dropped, d_cont2, d_locep, d_locep2,
-        d_rk, d_rv, d_rhist, d_mkeys;
+        d_rk, d_rv, d_rhist, d_mkeys, d_queue, d_nlist, d_nlist2, d_rslot, d_mrange, d_piv;
     size_t scan_levels_cap;
     unsigned strip;  /* columns per work-item in the column pass */
     unsigned bands;  /* row bands of the column pass */
     size_t wg;       /* work-group size of every launch */
+    size_t flip_blocks; /* Phase 5 starts with block-local Lawson passes over
+                           about this many blocks (0: parallel rounds only;
+                           CPU devices: 32 per compute unit) */
+    size_t flip_min_block; /* smallest block (triangle slots) */
+    size_t flip_queue;     /* largest queue of a work-item (edges, a power of two) */
 };
 
 /* Geometry of one run (the texel mapping of Phase 1). */
@@ -110,7 +133,10 @@ typedef struct gcd_run {
     size_t nmissing;    /* entries of the missing list (d_list) */
     size_t kept;
     int all_missing;    /* insertion path: every point goes through Phase 4 */
-    int sort_tris;      /* Phase 5 first sorts the triangles (no dead slots) */
+    int sort_tris;      /* Phase 5 first sorts the triangles (no dead slots):
+                           the insertion path, whose slots follow the
+                           insertion order; the gcd path's reserved slots
+                           already sit next to their neighbours */
     uint32_t epoch;     /* round counter shared by every phase: marks in
                            d_flipped / d_inact name the round that set them */
     gdt_core_stats *st;
@@ -150,11 +176,17 @@ gdt_status gcd_launch_wg(gdt_core *c, gdt_ocl_kernel *k, size_t global, size_t w
 
 double gcd_now(void);
 
+
 /* ---- phases ---- */
 gdt_status gcd_phase1(gdt_core *c, gcd_run *r, gdt_error *err);
 gdt_status gcd_voronoi_from_seeds(gdt_core *c, gcd_run *r, gdt_error *err);
 gdt_status gcd_phase2(gdt_core *c, gcd_run *r, gdt_error *err);
-gdt_status gcd_link_all(gdt_core *c, gcd_run *r, gdt_error *err);
+/* Neighbour links and vertex entries (d_opp, d_vt) of the triangle slots
+ * [0, r->ntris): gcd_link_start clears the vertex counts, then the slots
+ * before counted must have been counted (p2_write does it for the dual),
+ * and gcd_link_all counts the rest and links everything. */
+gdt_status gcd_link_start(gdt_core *c, gcd_run *r, gdt_error *err);
+gdt_status gcd_link_all(gdt_core *c, gcd_run *r, size_t counted, gdt_error *err);
 gdt_status gcd_phase3(gdt_core *c, gcd_run *r, gdt_error *err);
 gdt_status gcd_phase4(gdt_core *c, gcd_run *r, int flip_between, gdt_error *err);
 gdt_status gcd_phase5(gdt_core *c, gcd_run *r, gdt_error *err);

@@ -20,6 +20,12 @@ gdt_status gcd_test_voronoi(gdt_core *c, const uint32_t *sites, size_t nsites, u
 /* Row bands of the column pass (1 = none). */
 void gcd_test_set_bands(gdt_core *c, unsigned bands);
 
+/* Phase 5's block-local flipping: about `blocks` blocks of at least
+ * min_block triangle slots, queues of at most `queue` edges (a power of
+ * two, at least 8); blocks = 0: the parallel rounds alone; SIZE_MAX, 0, 0:
+ * the defaults of the device. */
+void gcd_test_set_flip_blocks(gdt_core *c, size_t blocks, size_t min_block, size_t queue);
+
 
 /* Phases 1 and 2 on real input (grid_n may be as small as 2): all receives
  * the triangulation after Phase 2 — vertices n + 12 (positions: texel

@@ -7,8 +7,10 @@
  * permutation of the input (mapped back); the triangulation between the
  * phases is verified too (gdt_core_opts.check_phases: symbolic orientation,
  * links, Euler, vertex entries).  Both paths (digital Voronoi and
- * insertion) are forced on some sets; duplicate points are refused with
- * GDT_EINPUT.
+ * insertion) are forced on some sets; on the smallest grid every set also
+ * goes through Phase 5 as the parallel rounds alone (the set-up of non-CPU
+ * devices) and with tiny blocks and queues; duplicate points are refused
+ * with GDT_EINPUT.
  *
  *   test_gcd_core [--quick] [--big N] [--only NAME]
  * Exit 77 without an OpenCL device. */
@@ -20,6 +22,7 @@
 #include "gdt_core.h"
 #include "gdt_reference.h"
 #include "gen_degenerate.h"
+#include "private/gcd_test.h"
 #include "test_gcd_gen.h"
 
 static double now_s(void)
@@ -35,8 +38,32 @@ typedef struct opts {
     size_t big;
 } opts;
 
+/* Cores with other Phase 5 set-ups (gcd_test_set_flip_blocks), run on the
+ * smallest grid. */
+typedef struct alt_cores {
+    gdt_core *rounds, *tiny;
+} alt_cores;
+
 /* One point set through the core: compare with the reference; repeat; and
  * a permuted copy.  path: forced path or AUTO. */
+static void run(tctx *t, gdt_core *core, gdt_core *core_ins, const gdt_ipt *pts, size_t n,
+                int grid, gen_rng *rng, const char *label, int perm);
+
+/* run(), and on the smallest grid the same set through the other set-ups. */
+static void run_all(tctx *t, gdt_core *core, gdt_core *core_ins, const alt_cores *alt,
+                    const gdt_ipt *pts, size_t n, int grid, gen_rng *rng, const char *label,
+                    int perm)
+{
+    char l2[160];
+    run(t, core, core_ins, pts, n, grid, rng, label, perm);
+    if (grid != 256)
+        return;
+    snprintf(l2, sizeof l2, "%s/rounds", label);
+    run(t, alt->rounds, NULL, pts, n, grid, rng, l2, 0);
+    snprintf(l2, sizeof l2, "%s/tiny", label);
+    run(t, alt->tiny, NULL, pts, n, grid, rng, l2, 0);
+}
+
 static void run(tctx *t, gdt_core *core, gdt_core *core_ins, const gdt_ipt *pts, size_t n,
                 int grid, gen_rng *rng, const char *label, int perm)
 {
@@ -127,6 +154,7 @@ int main(int argc, char **argv)
 {
     tctx t = {0, 0};
     gdt_core *core = NULL, *core_ins = NULL;
+    alt_cores alt = {NULL, NULL};
     gdt_core_opts o;
     gdt_error err;
     gen_rng rng;
@@ -153,6 +181,13 @@ int main(int argc, char **argv)
         gdt_error_print(&err, stderr);
         return err.status == GDT_EDEVICE && err.code == 5101 ? 77 : 1;
     }
+    if (gdt_core_create(&alt.rounds, &o, &err) != GDT_OK ||
+        gdt_core_create(&alt.tiny, &o, &err) != GDT_OK) {
+        gdt_error_print(&err, stderr);
+        return 1;
+    }
+    gcd_test_set_flip_blocks(alt.rounds, 0, 0, 0);
+    gcd_test_set_flip_blocks(alt.tiny, 1000000, 32, 8);
     o.path = GDT_CORE_PATH_INSERT;
     if (gdt_core_create(&core_ins, &o, &err) != GDT_OK) {
         gdt_error_print(&err, stderr);
@@ -171,53 +206,53 @@ int main(int argc, char **argv)
             size_t want = (size_t)g * g / 4 < op.big ? (size_t)g * g / 4 : op.big;
             p = gen_uniform(&rng, want, 0, 5000000, &n);
             snprintf(label, sizeof label, "uniform");
-            run(&t, core, gi == 0 ? core_ins : NULL, p, n, g, &rng, label, 1);
+            run_all(&t, core, gi == 0 ? core_ins : NULL, &alt, p, n, g, &rng, label, 1);
             free(p);
         }
         if (ONLY("lidar")) {
             size_t want = (size_t)g * g / 4 < op.big ? (size_t)g * g / 4 : op.big;
             p = gcd_gen_lidar(&rng, want, 3000000, &n);
-            run(&t, core, gi == 0 ? core_ins : NULL, p, n, g, &rng, "lidar-like", 1);
+            run_all(&t, core, gi == 0 ? core_ins : NULL, &alt, p, n, g, &rng, "lidar-like", 1);
             free(p);
         }
         if (ONLY("grid")) {
             p = gen_grid(300, 200, 1000, 2000, 5, &n);
-            run(&t, core, gi == 0 ? core_ins : NULL, p, n, g, &rng, "grid", 1);
+            run_all(&t, core, gi == 0 ? core_ins : NULL, &alt, p, n, g, &rng, "grid", 1);
             free(p);
         }
         if (ONLY("rotated")) {
             p = gen_rotated_grid(80, 3, 4, 1000000, 1000000, &n);
-            run(&t, core, NULL, p, n, g, &rng, "rotated grid", 0);
+            run_all(&t, core, NULL, &alt, p, n, g, &rng, "rotated grid", 0);
             free(p);
         }
         if (ONLY("circle")) {
             p = gen_circle(1000000, 1000000, 5525, &n);
-            run(&t, core, gi == 0 ? core_ins : NULL, p, n, g, &rng, "circle", 1);
+            run_all(&t, core, gi == 0 ? core_ins : NULL, &alt, p, n, g, &rng, "circle", 1);
             free(p);
             p = gen_thin_circle(&rng, 20000, 1000000, 1000000, 900000, 3, &n);
-            run(&t, core, NULL, p, n, g, &rng, "thin circle", 0);
+            run_all(&t, core, NULL, &alt, p, n, g, &rng, "thin circle", 0);
             free(p);
         }
         if (ONLY("collinear")) {
             p = gen_collinear(&rng, 500, 10, 20, 3, 7, 100000, &n);
-            run(&t, core, gi == 0 ? core_ins : NULL, p, n, g, &rng, "collinear", 1);
+            run_all(&t, core, gi == 0 ? core_ins : NULL, &alt, p, n, g, &rng, "collinear", 1);
             free(p);
         }
         if (ONLY("clusters")) {
             p = gen_clusters(&rng, 20, 2000, 300, &n);
-            run(&t, core, gi == 0 ? core_ins : NULL, p, n, g, &rng, "clusters", 1);
+            run_all(&t, core, gi == 0 ? core_ins : NULL, &alt, p, n, g, &rng, "clusters", 1);
             free(p);
         }
         if (ONLY("extremes")) {
             p = gen_extremes(&rng, &n);
-            run(&t, core, gi == 0 ? core_ins : NULL, p, n, g, &rng, "extremes", 1);
+            run_all(&t, core, gi == 0 ? core_ins : NULL, &alt, p, n, g, &rng, "extremes", 1);
             free(p);
         }
         if (ONLY("few")) {
             gdt_ipt few[5] = {{10, 10}, {2000000000, 11}, {15, 2000000000}, {40, 40}, {41, 41}};
             for (size_t k = 0; k <= 5; k++) {
                 snprintf(label, sizeof label, "%zu points", k);
-                run(&t, core, gi == 0 ? core_ins : NULL, few, k, g, &rng, label, 0);
+                run_all(&t, core, gi == 0 ? core_ins : NULL, &alt, few, k, g, &rng, label, 0);
             }
         }
     }
@@ -233,5 +268,7 @@ int main(int argc, char **argv)
     }
     gdt_core_destroy(core);
     gdt_core_destroy(core_ins);
+    gdt_core_destroy(alt.rounds);
+    gdt_core_destroy(alt.tiny);
     return gen_finish(&t, "test_gcd_core");
 }

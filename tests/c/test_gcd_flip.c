@@ -1,4 +1,4 @@
-/* test_gcd_flip — Phase 5 of the gCD core (parallel flipping) on its own.
+/* test_gcd_flip — Phase 5 of the gCD core (flipping) on its own.
  *
  * Start: the reference triangulation scrambled by many random flips of
  * strictly convex quads (a valid but far from Delaunay triangulation), for
@@ -6,7 +6,12 @@
  * co-circular, so the tie-break decides; extreme coordinates: the exact
  * path).  The device must reach exactly the reference triangle set (Thm
  * 4.1: T_{d1,d2} does not depend on the start), with valid links, and the
- * result must not depend on the start (two different scrambles).
+ * result must not depend on the start (two different scrambles, the second
+ * with its triangles stored in spatial order, as the core stores them).
+ * Every set goes through three set-ups of the flipping: the device's
+ * default (block-local passes, then parallel rounds), the parallel rounds
+ * alone, and tiny blocks with tiny queues (many slots deferred from pass
+ * to pass, the single-work-item pass, queue overflows, the rounds).
  * Runs with the double filter and with the integer-only path.
  * Exit 77 without an OpenCL device. */
 #include <inttypes.h>
@@ -41,6 +46,67 @@ static uint64_t scramble(gdt_mesh *m, gen_rng *rng, size_t flips)
     return done;
 }
 
+/* Stores the triangles of m in the order of a coarse row-major grid of
+ * their first vertex (links renumbered), like the core's slot order. */
+static void spatial_order(gdt_mesh *m)
+{
+    size_t T = m->ntris;
+    int64_t xmin = INT64_MAX, ymin = INT64_MAX, xmax = INT64_MIN, ymax = INT64_MIN;
+    int64_t *key = malloc((T ? T : 1) * sizeof *key);
+    int32_t *order = malloc((T ? T : 1) * sizeof *order);
+    int32_t *newidx = malloc((T ? T : 1) * sizeof *newidx);
+    int32_t *tri = malloc(3 * (T ? T : 1) * sizeof *tri);
+    int32_t *opp = malloc(3 * (T ? T : 1) * sizeof *opp);
+    if (key == NULL || order == NULL || newidx == NULL || tri == NULL || opp == NULL)
+        abort();
+    for (size_t v = 0; v < m->nverts; v++) {
+        xmin = m->pts[v].x < xmin ? m->pts[v].x : xmin;
+        ymin = m->pts[v].y < ymin ? m->pts[v].y : ymin;
+        xmax = m->pts[v].x > xmax ? m->pts[v].x : xmax;
+        ymax = m->pts[v].y > ymax ? m->pts[v].y : ymax;
+    }
+    int64_t cw = (xmax - xmin) / 64 + 1, ch = (ymax - ymin) / 64 + 1;
+    for (size_t k = 0; k < T; k++) {
+        gdt_ipt p = m->pts[m->tri[3 * k]];
+        key[k] = ((p.y - ymin) / ch) * 64 + (p.x - xmin) / cw;
+        order[k] = (int32_t)k;
+    }
+    /* counting sort by key (64 x 64 cells), stable */
+    {
+        size_t cnt[64 * 64 + 1];
+        memset(cnt, 0, sizeof cnt);
+        for (size_t k = 0; k < T; k++)
+            cnt[key[k] + 1]++;
+        for (size_t c = 1; c <= 64 * 64; c++)
+            cnt[c] += cnt[c - 1];
+        for (size_t k = 0; k < T; k++)
+            order[cnt[key[k]]++] = (int32_t)k;
+    }
+    for (size_t k = 0; k < T; k++)
+        newidx[order[k]] = (int32_t)k;
+    for (size_t k = 0; k < T; k++) {
+        int32_t o = order[k];
+        for (int i = 0; i < 3; i++) {
+            int32_t q = m->opp[3 * (size_t)o + (size_t)i];
+            tri[3 * k + (size_t)i] = m->tri[3 * (size_t)o + (size_t)i];
+            opp[3 * k + (size_t)i] =
+                q < 0 ? q : gdt_opp_pack(newidx[gdt_opp_tri(q)], gdt_opp_slot(q));
+        }
+    }
+    memcpy(m->tri, tri, 3 * T * sizeof *tri);
+    memcpy(m->opp, opp, 3 * T * sizeof *opp);
+    free(key);
+    free(order);
+    free(newidx);
+    free(tri);
+    free(opp);
+}
+
+/* Flip set-ups: {blocks, smallest block, queue}; SIZE_MAX: the device
+ * default. */
+static const size_t SETUPS[3][3] = {{SIZE_MAX, 0, 0}, {0, 0, 0}, {100000, 16, 8}};
+static const char *const SETUP_NAMES[3] = {"default", "rounds only", "tiny blocks"};
+
 static void run(tctx *t, gdt_core *core, const gdt_ipt *pts, size_t n, gen_rng *rng,
                 const char *label)
 {
@@ -56,8 +122,10 @@ static void run(tctx *t, gdt_core *core, const gdt_ipt *pts, size_t n, gen_rng *
         CHECK(t, 0, "%s: reference: %s", label, err.msg);
         goto done;
     }
-    for (int pass = 0; pass < 2; pass++) {
+    for (int run = 0; run < 6; run++) {
+        int pass = run % 2, setup = run / 2;
         memset(&st, 0, sizeof st);
+        gcd_test_set_flip_blocks(core, SETUPS[setup][0], SETUPS[setup][1], SETUPS[setup][2]);
         if (gdt_mesh_reserve(&m, ref.nverts, ref.ntris, 0, &err) != GDT_OK)
             abort();
         memcpy(m.pts, ref.pts, ref.nverts * sizeof *m.pts);
@@ -66,22 +134,28 @@ static void run(tctx *t, gdt_core *core, const gdt_ipt *pts, size_t n, gen_rng *
         m.nverts = ref.nverts;
         m.ntris = ref.ntris;
         uint64_t scr = scramble(&m, rng, 8 * m.ntris + 100);
+        if (pass == 1)
+            spatial_order(&m);
         if (gcd_test_flip(core, &m, &st, &err) != GDT_OK) {
-            CHECK(t, 0, "%s: %s", label, err.msg);
+            CHECK(t, 0, "%s (%s): %s", label, SETUP_NAMES[setup], err.msg);
             continue;
         }
         CHECK(t, gen_same_triangles(&m, &ref, why, sizeof why) == 0,
-              "%s (pass %d): differs from the reference: %s", label, pass, why);
+              "%s (%s, pass %d): differs from the reference: %s", label, SETUP_NAMES[setup],
+              pass, why);
         if (gdt_check_mesh(NULL, &m, &err) != GDT_OK)
-            CHECK(t, 0, "%s: %s", label, err.msg);
+            CHECK(t, 0, "%s (%s): %s", label, SETUP_NAMES[setup], err.msg);
         CHECK(t, scr == 0 || st.flips > 0, "%s: no flip after %" PRIu64 " scrambling flips",
               label, scr);
-        if (pass == 0)
-            fprintf(stderr, "%-34s %8zu tris %8" PRIu64 " flips %4" PRIu64 " rounds %7" PRIu64
-                            " exact %7" PRIu64 " tie\n",
-                    label, m.ntris, st.flips, st.flip_iterations, st.exact_escalations,
-                    st.tiebreaks);
+        CHECK(t, setup != 1 || scr == 0 || st.flip_iterations > 0,
+              "%s: the parallel rounds alone made no round", label);
+        fprintf(stderr,
+                "%-22s %-11s %d %7zu tris %7" PRIu64 " flips %4" PRIu64 " rounds %7" PRIu64
+                " exact %6" PRIu64 " tie\n",
+                label, SETUP_NAMES[setup], pass, m.ntris, st.flips, st.flip_iterations,
+                st.exact_escalations, st.tiebreaks);
     }
+    gcd_test_set_flip_blocks(core, SIZE_MAX, 0, 0);
 done:
     gdt_mesh_free(&ref);
     gdt_mesh_free(&m);
