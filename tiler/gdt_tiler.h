@@ -29,7 +29,9 @@
  *    c = sqrt(area / points) / 2, so that a tile of the occupied part holds
  *    about N^2/4 points, rounded (in ratio) to a multiple of max(1, V / N)
  *    (V: density voxel) so that tile counts are exact sums of density
- *    voxels.  A given --cell S (CRS units) becomes c = S / sx steps,
+ *    voxels; then lowered by such multiples while the densest tile holds
+ *    more than N^2/4 points, down to c / sqrt 2 at most (about twice the
+ *    tiles): the tile stage's memory follows the densest tile.  A given --cell S (CRS units) becomes c = S / sx steps,
  *    rounded to the nearest integer >= 1 (with a note when it is not one).
  *  - --halo auto: H = ceil(8 s / c) texels, s = the median point spacing
  *    over occupied density voxels, clamped to [1, N/2] and to the 2^31

@@ -6,7 +6,11 @@
  *   estimate level e: coarsen a copy of voxels until they hold 16 points on
  *     average (or one voxel is left); area = active * 4^e
  *   auto cell  c = sqrt(area / points) / 2 rounded (in ratio) to a multiple
- *     of q = max(1, V / N), at least q, so that V divides T = N c
+ *     of q = max(1, V / N), at least q, so that V divides T = N c; then
+ *     lowered by q while the densest tile (exact voxel sums) holds more
+ *     than N^2/4 points, but not below c_real / sqrt 2 (at most about twice
+ *     the tiles): the tile stage's memory follows the densest tile, so this
+ *     keeps it a function of N rather than of the cloud
  *   auto halo  H = ceil(8 s / c), s = 2^e / sqrt(median voxel count at e),
  *     clamped to [1, N/2] and to (N + 2H) c <= 2^31
  *   tiles      auto cell: sum of the voxels of each tile (exact, V | T);
@@ -100,6 +104,23 @@ static void vox_coarsen(vox_list *l)
     l->n = out;
 }
 
+/* Largest number of points in one tile of r x r voxels (r = T / V). */
+static gdt_status densest_tile(const vox_list *base, int64_t r, uint64_t *max, gdt_error *err)
+{
+    tl_map m = {0};
+    gdt_status st = GDT_OK;
+    *max = 0;
+    for (size_t k = 0; k < base->n && st == GDT_OK; k++) {
+        uint64_t *v;
+        st = tl_map_upsert(&m, tl_floor_div(base->v[k].x, r), tl_floor_div(base->v[k].y, r), &v,
+                           err);
+        if (st == GDT_OK && (*v += base->v[k].n) > *max)
+            *max = *v;
+    }
+    tl_map_free(&m);
+    return st;
+}
+
 /* Occupied area (lattice steps^2, as a double) and median spacing. */
 static gdt_status estimate(const vox_list *base, int shift, uint64_t points, double *area,
                            double *spacing, gdt_error *err)
@@ -176,6 +197,21 @@ gdt_status tl_plan_finish(gdt_tiler *t, gdt_error *err)
             if (c > cmax)
                 c = cmax / q * q;
         }
+        /* The densest tile at most N^2/4 points, within a factor sqrt 2
+         * of creal (V divides N c for every multiple c of q). */
+        if (c >= 1 && p->points > 0) {
+            const uint64_t cap = (uint64_t)N * (uint64_t)N / 4;
+            double cfloor = creal / sqrt(2.0);
+            while (c - q >= q && (double)(c - q) >= cfloor) {
+                uint64_t densest;
+                st = densest_tile(&base, (N * c) >> shift, &densest, err);
+                if (st != GDT_OK)
+                    goto fail;
+                if (densest <= cap)
+                    break;
+                c -= q;
+            }
+        }
         if (c < 1) {
             st = gdt_error_set(err, GDT_EUSAGE, 2502,
                                "the cloud needs a density voxel of 2^%d lattice steps, wider "
@@ -184,7 +220,7 @@ gdt_status tl_plan_finish(gdt_tiler *t, gdt_error *err)
                                shift, N);
             goto fail;
         }
-        if (p->points > 0 && (c > 1.25 * creal + 1.0 || c < 0.8 * creal - 1.0))
+        if (p->points > 0 && (c > 1.25 * creal + 1.0 || c < 0.7 * creal - 1.0))
             gdt_log_note(t->log, "tiler: texel of %" PRId64 " lattice steps (the density "
                                  "suggests %.1f; the density grid allows multiples of %" PRId64
                                  ")",
@@ -327,7 +363,7 @@ void gdt_tile_plan_print(FILE *out, const gdt_tile_plan *p)
             (double)p->span * L->sy);
     fprintf(out, "  texel        : %" PRId64 " lattice steps = %.17g x %.17g CRS units (%s)\n",
             p->cell, (double)p->cell * L->sx, (double)p->cell * L->sy,
-            p->cell_auto ? "auto: about N^2/4 points per tile" : "--cell");
+            p->cell_auto ? "auto: about N^2/4 points per tile, densest at most that" : "--cell");
     fprintf(out, "  halo         : %" PRId64 " texels = %" PRId64 " lattice steps (%s)\n",
             p->halo, p->halo * p->cell, p->halo_auto ? "auto, from the density" : "--halo");
     fprintf(out, "  grid         : %" PRId64 " x %" PRId64 " tiles", p->nx, p->ny);

@@ -287,6 +287,47 @@ def test_auto_cell_and_printed_plan(runner, tiler_run, tmp_path):
     assert f"texel        : {p['cell']} lattice steps" in text
 
 
+def test_auto_cell_bounds_the_densest_tile(runner, tiler_run, tmp_path):
+    """--cell auto: a patch twice as dense as the rest does not make any tile
+    hold more than N^2/4 points; a cluster far denser than that may, since
+    the texel shrinks by at most sqrt 2 from the mean-density one."""
+    rng = np.random.default_rng(11)
+    target = 64 * 64 // 4
+    side = 300000
+    n = 150000
+    X = rng.integers(0, side, n)
+    Y = rng.integers(0, side, n)
+    # the dense patch: one extra point per background point in a quarter
+    patch = (X < side // 2) & (Y < side // 2)
+    X = np.concatenate([X, X[patch] + 1])
+    Y = np.concatenate([Y, Y[patch]])
+    las = tmp_path / "patch.las"
+    write_las(las, X.astype(np.int32), Y.astype(np.int32), np.zeros(len(X), dtype=np.int32))
+    p = run_tiler(runner, tiler_run, tmp_path / "job", [las], "--tile", "64",
+                  "--plan-only")["plan"]
+    assert p["cell_auto"] == 1
+    assert p["max"] <= target, p
+    # the mean-density texel: sqrt(area / points) / 2 (area: the whole square)
+    creal = np.sqrt(float(side) * side / len(X)) / 2
+    assert creal / np.sqrt(2) - 1 <= p["cell"] < creal, (p["cell"], creal)
+
+    # 90% of the points in a small cluster: the floor holds
+    m = 100000
+    Xc = np.concatenate([rng.integers(0, side, m // 10), rng.integers(0, 3000, m - m // 10)])
+    Yc = np.concatenate([rng.integers(0, side, m // 10), rng.integers(0, 3000, m - m // 10)])
+    las2 = tmp_path / "cluster.las"
+    write_las(las2, Xc.astype(np.int32), Yc.astype(np.int32), np.zeros(m, dtype=np.int32))
+    p2 = run_tiler(runner, tiler_run, tmp_path / "job2", [las2], "--tile", "64",
+                   "--plan-only")["plan"]
+    assert p2["max"] > target
+    # at most about twice the tiles of the texel sqrt 2 coarser
+    coarse = int(np.ceil(p2["cell"] * np.sqrt(2)))
+    p3 = run_tiler(runner, tiler_run, tmp_path / "job3", [las2], "--tile", "64",
+                   "--plan-only", "--cell", f"{coarse * 0.01:.2f}")["plan"]
+    assert p3["cell"] == coarse
+    assert p2["tiles"] <= 2.5 * p3["tiles"], (p2, p3)
+
+
 def test_plan_empty_tiles_with_voids(runner, tiler_run, tmp_path):
     """Two clusters far apart: the grid between them is empty tiles."""
     rng = np.random.default_rng(5)
