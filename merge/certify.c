@@ -2,8 +2,12 @@
 #include "gdt_certify.h"
 
 #include <math.h>
+#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
+
+#define CERT_MAX_THREADS 64
+#define CERT_MIN_PER_THREAD 4096 /* fewer triangles: not worth a thread */
 
 /* Halo points bucketed on a gs x gs grid over K (CSR layout: the points of
  * cell k are pts[start[k] .. start[k+1])). */
@@ -15,13 +19,15 @@ struct gdt_certifier {
     gdt_ipt *pts;        /* nhalo points in cell order */
     uint32_t *cell;      /* scratch: cell of each halo point */
     size_t cap_cells, cap_pts;
+    int threads;         /* 1..CERT_MAX_THREADS */
 };
 
-gdt_status gdt_certifier_create(gdt_certifier **out, gdt_error *err)
+gdt_status gdt_certifier_create(gdt_certifier **out, int threads, gdt_error *err)
 {
     *out = calloc(1, sizeof **out);
     if (*out == NULL)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    (*out)->threads = threads < 1 ? 1 : threads > CERT_MAX_THREADS ? CERT_MAX_THREADS : threads;
     return GDT_OK;
 }
 
@@ -145,60 +151,111 @@ static int halo_in_disk(const gdt_certifier *c, gdt_ipt a, gdt_ipt b, gdt_ipt p,
     return 0;
 }
 
-gdt_status gdt_certify_tile(gdt_certifier *c, const gdt_mesh *m, const gdt_ipt *halo,
-                            size_t nhalo, const gdt_cert_region *r, uint8_t *cert,
-                            gdt_cert_stats *cs_out, gdt_error *err)
-{
+/* One slice [t0, t1) of the triangles; slices share only read-only data
+ * and write disjoint parts of cert. */
+typedef struct cert_job {
+    const gdt_certifier *c;
+    const gdt_mesh *m;
+    const gdt_cert_region *r;
+    size_t nhalo, t0, t1;
+    uint8_t *cert;
     gdt_cert_stats cs;
-    gdt_status st;
+} cert_job;
+
+static void *certify_range(void *arg)
+{
+    cert_job *j = arg;
+    const gdt_cert_region *r = j->r;
+    const gdt_mesh *m = j->m;
+    gdt_cert_stats *cs = &j->cs;
     /* integer points strictly beyond a side: the disk box must stay before it */
     const double own_lo_x = (double)(r->own[0] - 1), own_hi_x = (double)(r->own[2] + 1);
     const double own_lo_y = (double)(r->own[1] - 1), own_hi_y = (double)(r->own[3] + 1);
     const double k_lo_x = (double)(r->known[0] - 1), k_hi_x = (double)(r->known[2] + 1);
     const double k_lo_y = (double)(r->known[1] - 1), k_hi_y = (double)(r->known[3] + 1);
 
-    memset(&cs, 0, sizeof cs);
-    st = build_grid(c, halo, nhalo, r, err);
-    if (st != GDT_OK)
-        return st;
-    for (size_t t = 0; t < m->ntris; t++) {
+    for (size_t t = j->t0; t < j->t1; t++) {
         gdt_ipt a = m->pts[m->tri[3 * t]], b = m->pts[m->tri[3 * t + 1]],
                 p = m->pts[m->tri[3 * t + 2]];
         double box[4];
-        cert[t] = 0;
-        cs.triangles++;
-        if (!gdt_circumdisk_bounds(&cs.pred, a, b, p, box))
+        j->cert[t] = 0;
+        cs->triangles++;
+        if (!gdt_circumdisk_bounds(&cs->pred, a, b, p, box))
             continue;
         if (box[0] > own_lo_x && box[2] < own_hi_x && box[1] > own_lo_y && box[3] < own_hi_y) {
-            cert[t] = 1;
-            cs.inner++;
-            cs.certified++;
+            j->cert[t] = 1;
+            cs->inner++;
+            cs->certified++;
             continue;
         }
         if ((!r->open[GDT_SIDE_WEST] && !(box[0] > k_lo_x)) ||
             (!r->open[GDT_SIDE_SOUTH] && !(box[1] > k_lo_y)) ||
             (!r->open[GDT_SIDE_EAST] && !(box[2] < k_hi_x)) ||
             (!r->open[GDT_SIDE_NORTH] && !(box[3] < k_hi_y))) {
-            cs.outside_known++;
+            cs->outside_known++;
             continue;
         }
-        if (nhalo > 0 && halo_in_disk(c, a, b, p, box, &cs)) {
-            cs.halo_hit++;
+        if (j->nhalo > 0 && halo_in_disk(j->c, a, b, p, box, cs)) {
+            cs->halo_hit++;
             continue;
         }
-        cert[t] = 1;
-        cs.certified++;
+        j->cert[t] = 1;
+        cs->certified++;
     }
-    if (cs_out != NULL) {
-        gdt_pred_stats pred = cs_out->pred;
-        gdt_pred_stats_add(&pred, &cs.pred);
-        cs_out->triangles += cs.triangles;
-        cs_out->certified += cs.certified;
-        cs_out->inner += cs.inner;
-        cs_out->outside_known += cs.outside_known;
-        cs_out->halo_hit += cs.halo_hit;
-        cs_out->halo_tests += cs.halo_tests;
-        cs_out->pred = pred;
+    return NULL;
+}
+
+static void stats_add(gdt_cert_stats *to, const gdt_cert_stats *from)
+{
+    gdt_pred_stats_add(&to->pred, &from->pred);
+    to->triangles += from->triangles;
+    to->certified += from->certified;
+    to->inner += from->inner;
+    to->outside_known += from->outside_known;
+    to->halo_hit += from->halo_hit;
+    to->halo_tests += from->halo_tests;
+}
+
+gdt_status gdt_certify_tile(gdt_certifier *c, const gdt_mesh *m, const gdt_ipt *halo,
+                            size_t nhalo, const gdt_cert_region *r, uint8_t *cert,
+                            gdt_cert_stats *cs_out, gdt_error *err)
+{
+    cert_job jobs[CERT_MAX_THREADS];
+    pthread_t tid[CERT_MAX_THREADS];
+    size_t nt = (size_t)c->threads, started = 0;
+    gdt_status st;
+
+    st = build_grid(c, halo, nhalo, r, err);
+    if (st != GDT_OK)
+        return st;
+    if (nt > m->ntris / CERT_MIN_PER_THREAD)
+        nt = m->ntris / CERT_MIN_PER_THREAD;
+    if (nt < 1)
+        nt = 1;
+    for (size_t k = 0; k < nt; k++) {
+        memset(&jobs[k], 0, sizeof jobs[k]);
+        jobs[k].c = c;
+        jobs[k].m = m;
+        jobs[k].r = r;
+        jobs[k].nhalo = nhalo;
+        jobs[k].cert = cert;
+        jobs[k].t0 = m->ntris / nt * k;
+        jobs[k].t1 = k + 1 == nt ? m->ntris : m->ntris / nt * (k + 1);
     }
+    /* slice 0 runs here; a thread that cannot start leaves its slice to
+     * this thread too (the result does not depend on the split) */
+    for (size_t k = 1; k < nt; k++) {
+        if (pthread_create(&tid[k], NULL, certify_range, &jobs[k]) != 0)
+            break;
+        started = k;
+    }
+    certify_range(&jobs[0]);
+    for (size_t k = 1; k <= started; k++)
+        pthread_join(tid[k], NULL);
+    for (size_t k = started + 1; k < nt; k++)
+        certify_range(&jobs[k]);
+    if (cs_out != NULL)
+        for (size_t k = 0; k < nt; k++)
+            stats_add(cs_out, &jobs[k].cs);
     return GDT_OK;
 }

@@ -57,8 +57,11 @@ typedef struct gdt_cert_stats {
 /* Reusable state (the halo's bucket grid).  Not thread-safe per instance. */
 typedef struct gdt_certifier gdt_certifier;
 
-/* Ownership: *out is new; free with gdt_certifier_destroy.  Errors: 7001. */
-gdt_status gdt_certifier_create(gdt_certifier **out, gdt_error *err);
+/* threads: how many threads gdt_certify_tile may use (clamped to 1..64; a
+ * tile gets one per 4096 triangles at most).  The flags do not depend on
+ * it.  Ownership: *out is new; free with gdt_certifier_destroy.
+ * Errors: 7001. */
+gdt_status gdt_certifier_create(gdt_certifier **out, int threads, gdt_error *err);
 void gdt_certifier_destroy(gdt_certifier *c);
 
 /* Certifies the triangles of m (T_{d1,d2} of the tile's own points, in

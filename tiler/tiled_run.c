@@ -277,6 +277,15 @@ static gdt_status tile_path(tr_ctx *c, const gdt_tile_desc *d, const char *ext, 
     return *out == NULL ? gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory") : GDT_OK;
 }
 
+/* --threads K, 0 = the online cores. */
+static int host_threads(int k)
+{
+    long n = sysconf(_SC_NPROCESSORS_ONLN);
+    if (k > 0)
+        return k;
+    return n < 1 ? 1 : n > 1024 ? 1024 : (int)n;
+}
+
 /* Stage 2 for tile k: core, certification, .tri file, seam. */
 static gdt_status run_tile(tr_ctx *c, uint64_t k, gdt_error *err)
 {
@@ -1056,7 +1065,7 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     copt.log = &c.log;
     st = gdt_core_create(&c.core, &copt, err);
     if (st == GDT_OK)
-        st = gdt_certifier_create(&c.certifier, err);
+        st = gdt_certifier_create(&c.certifier, host_threads(opts->threads), err);
     if (st != GDT_OK)
         goto fail;
     snprintf(c.s.device, sizeof c.s.device, "%s", gdt_core_device_name(c.core));
