@@ -17,7 +17,7 @@
  * Collapsing is associative (ord = min, z = min/max or the z of the lowest
  * ord), so the result is the same for every cap: bytes do not depend on the
  * budget.  All records of one (x, y) meet in one leaf partition.
- * Memory: cap records plus the hash table (at most 4 cap words) or the
+ * Memory: cap records plus the hash table (at most 4 cap 32-bit words) or the
  * sort scratch (cap records), K small write or read buffers.  Descriptors:
  * at most K + 2 at a time.
  */
@@ -30,6 +30,7 @@
 #include <unistd.h>
 
 #define MAX_MERGE_LEVEL 16
+#define MERGE_CAP_MAX (UINT32_C(1) << 31) /* records held at once */
 
 typedef struct sink {
     tl_wfile *pts;      /* every record */
@@ -109,23 +110,32 @@ static size_t hash_xy(const gdt_point *p, size_t mask)
  * one pass, O(used).  Scratch: a table of at most 4 used words. */
 static gdt_status collapse(mctx *m, size_t *used, gdt_error *err)
 {
-    size_t n = *used, cap = 16, out = 0, *tab;
+    size_t n = *used, cap = 16, out = 0;
     gdt_point *b = m->buf;
+    uint32_t *tab;
 
     if (n < 2)
         return GDT_OK;
     while (cap < 2 * n)
         cap *= 2;
-    tab = calloc(cap, sizeof *tab);
-    if (tab == NULL)
-        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory (--dup merge of %zu points)",
-                             n);
+    /* n <= MERGE_CAP_MAX < 2^32: indices + 1 fit 32 bits */
+    if (cap > m->t->dup_tab_cap) {
+        free(m->t->dup_tab);
+        m->t->dup_tab_cap = 0;
+        m->t->dup_tab = malloc(cap * sizeof *m->t->dup_tab);
+        if (m->t->dup_tab == NULL)
+            return gdt_error_set(err, GDT_EINTERNAL, 7001,
+                                 "out of memory (--dup merge of %zu points)", n);
+        m->t->dup_tab_cap = cap;
+    }
+    tab = m->t->dup_tab;
+    memset(tab, 0, cap * sizeof *tab);
     for (size_t i = 0; i < n; i++) {
         size_t s = hash_xy(&b[i], cap - 1);
         for (;; s = (s + 1) & (cap - 1)) {
             if (tab[s] == 0) {
                 b[out] = b[i];
-                tab[s] = ++out;
+                tab[s] = (uint32_t)++out;
                 break;
             }
             if (b[tab[s] - 1].x == b[i].x && b[tab[s] - 1].y == b[i].y) {
@@ -134,7 +144,6 @@ static gdt_status collapse(mctx *m, size_t *used, gdt_error *err)
             }
         }
     }
-    free(tab);
     *used = out;
     return GDT_OK;
 }
@@ -369,14 +378,22 @@ gdt_status tl_merge_tile(gdt_tiler *t, uint64_t k, gdt_error *err)
     m.cap = t->sz.merge_cap;
     if ((uint64_t)m.cap > tl->count)
         m.cap = (size_t)tl->count; /* a small tile needs no more */
+    if (m.cap > MERGE_CAP_MAX)
+        m.cap = MERGE_CAP_MAX; /* the result does not depend on cap */
     if (m.cap < 2)
         m.cap = 2;
-    m.buf = malloc(m.cap * sizeof *m.buf);
-    if (m.buf == NULL) {
-        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory (--dup merge of %zu points)",
-                           m.cap);
-        goto fail;
+    if (m.cap > t->dup_cap) {
+        free(t->dup_buf);
+        t->dup_cap = 0;
+        t->dup_buf = malloc(m.cap * sizeof *t->dup_buf);
+        if (t->dup_buf == NULL) {
+            st = gdt_error_set(err, GDT_EINTERNAL, 7001,
+                               "out of memory (--dup merge of %zu points)", m.cap);
+            goto fail;
+        }
+        t->dup_cap = m.cap;
     }
+    m.buf = t->dup_buf;
     st = tl_wfile_init(&wp, pts_tmp, pts, t->sz.part_recs, !t->opts.test_nosync, err);
     if (st == GDT_OK)
         st = tl_wfile_init(&we, edge_tmp, edge, t->sz.part_recs, !t->opts.test_nosync, err);
@@ -408,7 +425,6 @@ gdt_status tl_merge_tile(gdt_tiler *t, uint64_t k, gdt_error *err)
 fail:
     tl_wfile_abort(&wp);
     tl_wfile_abort(&we);
-    free(m.buf);
     free(raw);
     free(pts_tmp);
     free(pts);

@@ -213,6 +213,8 @@ void gdt_tiler_destroy(gdt_tiler *t)
     tl_density_free(&t->density);
     tl_map_free(&t->map);
     free(t->tiles);
+    free(t->dup_buf);
+    free(t->dup_tab);
     free(t->job_dir);
     free(t->tiles_dir);
     free(t);
@@ -530,6 +532,11 @@ gdt_status gdt_tiler_pass2(gdt_tiler *t, gdt_error *err)
         if (t->tiles[k].points > t->stats.max_tile_points)
             t->stats.max_tile_points = t->tiles[k].points;
     }
+    free(t->dup_buf);
+    free(t->dup_tab);
+    t->dup_buf = NULL;
+    t->dup_tab = NULL;
+    t->dup_cap = t->dup_tab_cap = 0;
     st = tl_sync_dir(t->tiles_dir, err);
     if (st != GDT_OK)
         return st;

@@ -91,6 +91,12 @@ struct gdt_tiler {
     tl_map map;             /* (i, j) -> index in tiles (after pass 1) */
     tl_density density;     /* pass 1 */
     gdt_tiler_stats stats;
+    /* scratch of the --dup merge, reused from tile to tile within pass 2
+     * (records, and the hash table of collapse); freed after pass 2 */
+    gdt_point *dup_buf;
+    size_t dup_cap;
+    uint32_t *dup_tab;
+    size_t dup_tab_cap;
 };
 
 /* plan.c: turns the pass-1 results into the plan and the tile table.
