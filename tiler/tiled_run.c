@@ -31,6 +31,9 @@
 #define TR_MAGIC "GDTTRI01"
 #define TR_HEADER 64
 #define TR_CHUNK 65536
+#define MF_NAME "merge.faces"
+#define MF_MAGIC "GDTMRG01"
+#define MF_HEADER 16
 
 typedef struct tr_summary {
     uint64_t points_read, vertices, tiles, faces, certified, merge_faces;
@@ -72,7 +75,8 @@ typedef struct tr_ctx {
     size_t cap_count;
     unsigned char *fbuf; /* the .tri file image */
     size_t cap_fbuf;
-    gdt_seam seam;
+    gdt_seam seam;      /* one tile's seam (tile stage), one row's (merge) */
+    uint64_t seam_total; /* seam vertices of all tiles (merge progress) */
     gdt_job *jobdb;
     tr_pending *pending;  /* finished tiles not yet recorded */
     size_t npending, cap_pending;
@@ -293,7 +297,7 @@ static gdt_status run_tile(tr_ctx *c, uint64_t k, gdt_error *err)
     gdt_tile_desc d;
     gdt_cert_region r;
     gdt_core_stats cs;
-    size_t n, nh, nf, nv0 = c->seam.nv, ne0 = c->seam.ne, len;
+    size_t n, nh, nf, len;
     int64_t h = pl->halo * pl->cell;
     char *path = NULL;
     unsigned char *p;
@@ -361,11 +365,14 @@ static gdt_status run_tile(tr_ctx *c, uint64_t k, gdt_error *err)
     nf = 0;
     for (size_t t = 0; t < c->mesh.ntris; t++)
         nf += c->cert[t];
+    c->seam.nv = 0;
+    c->seam.ne = 0;
     st = gdt_seam_extract(&c->seam, &c->mesh, c->cert, c->base[k], d.local_x0 - pl->min_x,
                           d.local_y0 - pl->min_y, err);
     if (st != GDT_OK)
         return st;
-    len = TR_HEADER + 12 * nf + 24 * (c->seam.nv - nv0) + 16 * (c->seam.ne - ne0);
+    c->seam_total += c->seam.nv;
+    len = TR_HEADER + 12 * nf + 24 * c->seam.nv + 16 * c->seam.ne;
     if (reserve((void **)&c->fbuf, &c->cap_fbuf, len, 1) != 0)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     /* the face area of the file image (64-byte aligned offset) is the
@@ -382,17 +389,17 @@ static gdt_status run_tile(tr_ctx *c, uint64_t k, gdt_error *err)
     put_u64(p + 8, c->base[k]);
     put_u64(p + 16, n);
     put_u64(p + 24, nf);
-    put_u64(p + 32, c->seam.nv - nv0);
-    put_u64(p + 40, c->seam.ne - ne0);
+    put_u64(p + 32, c->seam.nv);
+    put_u64(p + 40, c->seam.ne);
     p += TR_HEADER;
     for (size_t i = 0; i < 3 * nf; i++, p += 4)
         put_u32(p, c->faces[i]);
-    for (size_t i = nv0; i < c->seam.nv; i++, p += 24) {
+    for (size_t i = 0; i < c->seam.nv; i++, p += 24) {
         put_u64(p, c->seam.v[i].id);
         put_u64(p + 8, (uint64_t)c->seam.v[i].x);
         put_u64(p + 16, (uint64_t)c->seam.v[i].y);
     }
-    for (size_t i = ne0; i < c->seam.ne; i++, p += 16) {
+    for (size_t i = 0; i < c->seam.ne; i++, p += 16) {
         put_u64(p, c->seam.e[i].a);
         put_u64(p + 8, c->seam.e[i].b);
     }
@@ -453,8 +460,9 @@ static gdt_status flush_pending(tr_ctx *c, gdt_error *err)
 }
 
 /* A tile recorded as finished: its .tri file is reused when its size and
- * checksum match the record; its seam goes back into the merge.
- * *ok = 0: the file is missing or damaged (the tile must be redone). */
+ * checksum match the record (the merge reads its seam from there, as for a
+ * tile computed now).  *ok = 0: the file is missing or damaged (the tile
+ * must be redone). */
 static gdt_status reuse_tile(tr_ctx *c, uint64_t k, uint64_t size, uint64_t sum, int *ok,
                              gdt_error *err)
 {
@@ -463,7 +471,6 @@ static gdt_status reuse_tile(tr_ctx *c, uint64_t k, uint64_t size, uint64_t sum,
     FILE *f = NULL;
     const unsigned char *p;
     uint64_t nf, nv, ne;
-    size_t off;
     gdt_status st = gdt_tiler_tile_info(c->tiler, k, &d, err);
 
     *ok = 0;
@@ -494,26 +501,7 @@ static gdt_status reuse_tile(tr_ctx *c, uint64_t k, uint64_t size, uint64_t sum,
     if (memcmp(p, TR_MAGIC, 8) != 0 || get_u64(p + 8) != c->base[k] ||
         get_u64(p + 16) != d.points || TR_HEADER + 12 * nf + 24 * nv + 16 * ne != size)
         return GDT_OK;
-    off = TR_HEADER + 12 * (size_t)nf;
-    for (uint64_t i = 0; i < nv; i++, off += 24) {
-        if (c->seam.nv == c->seam.cap_v &&
-            reserve((void **)&c->seam.v, &c->seam.cap_v,
-                    c->seam.cap_v > 0 ? 2 * c->seam.cap_v : 1024, sizeof *c->seam.v) != 0)
-            return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-        c->seam.v[c->seam.nv].id = get_u64(p + off);
-        c->seam.v[c->seam.nv].x = (int64_t)get_u64(p + off + 8);
-        c->seam.v[c->seam.nv].y = (int64_t)get_u64(p + off + 16);
-        c->seam.nv++;
-    }
-    for (uint64_t i = 0; i < ne; i++, off += 16) {
-        if (c->seam.ne == c->seam.cap_e &&
-            reserve((void **)&c->seam.e, &c->seam.cap_e,
-                    c->seam.cap_e > 0 ? 2 * c->seam.cap_e : 1024, sizeof *c->seam.e) != 0)
-            return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-        c->seam.e[c->seam.ne].a = get_u64(p + off);
-        c->seam.e[c->seam.ne].b = get_u64(p + off + 8);
-        c->seam.ne++;
-    }
+    c->seam_total += nv;
     c->s.certified += nf;
     *ok = 1;
     return GDT_OK;
@@ -570,6 +558,294 @@ fail:
         fclose(f);
     free(raw);
     free(tri);
+    free(path);
+    return st;
+}
+
+/* Appends the seam section of tile k's .tri file (seam vertices and barrier
+ * edges) to c->seam.  The counts of the header are checked against the
+ * file's size before anything is allocated, every id against the tile's
+ * vertex range and every coordinate against the merge frame.
+ * returns: GDT_EIO 4805 (open or read), GDT_EJOB 6801 (not the file this
+ * run wrote), 6802 (its size or content does not match its header), 7001. */
+static gdt_status read_seam(tr_ctx *c, uint64_t k, gdt_error *err)
+{
+    gdt_tile_desc d;
+    unsigned char hdr[TR_HEADER];
+    char *path = NULL;
+    FILE *f = NULL;
+    struct stat sb;
+    uint64_t nf, nv, ne, size, lo = c->base[k], hi;
+    gdt_seam *s = &c->seam;
+    gdt_status st = gdt_tiler_tile_info(c->tiler, k, &d, err);
+
+    if (st == GDT_OK)
+        st = tile_path(c, &d, "tri", &path, err);
+    if (st != GDT_OK)
+        return st;
+    hi = lo + d.points;
+    f = fopen(path, "rb");
+    if (f == NULL || fstat(fileno(f), &sb) != 0) {
+        st = gdt_error_set(err, GDT_EIO, 4805, "%s: cannot open: %s", path, strerror(errno));
+        goto fail;
+    }
+    if (fread(hdr, 1, TR_HEADER, f) != TR_HEADER || memcmp(hdr, TR_MAGIC, 8) != 0 ||
+        get_u64(hdr + 8) != lo || get_u64(hdr + 16) != d.points) {
+        st = gdt_error_set(err, GDT_EJOB, 6801, "%s: not the tile file this run wrote", path);
+        goto fail;
+    }
+    size = (uint64_t)sb.st_size;
+    nf = get_u64(hdr + 24);
+    nv = get_u64(hdr + 32);
+    ne = get_u64(hdr + 40);
+    if (nf > size / 12 || nv > size / 24 || ne > size / 16 ||
+        TR_HEADER + 12 * nf + 24 * nv + 16 * ne != size || nv > d.points) {
+        st = gdt_error_set(err, GDT_EJOB, 6802,
+                           "%s: %" PRIu64 " bytes do not match its header (%" PRIu64
+                           " faces, %" PRIu64 " seam vertices, %" PRIu64 " barrier edges)",
+                           path, size, nf, nv, ne);
+        goto fail;
+    }
+    if (fseeko(f, (off_t)(TR_HEADER + 12 * nf), SEEK_SET) != 0) {
+        st = gdt_error_set(err, GDT_EIO, 4805, "%s: cannot seek: %s", path, strerror(errno));
+        goto fail;
+    }
+    /* growth by at least the current capacity: amortised doubling */
+    if (reserve((void **)&c->fbuf, &c->cap_fbuf, 24 * (size_t)TR_CHUNK, 1) != 0 ||
+        reserve((void **)&s->v, &s->cap_v, s->nv + (size_t)nv + (s->cap_v > 0 ? s->cap_v : 1024),
+                sizeof *s->v) != 0 ||
+        reserve((void **)&s->e, &s->cap_e, s->ne + (size_t)ne + (s->cap_e > 0 ? s->cap_e : 1024),
+                sizeof *s->e) != 0) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        goto fail;
+    }
+    for (uint64_t done = 0; done < nv;) {
+        size_t m = nv - done < TR_CHUNK ? (size_t)(nv - done) : TR_CHUNK;
+        if (fread(c->fbuf, 24, m, f) != m) {
+            st = gdt_error_set(err, GDT_EIO, 4805, "%s: read failed", path);
+            goto fail;
+        }
+        for (size_t i = 0; i < m; i++) {
+            gdt_seam_vertex *v = &s->v[s->nv];
+            v->id = get_u64(c->fbuf + 24 * i);
+            v->x = (int64_t)get_u64(c->fbuf + 24 * i + 8);
+            v->y = (int64_t)get_u64(c->fbuf + 24 * i + 16);
+            if (v->id < lo || v->id >= hi || v->x < 0 || v->y < 0 || v->x > GDT_COORD_MAX ||
+                v->y > GDT_COORD_MAX) {
+                st = gdt_error_set(err, GDT_EJOB, 6802,
+                                   "%s: seam vertex %" PRIu64 " is not one of the tile's "
+                                   "vertices in the merge frame",
+                                   path, done + i);
+                goto fail;
+            }
+            s->nv++;
+        }
+        done += m;
+    }
+    for (uint64_t done = 0; done < ne;) {
+        size_t m = ne - done < TR_CHUNK ? (size_t)(ne - done) : TR_CHUNK;
+        if (fread(c->fbuf, 16, m, f) != m) {
+            st = gdt_error_set(err, GDT_EIO, 4805, "%s: read failed", path);
+            goto fail;
+        }
+        for (size_t i = 0; i < m; i++) {
+            gdt_seam_edge *e = &s->e[s->ne];
+            e->a = get_u64(c->fbuf + 16 * i);
+            e->b = get_u64(c->fbuf + 16 * i + 8);
+            if (e->a < lo || e->a >= hi || e->b < lo || e->b >= hi) {
+                st = gdt_error_set(err, GDT_EJOB, 6802,
+                                   "%s: barrier edge %" PRIu64 " names another tile's vertex",
+                                   path, done + i);
+                goto fail;
+            }
+            s->ne++;
+        }
+        done += m;
+    }
+fail:
+    if (f != NULL)
+        fclose(f);
+    free(path);
+    return st;
+}
+
+/* Writes all of buf to fd; GDT_EIO 4803. */
+static gdt_status write_all(int fd, const unsigned char *buf, size_t len, const char *path,
+                            gdt_error *err)
+{
+    size_t done = 0;
+    while (done < len) {
+        ssize_t w = write(fd, buf + done, len - done);
+        if (w < 0 && errno == EINTR)
+            continue;
+        if (w <= 0)
+            return gdt_error_set(err, GDT_EIO, 4803, "%s: write failed: %s", path,
+                                 w < 0 ? strerror(errno) : "no progress");
+        done += (size_t)w;
+    }
+    return GDT_OK;
+}
+
+/* Stage 3: the seam merge by rows of tiles (gdt_seam.h).  Each row's seam
+ * is read from its tiles' .tri files; each round's final faces are appended
+ * to <job>/merge.faces ("GDTMRG01", u64 face count, then 3 x u32 output
+ * indices per face, little-endian), written under merge.faces.tmp, fsync'd
+ * and renamed.  Holds one row of seams, the merger's band and a write
+ * buffer. */
+static gdt_status merge_rows(tr_ctx *c, gdt_error *err)
+{
+    const gdt_tile_plan *pl = c->plan;
+    uint64_t ntiles = gdt_tiler_tile_count(c->tiler), k = 0, nmf = 0, done_v = 0;
+    gdt_merger *m = NULL;
+    char *path = path_join(c->job, MF_NAME), *tmp = path_join(c->job, MF_NAME ".tmp");
+    unsigned char *buf = malloc(12 * (size_t)TR_CHUNK);
+    size_t nbuf = 0;
+    int fd = -1;
+    gdt_status st = GDT_OK;
+
+    if (path == NULL || tmp == NULL || buf == NULL) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        goto fail;
+    }
+    st = gdt_merger_create(&m, err);
+    if (st != GDT_OK)
+        goto fail;
+    fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (fd < 0) {
+        st = gdt_error_set(err, GDT_EIO, 4802, "%s: cannot create: %s", tmp, strerror(errno));
+        goto fail;
+    }
+    memset(buf, 0, MF_HEADER);
+    memcpy(buf, MF_MAGIC, 8);
+    nbuf = MF_HEADER;
+    gdt_progress_stage(&c->prog, "merge", c->seam_total, "points");
+    while (k < ntiles) {
+        gdt_tile_desc d;
+        const uint64_t *f = NULL;
+        size_t nf = 0;
+        int64_t row, y_next = 0;
+        uint64_t k1 = k;
+        if (stopped(c)) {
+            st = interrupted_in(c->job, "the seam merge", err);
+            goto fail;
+        }
+        st = gdt_tiler_tile_info(c->tiler, k, &d, err);
+        if (st != GDT_OK)
+            goto fail;
+        row = d.j;
+        c->seam.nv = 0;
+        c->seam.ne = 0;
+        /* tiles are sorted by (j, i): a row is a run of equal j */
+        while (k1 < ntiles) {
+            st = gdt_tiler_tile_info(c->tiler, k1, &d, err);
+            if (st != GDT_OK)
+                goto fail;
+            if (d.j != row) {
+                y_next = d.y0 - pl->min_y;
+                break;
+            }
+            st = read_seam(c, k1, err);
+            if (st != GDT_OK)
+                goto fail;
+            k1++;
+        }
+        st = gdt_merger_round(m, &c->seam, y_next, k1 == ntiles, &f, &nf, err);
+        if (st != GDT_OK)
+            goto fail;
+        for (size_t i = 0; i < nf; i++) {
+            if (nbuf + 12 > 12 * (size_t)TR_CHUNK) {
+                st = write_all(fd, buf, nbuf, tmp, err);
+                if (st != GDT_OK)
+                    goto fail;
+                nbuf = 0;
+            }
+            for (int q = 0; q < 3; q++)
+                put_u32(buf + nbuf + 4 * q, (uint32_t)f[3 * i + q]);
+            nbuf += 12;
+        }
+        nmf += nf;
+        done_v += c->seam.nv;
+        gdt_progress_update(&c->prog, done_v);
+        k = k1;
+    }
+    st = write_all(fd, buf, nbuf, tmp, err);
+    if (st != GDT_OK)
+        goto fail;
+    put_u64(buf, nmf);
+    if (pwrite(fd, buf, 8, 8) != 8) {
+        st = gdt_error_set(err, GDT_EIO, 4803, "%s: write failed: %s", tmp, strerror(errno));
+        goto fail;
+    }
+    if (fsync(fd) != 0) {
+        st = gdt_error_set(err, GDT_EIO, 4804, "%s: fsync failed: %s", tmp, strerror(errno));
+        goto fail;
+    }
+    if (close(fd) != 0) {
+        fd = -1;
+        st = gdt_error_set(err, GDT_EIO, 4803, "%s: write failed: %s", tmp, strerror(errno));
+        goto fail;
+    }
+    fd = -1;
+    if (rename(tmp, path) != 0) {
+        st = gdt_error_set(err, GDT_EIO, 4804, "%s: rename failed: %s", path, strerror(errno));
+        goto fail;
+    }
+    st = tl_sync_dir(c->job, err);
+    c->s.merge = *gdt_merger_stats(m);
+    c->s.merge_faces = nmf;
+fail:
+    if (fd >= 0)
+        close(fd);
+    if (st != GDT_OK && tmp != NULL)
+        unlink(tmp);
+    gdt_merger_destroy(m);
+    free(buf);
+    free(tmp);
+    free(path);
+    return st;
+}
+
+/* Appends the faces of <job>/merge.faces to the PLY; the file must hold
+ * exactly the c->s.merge_faces faces the merge counted. */
+static gdt_status copy_merge_faces(tr_ctx *c, gdt_ply_writer *w, int32_t *tri,
+                                   unsigned char *raw, gdt_error *err)
+{
+    char *path = path_join(c->job, MF_NAME);
+    unsigned char hdr[MF_HEADER];
+    FILE *f = NULL;
+    struct stat sb;
+    uint64_t nf;
+    gdt_status st = GDT_OK;
+
+    if (path == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    f = fopen(path, "rb");
+    if (f == NULL || fstat(fileno(f), &sb) != 0) {
+        st = gdt_error_set(err, GDT_EIO, 4805, "%s: cannot open: %s", path, strerror(errno));
+        goto fail;
+    }
+    nf = c->s.merge_faces;
+    if (fread(hdr, 1, MF_HEADER, f) != MF_HEADER || memcmp(hdr, MF_MAGIC, 8) != 0 ||
+        get_u64(hdr + 8) != nf || (uint64_t)sb.st_size != MF_HEADER + 12 * nf) {
+        st = gdt_error_set(err, GDT_EJOB, 6801, "%s: not the merge file this run wrote", path);
+        goto fail;
+    }
+    for (uint64_t done = 0; done < nf;) {
+        size_t m = nf - done < TR_CHUNK ? (size_t)(nf - done) : TR_CHUNK;
+        if (fread(raw, 12, m, f) != m) {
+            st = gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
+            goto fail;
+        }
+        for (size_t i = 0; i < 3 * m; i++)
+            tri[i] = (int32_t)get_u32(raw + 4 * i);
+        st = gdt_ply_write_faces(w, tri, m, err);
+        if (st != GDT_OK)
+            goto fail;
+        done += m;
+    }
+fail:
+    if (f != NULL)
+        fclose(f);
     free(path);
     return st;
 }
@@ -651,7 +927,7 @@ static void remove_stale_temps(const char *output)
 }
 
 /* Stage 4: the PLY. */
-static gdt_status write_ply(tr_ctx *c, const uint64_t *mfaces, size_t nmf, gdt_error *err)
+static gdt_status write_ply(tr_ctx *c, gdt_error *err)
 {
     const gdt_cloud_info *ci = gdt_cloud_get_info(c->cloud);
     uint64_t ntiles = gdt_tiler_tile_count(c->tiler);
@@ -660,13 +936,14 @@ static gdt_status write_ply(tr_ctx *c, const uint64_t *mfaces, size_t nmf, gdt_e
     double *xyz = malloc(3 * TR_CHUNK * sizeof *xyz);
     gdt_point *buf = malloc(TR_CHUNK * sizeof *buf);
     int32_t *tri = malloc(3 * TR_CHUNK * sizeof *tri);
+    unsigned char *raw = malloc(12 * TR_CHUNK);
     gdt_status st;
 
     memset(&meta, 0, sizeof meta);
     meta.lattice = ci->lattice;
     meta.epsg = ci->epsg;
     meta.crs_wkt = ci->crs_wkt;
-    if (xyz == NULL || buf == NULL || tri == NULL) {
+    if (xyz == NULL || buf == NULL || tri == NULL || raw == NULL) {
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         goto fail;
     }
@@ -681,18 +958,15 @@ static gdt_status write_ply(tr_ctx *c, const uint64_t *mfaces, size_t nmf, gdt_e
         st = stopped(c) ? interrupted_in(c->job, "the output", err) : copy_faces(c, k, w, err);
         gdt_progress_update(&c->prog, ntiles + k + 1);
     }
-    for (size_t i = 0; st == GDT_OK && i < nmf; i += TR_CHUNK) {
-        size_t m = nmf - i < TR_CHUNK ? nmf - i : TR_CHUNK;
-        for (size_t q = 0; q < 3 * m; q++)
-            tri[q] = (int32_t)mfaces[3 * i + q];
-        st = gdt_ply_write_faces(w, tri, m, err);
-    }
+    if (st == GDT_OK)
+        st = copy_merge_faces(c, w, tri, raw, err);
     if (st == GDT_OK) {
         st = gdt_ply_finish(w, err);
         w = NULL;
     }
 fail:
     gdt_ply_abort(w);
+    free(raw);
     free(tri);
     free(buf);
     free(xyz);
@@ -763,6 +1037,9 @@ static gdt_status write_summary(const tr_ctx *c, gdt_error *err)
     gdt_json_uint(&j, "barrier_edges", s->merge.barrier_edges);
     gdt_json_uint(&j, "seam_triangles", s->merge.seam_triangles);
     gdt_json_uint(&j, "hull_vertices", s->merge.hull_vertices);
+    gdt_json_uint(&j, "merge_rounds", s->merge.rounds);
+    gdt_json_uint(&j, "merge_max_band_vertices", s->merge.max_band_vertices);
+    gdt_json_uint(&j, "merge_peak_bytes", s->merge.peak_bytes);
     gdt_json_begin_object(&j, "certification");
     gdt_json_uint(&j, "triangles", s->cert.triangles);
     gdt_json_uint(&j, "inner", s->cert.inner);
@@ -931,12 +1208,14 @@ static void first_difference(const char *a, const char *b, char *msg, size_t len
 }
 
 /* Removes the files a job directory holds (job.db and its WAL files,
- * index.vdb, tiles/ with our tile files), then the directories if empty.
+ * index.vdb, merge.faces, tiles/ with our tile files), then the directories
+ * if empty.
  * Never removes anything else: --job may name a directory the user owns. */
 static void remove_job_files(const char *job)
 {
     static const char *const names[] = {"job.db", "job.db-wal", "job.db-shm", "job.db-journal",
-                                        "index.vdb", "index.vdb.tmp"};
+                                        "index.vdb", "index.vdb.tmp", MF_NAME,
+                                        MF_NAME ".tmp"};
     char *tiles = path_join(job, "tiles");
     /* the journal first: a removal cut short by a crash must not leave a
      * journal that vouches for files already gone */
@@ -1040,8 +1319,7 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     gdt_cloud_opts co;
     gdt_tiler_opts to;
     gdt_core_opts copt;
-    uint64_t *mfaces = NULL, ntiles, hull;
-    size_t nmf = 0;
+    uint64_t ntiles, hull;
     int done = 0;
     double t_start = gdt_now(), t0;
     gdt_status st;
@@ -1196,14 +1474,11 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     gdt_mesh_free(&c.mesh);
     gdt_mesh_init(&c.mesh);
     t0 = gdt_now();
-    gdt_progress_stage(&c.prog, "merge", c.seam.nv, "points");
-    st = gdt_merge_seams(&c.seam, &mfaces, &nmf, &c.s.merge, err);
+    st = merge_rows(&c, err);
     if (st != GDT_OK)
         goto fail;
-    gdt_progress_update(&c.prog, c.seam.nv);
     gdt_seam_free(&c.seam);
-    c.s.merge_faces = nmf;
-    c.s.faces = c.s.certified + nmf;
+    c.s.faces = c.s.certified + c.s.merge_faces;
     c.s.t_merge = gdt_now() - t0;
 
     /* Euler: a triangulation of V points with h on the hull has 2V - h - 2
@@ -1221,7 +1496,7 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     }
 
     t0 = gdt_now();
-    st = write_ply(&c, mfaces, nmf, err);
+    st = write_ply(&c, err);
     if (st == GDT_OK)
         st = gdt_job_set_stage(c.jobdb, "ply", 1, err);
     if (st != GDT_OK)
@@ -1268,7 +1543,6 @@ fail:
         gdt_progress_end(&c.prog);
     else
         gdt_progress_abort(&c.prog);
-    free(mfaces);
     free(c.pending);
     gdt_seam_free(&c.seam);
     free(c.fbuf);

@@ -35,6 +35,9 @@ TINY_ARGS = ["--tile", "64", "--cell", "0.125"]
 # A longer run (2-5 s, ~170 tiles) for kills spread over time.
 BIG_POINTS, BIG_SEED = 300_000, 7
 BIG_ARGS = ["--tile", "64", "--cell", "0.25"]
+# the same cloud in about four times the tiles: a tile stage of a few
+# seconds, long enough to see tiles outlive the recording window
+MANY_ARGS = ["--tile", "64", "--cell", "0.125"]
 
 KILL_SEED = 20240611
 UNIFORM_KILLS = 16          # instants drawn uniformly over an uninterrupted run
@@ -112,6 +115,11 @@ def tiny(gdt_bin, tmp_path_factory):
 @pytest.fixture(scope="module")
 def big(gdt_bin, tmp_path_factory):
     return Case(gdt_bin, tmp_path_factory.mktemp("big"), BIG_POINTS, BIG_SEED, BIG_ARGS)
+
+
+@pytest.fixture(scope="module")
+def many(gdt_bin, tmp_path_factory):
+    return Case(gdt_bin, tmp_path_factory.mktemp("many"), BIG_POINTS, BIG_SEED, MANY_ARGS)
 
 
 def kill_in_tile_stage(cmd, job, min_tri=1, sig=signal.SIGKILL):
@@ -626,7 +634,7 @@ def test_json_fresh_run_and_rerun_of_a_finished_job(tiny, tmp_path):
     tiny.assert_same(out, "rerun of a finished job")
 
 
-def test_json_after_sigkill_in_tile_stage(big, tmp_path):
+def test_json_after_sigkill_in_tile_stage(many, tmp_path):
     """SIGKILL late in the tile stage (at least half of the .tri files
     present, or the stage has run KILL_AFTER s): the rerun reports resumed,
     pass 2 reused, and reuses every tile whose .tri file had been present
@@ -635,7 +643,7 @@ def test_json_after_sigkill_in_tile_stage(big, tmp_path):
     present; reused + redone = all tiles."""
     out = tmp_path / "out.ply"
     job = default_job(out)
-    cmd = big.cmd(big.las, out)
+    cmd = many.cmd(many.las, out)
     r = ru.Run(cmd)
     r.wait_for(lambda x: x.started("tiles"))
     t_tiles = r.stage_start("tiles")
@@ -643,8 +651,8 @@ def test_json_after_sigkill_in_tile_stage(big, tmp_path):
 
     def late(x):
         seen.append((x.elapsed(), len(ru.tri_files(job))))
-        return seen[-1][1] >= big.ntiles // 2 and seen[-1][0] - t_tiles >= KILL_AFTER or \
-            seen[-1][1] >= big.ntiles - 2
+        return seen[-1][1] >= many.ntiles // 2 and seen[-1][0] - t_tiles >= KILL_AFTER or \
+            seen[-1][1] >= many.ntiles - 2
     assert r.wait_for(late, poll=0.005), r.stderr
     r.send(signal.SIGKILL)
     t_kill = r.sent_at
@@ -657,14 +665,14 @@ def test_json_after_sigkill_in_tile_stage(big, tmp_path):
     js = tmp_path / "rerun.json"
     r2 = run(cmd + ["--json", js])
     assert r2.returncode == 0, r2.stderr
-    big.assert_same(out, "rerun after a kill in the tile stage")
+    many.assert_same(out, "rerun after a kill in the tile stage")
     s = ru.read_json(js)
     assert s["resumed"] is True and s["reused"]["pass2"] is True, s
     reused, redone = s["reused"]["tiles"], s["redone"]["tiles"]
     assert old <= reused <= present, \
-        f"killed {t_kill - t_tiles:.2f} s into the tile stage with {present} of {big.ntiles} " \
+        f"killed {t_kill - t_tiles:.2f} s into the tile stage with {present} of {many.ntiles} " \
         f".tri files present ({old} of them for {LOSS_WINDOW} s or more): reused {reused}"
-    assert reused + redone == big.ntiles, s
+    assert reused + redone == many.ntiles, s
 
 
 @pytest.mark.sanitize

@@ -7,9 +7,16 @@
  *      points, the halo is loaded beside them, gdt_certify.h marks the final
  *      triangles, and tiles/tile_<i>_<j>.tri receives the certified faces and
  *      the tile's seam (gdt_seam.h);
- *   3. the seam merge (gdt_merge_seams) of all tiles' seams;
+ *   3. the seam merge by rows of tiles (gdt_merger_round, gdt_seam.h): the
+ *      seams of one row are read back from its .tri files, and each round's
+ *      final faces are appended to merge.faces in the job directory
+ *      ("GDTMRG01", u64 face count, then 3 x u32 output indices per face;
+ *      written under a temporary name, fsync'd, renamed; a resumed run
+ *      redoes the merge).  Memory: one row of seams and the merger's band,
+ *      never all seams;
  *   4. the PLY: vertices tile by tile (each tile's points by lowest input
- *      ordinal), then every tile's certified faces, then the merge's faces.
+ *      ordinal), then every tile's certified faces, then the merge's faces
+ *      round by round (each round's sorted).
  * Output bytes depend only on the inputs and the options --tile, --cell,
  * --halo, --dup and --quantum.  The face count is checked against Euler's
  * relation F = 2V - h - 2 before the PLY is completed.

@@ -1,0 +1,5 @@
+# The seam merge by rows: simulated tiles (reference triangulator,
+# certification, seam extraction), merged round by round and all at once,
+# compared with the triangulation of the whole point set.
+gdt_add_test_exe(test_merge_stream ${CMAKE_CURRENT_SOURCE_DIR}/c/test_merge_stream.c)
+add_test(NAME merge_stream COMMAND test_merge_stream)
