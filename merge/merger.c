@@ -7,6 +7,7 @@
 #include <time.h>
 
 #include "gdt_predicates.h"
+#include "private/grow.h"
 
 /* Per slot of DT(W_r). */
 #define SLOT_WALL 1u   /* the directed edge of this slot is a wall */
@@ -58,21 +59,9 @@ static double now_s(void)
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
-/* Grows *p to hold need elements (doubling); never shrinks. */
 static int grow(void **p, size_t *cap, size_t need, size_t elem)
 {
-    size_t c = *cap > 0 ? *cap : 256;
-    void *q;
-    if (need <= *cap)
-        return 0;
-    while (c < need)
-        c *= 2;
-    q = realloc(*p, c * elem);
-    if (q == NULL)
-        return -1;
-    *p = q;
-    *cap = c;
-    return 0;
+    return gdt_merge_grow(p, cap, need, elem, 256);
 }
 
 static uint64_t mix(uint64_t k)

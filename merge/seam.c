@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "gdt_predicates.h"
+#include "private/grow.h"
 
 void gdt_seam_free(gdt_seam *s)
 {
@@ -17,18 +18,7 @@ void gdt_seam_free(gdt_seam *s)
 
 static int grow(void **p, size_t *cap, size_t need, size_t elem)
 {
-    size_t c = *cap > 0 ? *cap : 1024;
-    void *q;
-    if (need <= *cap)
-        return 0;
-    while (c < need)
-        c *= 2;
-    q = realloc(*p, c * elem);
-    if (q == NULL)
-        return -1;
-    *p = q;
-    *cap = c;
-    return 0;
+    return gdt_merge_grow(p, cap, need, elem, 1024);
 }
 
 static int cmp_edge(const void *pa, const void *pb)

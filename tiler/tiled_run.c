@@ -507,16 +507,37 @@ static gdt_status reuse_tile(tr_ctx *c, uint64_t k, uint64_t size, uint64_t sum,
     return GDT_OK;
 }
 
-/* Reads the certified faces of tile k's .tri file into the PLY. */
-static gdt_status copy_faces(tr_ctx *c, uint64_t k, gdt_ply_writer *w, gdt_error *err)
+/* Copies nf face records (3 x u32 output indices, little-endian) from the
+ * current position of f to the PLY, TR_CHUNK at a time through the caller's
+ * buffers tri (3 TR_CHUNK) and raw (12 TR_CHUNK).  path names f in errors. */
+static gdt_status copy_face_records(FILE *f, const char *path, uint64_t nf, gdt_ply_writer *w,
+                                    int32_t *tri, unsigned char *raw, gdt_error *err)
+{
+    for (uint64_t done = 0; done < nf;) {
+        size_t m = nf - done < TR_CHUNK ? (size_t)(nf - done) : TR_CHUNK;
+        gdt_status st;
+        if (fread(raw, 12, m, f) != m)
+            return gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
+        for (size_t i = 0; i < 3 * m; i++)
+            tri[i] = (int32_t)get_u32(raw + 4 * i);
+        st = gdt_ply_write_faces(w, tri, m, err);
+        if (st != GDT_OK)
+            return st;
+        done += m;
+    }
+    return GDT_OK;
+}
+
+/* Reads the certified faces of tile k's .tri file into the PLY (tri, raw:
+ * the buffers of copy_face_records). */
+static gdt_status copy_faces(tr_ctx *c, uint64_t k, gdt_ply_writer *w, int32_t *tri,
+                             unsigned char *raw, gdt_error *err)
 {
     gdt_tile_desc d;
     unsigned char hdr[TR_HEADER];
     char *path = NULL;
     FILE *f = NULL;
     uint64_t nf;
-    int32_t *tri = NULL;
-    unsigned char *raw = NULL;
     gdt_status st = gdt_tiler_tile_info(c->tiler, k, &d, err);
 
     if (st == GDT_OK)
@@ -534,30 +555,10 @@ static gdt_status copy_faces(tr_ctx *c, uint64_t k, gdt_ply_writer *w, gdt_error
         goto fail;
     }
     nf = get_u64(hdr + 24);
-    tri = malloc(3 * TR_CHUNK * sizeof *tri);
-    raw = malloc(12 * TR_CHUNK);
-    if (tri == NULL || raw == NULL) {
-        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-        goto fail;
-    }
-    for (uint64_t done = 0; done < nf;) {
-        size_t m = nf - done < TR_CHUNK ? (size_t)(nf - done) : TR_CHUNK;
-        if (fread(raw, 12, m, f) != m) {
-            st = gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
-            goto fail;
-        }
-        for (size_t i = 0; i < 3 * m; i++)
-            tri[i] = (int32_t)get_u32(raw + 4 * i);
-        st = gdt_ply_write_faces(w, tri, m, err);
-        if (st != GDT_OK)
-            goto fail;
-        done += m;
-    }
+    st = copy_face_records(f, path, nf, w, tri, raw, err);
 fail:
     if (f != NULL)
         fclose(f);
-    free(raw);
-    free(tri);
     free(path);
     return st;
 }
@@ -830,19 +831,7 @@ static gdt_status copy_merge_faces(tr_ctx *c, gdt_ply_writer *w, int32_t *tri,
         st = gdt_error_set(err, GDT_EJOB, 6801, "%s: not the merge file this run wrote", path);
         goto fail;
     }
-    for (uint64_t done = 0; done < nf;) {
-        size_t m = nf - done < TR_CHUNK ? (size_t)(nf - done) : TR_CHUNK;
-        if (fread(raw, 12, m, f) != m) {
-            st = gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
-            goto fail;
-        }
-        for (size_t i = 0; i < 3 * m; i++)
-            tri[i] = (int32_t)get_u32(raw + 4 * i);
-        st = gdt_ply_write_faces(w, tri, m, err);
-        if (st != GDT_OK)
-            goto fail;
-        done += m;
-    }
+    st = copy_face_records(f, path, nf, w, tri, raw, err);
 fail:
     if (f != NULL)
         fclose(f);
@@ -955,7 +944,8 @@ static gdt_status write_ply(tr_ctx *c, gdt_error *err)
         gdt_progress_update(&c->prog, k + 1);
     }
     for (uint64_t k = 0; st == GDT_OK && k < ntiles; k++) {
-        st = stopped(c) ? interrupted_in(c->job, "the output", err) : copy_faces(c, k, w, err);
+        st = stopped(c) ? interrupted_in(c->job, "the output", err)
+                        : copy_faces(c, k, w, tri, raw, err);
         gdt_progress_update(&c->prog, ntiles + k + 1);
     }
     if (st == GDT_OK)

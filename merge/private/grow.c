@@ -1,0 +1,23 @@
+/* grow.c — see grow.h. */
+#include "grow.h"
+
+#include <stdlib.h>
+
+int gdt_merge_grow(void **p, size_t *cap, size_t need, size_t elem, size_t first)
+{
+    size_t c = *cap > 0 ? *cap : (first > 0 ? first : 1);
+    void *q;
+    if (need <= *cap)
+        return 0;
+    while (c < need) {
+        if (c > ((size_t)-1) / 2 / (elem > 0 ? elem : 1))
+            return -1;
+        c *= 2;
+    }
+    q = realloc(*p, c * elem);
+    if (q == NULL)
+        return -1;
+    *p = q;
+    *cap = c;
+    return 0;
+}
