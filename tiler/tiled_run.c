@@ -6,6 +6,7 @@
 #include <errno.h>
 #include <fcntl.h>
 #include <inttypes.h>
+#include <pthread.h>
 #include <signal.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -52,7 +53,36 @@ typedef struct tr_pending {
     uint64_t k, size, checksum;
 } tr_pending;
 
-typedef struct tr_ctx {
+/* One triangulated tile on its way from the core to its .tri file.  The
+ * main thread owns a slot until it hands it to the post stage, the post
+ * stage until it is joined. */
+typedef struct tr_slot {
+    uint64_t k;
+    gdt_tile_desc d;
+    size_t n, nh;       /* own points, halo points */
+    gdt_ipt *lh;        /* nh halo points, tile-local; owned */
+    size_t cap_lh;
+    gdt_mesh mesh;      /* the core's triangulation of the own points */
+} tr_slot;
+
+typedef struct tr_ctx tr_ctx;
+
+/* The post stage of a tile (certification, seam, sorted faces, .tri file,
+ * pending record) runs on its own thread while the main thread loads the
+ * next tile and runs the core on it.  While it runs it alone touches cert,
+ * faces, count, fbuf, seam, seam_total, pending/npending and s.cert,
+ * s.certified, s.t_certify; the main thread reads them only after
+ * post_join. */
+typedef struct tr_post {
+    pthread_t tid;
+    int running;        /* a thread was started and not yet joined */
+    tr_ctx *c;
+    tr_slot *slot;
+    gdt_status st;
+    gdt_error err;
+} tr_post;
+
+struct tr_ctx {
     const gdt_options *opts;
     gdt_log log;
     char *job;          /* owned */
@@ -64,9 +94,10 @@ typedef struct tr_ctx {
     const gdt_tile_plan *plan;
     uint64_t *base;     /* ntiles + 1 output index of each tile's first vertex */
     gdt_point_buf pts, halo;
-    gdt_ipt *lp, *lh;
-    size_t cap_lp, cap_lh;
-    gdt_mesh mesh;
+    gdt_ipt *lp;        /* own points of the tile in the core, tile-local */
+    size_t cap_lp;
+    tr_slot slot[2];    /* tile k uses slot[k & 1] */
+    tr_post post;
     uint8_t *cert;
     size_t cap_cert;
     uint32_t *faces;    /* certified faces of the current tile, 3 per face */
@@ -83,7 +114,7 @@ typedef struct tr_ctx {
     double t_flushed;
     gdt_progress prog;
     tr_summary s;
-} tr_ctx;
+};
 
 static int stopped(const tr_ctx *c)
 {
@@ -220,10 +251,9 @@ fail:
  * only on the face set, not on the order the core produced them in.
  * scratch holds 3 * nf values (the unsorted faces); the result is in
  * c->faces. */
-static gdt_status sort_faces(tr_ctx *c, size_t nf, uint32_t base, uint32_t *scratch,
-                             gdt_error *err)
+static gdt_status sort_faces(tr_ctx *c, const gdt_mesh *m, size_t nf, uint32_t base,
+                             uint32_t *scratch, gdt_error *err)
 {
-    const gdt_mesh *m = &c->mesh;
     size_t nv = m->nverts, k = 0;
     uint32_t *tmp = scratch;
 
@@ -290,41 +320,38 @@ static int host_threads(int k)
     return n < 1 ? 1 : n > 1024 ? 1024 : (int)n;
 }
 
-/* Stage 2 for tile k: core, certification, .tri file, seam. */
-static gdt_status run_tile(tr_ctx *c, uint64_t k, gdt_error *err)
+/* The first half of tile k, on the main thread: loads it and runs the core
+ * on its own points into sl (the halo goes beside it). */
+static gdt_status core_tile(tr_ctx *c, uint64_t k, tr_slot *sl, gdt_error *err)
 {
-    const gdt_tile_plan *pl = c->plan;
-    gdt_tile_desc d;
-    gdt_cert_region r;
+    gdt_tile_desc *d = &sl->d;
     gdt_core_stats cs;
-    size_t n, nh, nf, len;
-    int64_t h = pl->halo * pl->cell;
-    char *path = NULL;
-    unsigned char *p;
+    size_t n, nh;
     double t0;
     gdt_status st;
 
-    st = gdt_tiler_tile_info(c->tiler, k, &d, err);
+    sl->k = k;
+    st = gdt_tiler_tile_info(c->tiler, k, d, err);
     if (st == GDT_OK)
         st = gdt_tiler_load_tile(c->tiler, k, &c->pts, &c->halo, err);
     if (st != GDT_OK)
         return st;
-    n = c->pts.n;
-    nh = c->halo.n;
+    n = sl->n = c->pts.n;
+    nh = sl->nh = c->halo.n;
     if (n > c->s.max_tile_points)
         c->s.max_tile_points = n;
     if (nh > c->s.max_halo_points)
         c->s.max_halo_points = nh;
     if (reserve((void **)&c->lp, &c->cap_lp, n + 1, sizeof *c->lp) != 0 ||
-        reserve((void **)&c->lh, &c->cap_lh, nh + 1, sizeof *c->lh) != 0)
+        reserve((void **)&sl->lh, &sl->cap_lh, nh + 1, sizeof *sl->lh) != 0)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     for (size_t i = 0; i < n; i++) {
-        c->lp[i].x = c->pts.pts[i].x - d.local_x0;
-        c->lp[i].y = c->pts.pts[i].y - d.local_y0;
+        c->lp[i].x = c->pts.pts[i].x - d->local_x0;
+        c->lp[i].y = c->pts.pts[i].y - d->local_y0;
     }
     for (size_t i = 0; i < nh; i++) {
-        c->lh[i].x = c->halo.pts[i].x - d.local_x0;
-        c->lh[i].y = c->halo.pts[i].y - d.local_y0;
+        sl->lh[i].x = c->halo.pts[i].x - d->local_x0;
+        sl->lh[i].y = c->halo.pts[i].y - d->local_y0;
     }
 
     /* the points are on disk and in lp: their buffer is not needed while
@@ -332,7 +359,7 @@ static gdt_status run_tile(tr_ctx *c, uint64_t k, gdt_error *err)
     gdt_point_buf_free(&c->pts);
     t0 = gdt_now();
     memset(&cs, 0, sizeof cs);
-    st = gdt_core_triangulate(c->core, c->lp, n, c->opts->tile, &c->mesh, &cs, err);
+    st = gdt_core_triangulate(c->core, c->lp, n, c->opts->tile, &sl->mesh, &cs, err);
     if (st != GDT_OK)
         return st;
     free(c->lp);
@@ -343,32 +370,49 @@ static gdt_status run_tile(tr_ctx *c, uint64_t k, gdt_error *err)
     else
         c->s.gcd_tiles++;
     c->s.t_core += gdt_now() - t0;
+    return GDT_OK;
+}
 
-    t0 = gdt_now();
+/* The second half of a tile (the post stage): certification, seam, the
+ * .tri file and its pending record. */
+static gdt_status post_tile(tr_ctx *c, tr_slot *sl, gdt_error *err)
+{
+    const gdt_tile_plan *pl = c->plan;
+    const gdt_tile_desc *d = &sl->d;
+    const gdt_mesh *m = &sl->mesh;
+    uint64_t k = sl->k;
+    gdt_cert_region r;
+    size_t nf, len;
+    int64_t h = pl->halo * pl->cell;
+    char *path = NULL;
+    unsigned char *p;
+    double t0 = gdt_now();
+    gdt_status st;
+
     r.own[0] = h;
     r.own[1] = h;
     r.own[2] = h + pl->span - 1;
     r.own[3] = h + pl->span - 1;
     r.known[0] = 0;
     r.known[1] = 0;
-    r.known[2] = d.local_extent - 1;
-    r.known[3] = d.local_extent - 1;
-    r.open[GDT_SIDE_WEST] = d.local_x0 <= pl->min_x;
-    r.open[GDT_SIDE_SOUTH] = d.local_y0 <= pl->min_y;
-    r.open[GDT_SIDE_EAST] = d.local_x0 + d.local_extent - 1 >= pl->max_x;
-    r.open[GDT_SIDE_NORTH] = d.local_y0 + d.local_extent - 1 >= pl->max_y;
-    if (reserve((void **)&c->cert, &c->cap_cert, c->mesh.ntris + 1, 1) != 0)
+    r.known[2] = d->local_extent - 1;
+    r.known[3] = d->local_extent - 1;
+    r.open[GDT_SIDE_WEST] = d->local_x0 <= pl->min_x;
+    r.open[GDT_SIDE_SOUTH] = d->local_y0 <= pl->min_y;
+    r.open[GDT_SIDE_EAST] = d->local_x0 + d->local_extent - 1 >= pl->max_x;
+    r.open[GDT_SIDE_NORTH] = d->local_y0 + d->local_extent - 1 >= pl->max_y;
+    if (reserve((void **)&c->cert, &c->cap_cert, m->ntris + 1, 1) != 0)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-    st = gdt_certify_tile(c->certifier, &c->mesh, c->lh, nh, &r, c->cert, &c->s.cert, err);
+    st = gdt_certify_tile(c->certifier, m, sl->lh, sl->nh, &r, c->cert, &c->s.cert, err);
     if (st != GDT_OK)
         return st;
     nf = 0;
-    for (size_t t = 0; t < c->mesh.ntris; t++)
+    for (size_t t = 0; t < m->ntris; t++)
         nf += c->cert[t];
     c->seam.nv = 0;
     c->seam.ne = 0;
-    st = gdt_seam_extract(&c->seam, &c->mesh, c->cert, c->base[k], d.local_x0 - pl->min_x,
-                          d.local_y0 - pl->min_y, err);
+    st = gdt_seam_extract(&c->seam, m, c->cert, c->base[k], d->local_x0 - pl->min_x,
+                          d->local_y0 - pl->min_y, err);
     if (st != GDT_OK)
         return st;
     c->seam_total += c->seam.nv;
@@ -377,7 +421,8 @@ static gdt_status run_tile(tr_ctx *c, uint64_t k, gdt_error *err)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     /* the face area of the file image (64-byte aligned offset) is the
      * sort's scratch before it receives the sorted faces */
-    st = sort_faces(c, nf, (uint32_t)c->base[k], (uint32_t *)(void *)(c->fbuf + TR_HEADER), err);
+    st = sort_faces(c, m, nf, (uint32_t)c->base[k], (uint32_t *)(void *)(c->fbuf + TR_HEADER),
+                    err);
     if (st != GDT_OK)
         return st;
     c->s.certified += nf;
@@ -387,7 +432,7 @@ static gdt_status run_tile(tr_ctx *c, uint64_t k, gdt_error *err)
     memset(p, 0, TR_HEADER);
     memcpy(p, TR_MAGIC, 8);
     put_u64(p + 8, c->base[k]);
-    put_u64(p + 16, n);
+    put_u64(p + 16, sl->n);
     put_u64(p + 24, nf);
     put_u64(p + 32, c->seam.nv);
     put_u64(p + 40, c->seam.ne);
@@ -403,7 +448,7 @@ static gdt_status run_tile(tr_ctx *c, uint64_t k, gdt_error *err)
         put_u64(p, c->seam.e[i].a);
         put_u64(p + 8, c->seam.e[i].b);
     }
-    st = tile_path(c, &d, "tri", &path, err);
+    st = tile_path(c, d, "tri", &path, err);
     /* durability comes in batches: see flush_pending */
     if (st == GDT_OK)
         st = write_atomic(path, c->fbuf, len, 1, err);
@@ -417,6 +462,42 @@ static gdt_status run_tile(tr_ctx *c, uint64_t k, gdt_error *err)
     c->pending[c->npending].size = len;
     c->pending[c->npending].checksum = gdt_hash64(c->fbuf, len, k);
     c->npending++;
+    return GDT_OK;
+}
+
+static void *post_main(void *arg)
+{
+    tr_post *q = arg;
+    q->st = post_tile(q->c, q->slot, &q->err);
+    return NULL;
+}
+
+/* Waits for the post stage (if one runs) and returns its status; its error,
+ * if any, is copied to *err. */
+static gdt_status post_join(tr_ctx *c, gdt_error *err)
+{
+    tr_post *q = &c->post;
+    if (!q->running)
+        return GDT_OK;
+    pthread_join(q->tid, NULL);
+    q->running = 0;
+    if (q->st != GDT_OK)
+        *err = q->err;
+    return q->st;
+}
+
+/* Starts the post stage of sl; the caller has joined the previous one.  If
+ * no thread can be started it runs here. */
+static gdt_status post_start(tr_ctx *c, tr_slot *sl, gdt_error *err)
+{
+    tr_post *q = &c->post;
+    q->c = c;
+    q->slot = sl;
+    q->st = GDT_OK;
+    gdt_error_clear(&q->err);
+    if (pthread_create(&q->tid, NULL, post_main, q) != 0)
+        return post_tile(c, sl, err);
+    q->running = 1;
     return GDT_OK;
 }
 
@@ -1317,7 +1398,8 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     memset(&c, 0, sizeof c);
     c.opts = opts;
     c.t_flushed = gdt_now();
-    gdt_mesh_init(&c.mesh);
+    gdt_mesh_init(&c.slot[0].mesh);
+    gdt_mesh_init(&c.slot[1].mesh);
     gdt_log_init(&c.log, opts->verbosity);
     gdt_progress_init(&c.prog, opts->verbosity);
     c.job = opts->job != NULL ? strdup(opts->job) : default_job(opts->output);
@@ -1433,36 +1515,46 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
             /* keep what is done: a rerun reuses it */
             gdt_error e2;
             gdt_error_clear(&e2);
-            flush_pending(&c, &e2);
+            if (post_join(&c, &e2) == GDT_OK)
+                flush_pending(&c, &e2);
             st = interrupted_in(c.job, "the tile stage", err);
             goto fail;
         }
         st = gdt_job_get_tile(c.jobdb, k, &found, &size, &sum, err);
-        if (st == GDT_OK && found)
+        /* reuse_tile shares the post stage's buffers */
+        if (st == GDT_OK && found && (st = post_join(&c, err)) == GDT_OK)
             st = reuse_tile(&c, k, size, sum, &ok, err);
+        /* the core on tile k while the post stage finishes tile k - 1 */
         if (st == GDT_OK && !ok)
-            st = run_tile(&c, k, err);
+            st = core_tile(&c, k, &c.slot[k & 1], err);
+        if (st == GDT_OK)
+            st = post_join(&c, err);
+        /* no post stage runs: pending holds every finished tile before k */
+        if (st == GDT_OK &&
+            (c.npending >= 256 || (c.npending > 0 && gdt_now() - c.t_flushed > 1.0)))
+            st = flush_pending(&c, err);
+        if (st == GDT_OK && !ok)
+            st = post_start(&c, &c.slot[k & 1], err);
         if (st != GDT_OK)
             goto fail;
         if (ok)
             c.s.tiles_reused++;
         else
             c.s.tiles_redone++;
-        if (c.npending >= 256 || (c.npending > 0 && gdt_now() - c.t_flushed > 1.0)) {
-            st = flush_pending(&c, err);
-            if (st != GDT_OK)
-                goto fail;
-        }
         gdt_progress_update(&c.prog, c.base[k + 1]);
     }
-    st = flush_pending(&c, err);
+    st = post_join(&c, err);
+    if (st == GDT_OK)
+        st = flush_pending(&c, err);
     if (st != GDT_OK)
         goto fail;
     c.s.t_tiles = gdt_now() - t0;
     gdt_core_destroy(c.core);
     c.core = NULL;
-    gdt_mesh_free(&c.mesh);
-    gdt_mesh_init(&c.mesh);
+    for (int i = 0; i < 2; i++) {
+        gdt_mesh_free(&c.slot[i].mesh);
+        gdt_mesh_init(&c.slot[i].mesh);
+    }
     t0 = gdt_now();
     st = merge_rows(&c, err);
     if (st != GDT_OK)
@@ -1529,6 +1621,12 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
         remove_job_files(c.job);
     }
 fail:
+    {
+        /* the first error stands */
+        gdt_error e2;
+        gdt_error_clear(&e2);
+        post_join(&c, &e2);
+    }
     if (st == GDT_OK)
         gdt_progress_end(&c.prog);
     else
@@ -1539,8 +1637,10 @@ fail:
     free(c.count);
     free(c.faces);
     free(c.cert);
-    gdt_mesh_free(&c.mesh);
-    free(c.lh);
+    for (int i = 0; i < 2; i++) {
+        gdt_mesh_free(&c.slot[i].mesh);
+        free(c.slot[i].lh);
+    }
     free(c.lp);
     gdt_point_buf_free(&c.halo);
     gdt_point_buf_free(&c.pts);
