@@ -5,6 +5,7 @@
 
 #include <inttypes.h>
 #include <stdarg.h>
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
@@ -504,16 +505,20 @@ static gdt_status setup_run(gdt_core *c, gcd_run *r, const gdt_ipt *pts, size_t 
             r->ymax = pts[i].y;
     }
     span = (r->xmax - r->xmin > r->ymax - r->ymin ? r->xmax - r->xmin : r->ymax - r->ymin) + 1;
-    if (!c->opts.full_grid) {
-        /* A tile holds about grid_n^2/4 points; a sparser one gets a
-         * coarser grid (about 4 texels per point, at least 64 per side):
-         * the grid passes cost as much as the texels. */
-        int g = grid_n < 64 ? grid_n : 64;
-        while (g < grid_n && (uint64_t)g * (uint64_t)g < 4 * (uint64_t)n)
-            g *= 2;
-        grid_n = g;
-    }
     r->cell = (span + grid_n - 1) / grid_n;
+    if (!c->opts.full_grid) {
+        /* A full tile holds about grid_n^2/4 points; a sparser one, or one
+         * whose points cover only part of the square, gets coarser texels:
+         * about 4 texels per point over the points' bounding box (at least
+         * 64 per side), since the grid passes cost as much as the texels. */
+        int64_t w = r->xmax - r->xmin + 1, h = r->ymax - r->ymin + 1, c4 = span / 64;
+        double area = (double)w * (double)h / (4.0 * (double)(n > 0 ? n : 1));
+        int64_t ca = (int64_t)sqrt(area);
+        if (ca > c4)
+            ca = c4;
+        if (ca > r->cell)
+            r->cell = ca;
+    }
     r->W = (uint32_t)((r->xmax - r->xmin) / r->cell + 1);
     r->H = (uint32_t)((r->ymax - r->ymin) / r->cell + 1);
     r->cx = r->xmin + (r->xmax - r->xmin) / 2;

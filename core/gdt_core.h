@@ -83,7 +83,8 @@ typedef struct gdt_core_opts {
     double missing_limit;    /* AUTO: insertion path above this missing fraction
                                 (0 = default 1: never) */
     int full_grid;           /* use grid_n texels per side whatever the point count
-                                (default: at most about 4 texels per point) */
+                                (default: at most about 4 texels per point
+                                of the points' bounding box) */
     int profile;             /* time every kernel (gdt_core_profile_dump) */
     int check_phases;        /* debug: download and verify the triangulation
                                 after phases 2, 3 and 4 (GDT_EINTERNAL 7690) */
@@ -136,8 +137,9 @@ const char *gdt_core_device_name(const gdt_core *core);
 
 /* Triangulates pts[0..n) (distinct, tile-local coordinates in
  * [0, GDT_COORD_MAX]) on a grid of at most grid_n x grid_n texels
- * (grid_n a power of two, 64..16384; a tile with fewer than grid_n^2/4
- * points gets a coarser grid unless opts.full_grid).  On success out holds vertex i =
+ * (grid_n a power of two, 64..16384; unless opts.full_grid, a tile whose
+ * points' bounding box has more than about 4 texels per point gets coarser
+ * texels, down to 64 texels per side).  On success out holds vertex i =
  * pts[i] (out->ids, if allocated, 0..n-1) and the triangles of T_{d1,d2}
  * with their opposite pointers; fewer than 3 points or all collinear give
  * no triangle.  out must have been initialised (gdt_mesh_init); its content
