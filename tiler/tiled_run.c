@@ -190,6 +190,40 @@ static gdt_status make_dir(const char *path, gdt_error *err)
                          strerror(errno));
 }
 
+/* Writes all of buf to fd (path names it in errors); GDT_EIO 4803. */
+static gdt_status write_all(int fd, const unsigned char *buf, size_t len, const char *path,
+                            gdt_error *err)
+{
+    size_t done = 0;
+    while (done < len) {
+        ssize_t w = write(fd, buf + done, len - done);
+        if (w < 0 && errno == EINTR)
+            continue;
+        if (w <= 0)
+            return gdt_error_set(err, GDT_EIO, 4803, "%s: write failed: %s", path,
+                                 w < 0 ? strerror(errno) : "no progress");
+        done += (size_t)w;
+    }
+    return GDT_OK;
+}
+
+/* Finishes a file written through tmp: fsync (unless nosync), close, then
+ * rename to path.  *fd is closed and set to -1 whatever happens; on failure
+ * the caller removes tmp. */
+static gdt_status commit_tmp(int *fd, const char *tmp, const char *path, int nosync,
+                             gdt_error *err)
+{
+    gdt_status st = GDT_OK;
+    if (!nosync && fsync(*fd) != 0)
+        st = gdt_error_set(err, GDT_EIO, 4804, "%s: fsync failed: %s", tmp, strerror(errno));
+    if (close(*fd) != 0 && st == GDT_OK)
+        st = gdt_error_set(err, GDT_EIO, 4803, "%s: write failed: %s", tmp, strerror(errno));
+    *fd = -1;
+    if (st == GDT_OK && rename(tmp, path) != 0)
+        st = gdt_error_set(err, GDT_EIO, 4804, "%s: rename failed: %s", path, strerror(errno));
+    return st;
+}
+
 /* Writes buf to path through path.tmp: write, fsync (unless nosync),
  * rename.  On failure nothing is left at either name. */
 static gdt_status write_atomic(const char *path, const unsigned char *buf, size_t len,
@@ -198,7 +232,6 @@ static gdt_status write_atomic(const char *path, const unsigned char *buf, size_
     size_t lp = strlen(path);
     char *tmp = malloc(lp + 5);
     int fd = -1;
-    size_t done = 0;
     gdt_status st = GDT_OK;
 
     if (tmp == NULL)
@@ -210,31 +243,11 @@ static gdt_status write_atomic(const char *path, const unsigned char *buf, size_
         st = gdt_error_set(err, GDT_EIO, 4802, "%s: cannot create: %s", tmp, strerror(errno));
         goto fail;
     }
-    while (done < len) {
-        ssize_t w = write(fd, buf + done, len - done);
-        if (w < 0 && errno == EINTR)
-            continue;
-        if (w <= 0) {
-            st = gdt_error_set(err, GDT_EIO, 4803, "%s: write failed: %s", tmp,
-                               w < 0 ? strerror(errno) : "no progress");
-            goto fail;
-        }
-        done += (size_t)w;
-    }
-    if (!nosync && fsync(fd) != 0) {
-        st = gdt_error_set(err, GDT_EIO, 4804, "%s: fsync failed: %s", tmp, strerror(errno));
+    st = write_all(fd, buf, len, tmp, err);
+    if (st == GDT_OK)
+        st = commit_tmp(&fd, tmp, path, nosync, err);
+    if (st != GDT_OK)
         goto fail;
-    }
-    if (close(fd) != 0) {
-        fd = -1;
-        st = gdt_error_set(err, GDT_EIO, 4803, "%s: write failed: %s", tmp, strerror(errno));
-        goto fail;
-    }
-    fd = -1;
-    if (rename(tmp, path) != 0) {
-        st = gdt_error_set(err, GDT_EIO, 4804, "%s: rename failed: %s", path, strerror(errno));
-        goto fail;
-    }
     free(tmp);
     return GDT_OK;
 fail:
@@ -751,23 +764,6 @@ fail:
     return st;
 }
 
-/* Writes all of buf to fd; GDT_EIO 4803. */
-static gdt_status write_all(int fd, const unsigned char *buf, size_t len, const char *path,
-                            gdt_error *err)
-{
-    size_t done = 0;
-    while (done < len) {
-        ssize_t w = write(fd, buf + done, len - done);
-        if (w < 0 && errno == EINTR)
-            continue;
-        if (w <= 0)
-            return gdt_error_set(err, GDT_EIO, 4803, "%s: write failed: %s", path,
-                                 w < 0 ? strerror(errno) : "no progress");
-        done += (size_t)w;
-    }
-    return GDT_OK;
-}
-
 /* Stage 3: the seam merge by rows of tiles (gdt_seam.h).  Each row's seam
  * is read from its tiles' .tri files; each round's final faces are appended
  * to <job>/merge.faces ("GDTMRG01", u64 face count, then 3 x u32 output
@@ -858,20 +854,9 @@ static gdt_status merge_rows(tr_ctx *c, gdt_error *err)
         st = gdt_error_set(err, GDT_EIO, 4803, "%s: write failed: %s", tmp, strerror(errno));
         goto fail;
     }
-    if (fsync(fd) != 0) {
-        st = gdt_error_set(err, GDT_EIO, 4804, "%s: fsync failed: %s", tmp, strerror(errno));
+    st = commit_tmp(&fd, tmp, path, 0, err);
+    if (st != GDT_OK)
         goto fail;
-    }
-    if (close(fd) != 0) {
-        fd = -1;
-        st = gdt_error_set(err, GDT_EIO, 4803, "%s: write failed: %s", tmp, strerror(errno));
-        goto fail;
-    }
-    fd = -1;
-    if (rename(tmp, path) != 0) {
-        st = gdt_error_set(err, GDT_EIO, 4804, "%s: rename failed: %s", path, strerror(errno));
-        goto fail;
-    }
     st = tl_sync_dir(c->job, err);
     c->s.merge = *gdt_merger_stats(m);
     c->s.merge_faces = nmf;
