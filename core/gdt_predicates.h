@@ -89,6 +89,23 @@ int gdt_edge_needs_flip(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c, gdt
  * + 8u (|a| + |centre offset| + r) per side, several times that bound. */
 int gdt_circumdisk_bounds(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c, double bounds[4]);
 
+/* Whether the closed circumdisk of the triangle (a, b, c) (either
+ * orientation) misses the closed quadrant strip
+ *   Q = [x0, x1] x [y, +inf):
+ * returns 1 only if it is proven that no real point (px, py) with
+ * x0 <= px <= x1 and py >= y lies in the closed disk (a point on the circle
+ * counts as inside); 0 when the disk meets Q, when a, b, c are collinear, when
+ * the arguments break 0 <= x0 <= x1 <= GDT_COORD_MAX, 0 <= y <= GDT_COORD_MAX,
+ * or when the filter cannot decide.  Conservative like gdt_circumdisk_bounds:
+ * it may answer 0 for a disk that misses Q, never 1 for one that meets it.
+ * Decided by the certified box of gdt_circumdisk_bounds when the box misses
+ * Q, and otherwise, for a centre certified west of x0 (east of x1) and south
+ * of y, by the exact in-circle test of the corner (x0, y) (resp. (x1, y)),
+ * the point of Q nearest to the centre.  Counts one orient2d call, plus one
+ * incircle call when a corner is tested. */
+int gdt_circumdisk_misses_strip(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c, int64_t x0,
+                                int64_t x1, int64_t y);
+
 /* Faults found by gdt_predicates_selftest (bit mask). */
 #define GDT_FPENV_CONTRACTION 0x1u /* a*b - c was fused into one rounding (FMA) */
 #define GDT_FPENV_REASSOC 0x2u     /* (a + b) - a was simplified, or extended precision */

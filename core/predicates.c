@@ -70,6 +70,105 @@ int gdt_edge_needs_flip(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c, gdt
     return (code & GDT_X_FLIP) != 0;
 }
 
+/* The circumdisk of the strictly counter-clockwise triangle (a, b, c) in
+ * double: centre (*xc, *yc), radius *r and a slack *s with
+ *   |true centre x - *xc|, |true centre y - *yc|, |true radius - *r| <= *s,
+ * and with the sum of the centre's and the radius' errors per axis, plus the
+ * rounding of xc +- r, still below *s (the error analysis is in
+ * gdt_predicates.h, at gdt_circumdisk_bounds).  Returns 0 when (a, b, c) is
+ * not strictly counter-clockwise (outputs untouched). */
+static int disk_approx(gdt_ipt a, gdt_ipt b, gdt_ipt c, double *xc, double *yc, double *r,
+                       double *s)
+{
+    const double u = DBL_EPSILON / 2.0;
+    int64_t bx = b.x - a.x, by = b.y - a.y, cx = c.x - a.x, cy = c.y - a.y;
+    /* |b'|, |c'| < 2^31: every product below is < 2^62 and the sums < 2^63 */
+    int64_t det = bx * cy - by * cx;
+    int64_t bb = bx * bx + by * by, cc = cx * cx + cy * cy;
+    double d2, nx, ny, ux, uy, qx, qy;
+
+    if (det <= 0)
+        return 0;
+    d2 = 2.0 * (double)det;
+    nx = (double)cy * (double)bb - (double)by * (double)cc;
+    ny = (double)bx * (double)cc - (double)cx * (double)bb;
+    ux = nx / d2;
+    uy = ny / d2;
+    qx = (fabs((double)cy) * (double)bb + fabs((double)by) * (double)cc) / d2;
+    qy = (fabs((double)bx) * (double)cc + fabs((double)cx) * (double)bb) / d2;
+    *r = sqrt(ux * ux + uy * uy);
+    *xc = (double)a.x + ux;
+    *yc = (double)a.y + uy;
+    *s = 32.0 * u * (qx + qy) + 8.0 * u * ((double)a.x + (double)a.y + fabs(ux) + fabs(uy) + *r) +
+         8.0 * u;
+    return 1;
+}
+
+int gdt_circumdisk_bounds(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c, double bounds[4])
+{
+    double xc, yc, r, slack;
+
+    if (st != NULL)
+        st->orient_calls++;
+    if (!disk_approx(a, b, c, &xc, &yc, &r, &slack))
+        return 0;
+    bounds[0] = (xc - r) - slack;
+    bounds[1] = (yc - r) - slack;
+    bounds[2] = (xc + r) + slack;
+    bounds[3] = (yc + r) + slack;
+    return 1;
+}
+
+/* design: Q = [x0, x1] x [y, +inf) is closed and convex, so the closed disk
+ * of centre o and radius r misses it iff |o - p| > r for the point p of Q
+ * nearest to o (o clamped into Q).
+ *   1. The outer box of the disk (as gdt_circumdisk_bounds) misses Q: the
+ *      disk does.  This decides every disk whose centre lies within the
+ *      strip's x range (p is straight above o, or o itself), and every disk
+ *      west of x0 or east of x1 that does not reach the strip, whatever its
+ *      centre's y.
+ *   2. The centre is certified west of x0 (xc + s < x0; fl is monotone and
+ *      x0 is a double, so the real xc + s < x0) and south of y: p is the
+ *      corner (x0, y), an integer point, and the exact in-circle test on it
+ *      decides (on the circle counts as inside).  East of x1 alike with the
+ *      corner (x1, y).
+ *   Anything else: 0. */
+int gdt_circumdisk_misses_strip(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c, int64_t x0,
+                                int64_t x1, int64_t y)
+{
+    double xc, yc, r, slack, xlo, xhi, yhi;
+    gdt_ipt corner, tmp;
+
+    assert(PRED_IN_RANGE(a) && PRED_IN_RANGE(b) && PRED_IN_RANGE(c));
+    if (x0 < 0 || x0 > x1 || x1 > GDT_COORD_MAX || y < 0 || y > GDT_COORD_MAX)
+        return 0;
+    if (st != NULL)
+        st->orient_calls++;
+    if (!disk_approx(a, b, c, &xc, &yc, &r, &slack)) {
+        /* clockwise: the same disk, counter-clockwise from here on */
+        tmp = b;
+        b = c;
+        c = tmp;
+        if (!disk_approx(a, b, c, &xc, &yc, &r, &slack))
+            return 0;
+    }
+    xlo = (xc - r) - slack;
+    xhi = (xc + r) + slack;
+    yhi = (yc + r) + slack;
+    if (yhi < (double)y || xhi < (double)x0 || xlo > (double)x1)
+        return 1;
+    if (!(yc + slack < (double)y))
+        return 0;
+    if (xc + slack < (double)x0)
+        corner.x = x0;
+    else if (xc - slack > (double)x1)
+        corner.x = x1;
+    else
+        return 0;
+    corner.y = y;
+    return gdt_incircle(st, a, b, c, corner) < 0;
+}
+
 /* ---------------------------------------------------------------------
  * Floating-point environment self-test.
  *
@@ -82,38 +181,6 @@ int gdt_edge_needs_flip(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c, gdt
 /* a*b - c with c = fl(a*b): 0 when a*b is rounded on its own, the rounding
  * error 2^-60 when the product is fused into the subtraction.  Tried in the
  * one-expression form and in the named-temporaries form the filter uses. */
-int gdt_circumdisk_bounds(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c, double bounds[4])
-{
-    const double u = DBL_EPSILON / 2.0;
-    int64_t bx = b.x - a.x, by = b.y - a.y, cx = c.x - a.x, cy = c.y - a.y;
-    /* |b'|, |c'| < 2^31: every product below is < 2^62 and the sums < 2^63 */
-    int64_t det = bx * cy - by * cx;
-    int64_t bb = bx * bx + by * by, cc = cx * cx + cy * cy;
-    double d2, nx, ny, ux, uy, qx, qy, r, xc, yc, slack;
-
-    if (st != NULL)
-        st->orient_calls++;
-    if (det <= 0)
-        return 0;
-    d2 = 2.0 * (double)det;
-    nx = (double)cy * (double)bb - (double)by * (double)cc;
-    ny = (double)bx * (double)cc - (double)cx * (double)bb;
-    ux = nx / d2;
-    uy = ny / d2;
-    qx = (fabs((double)cy) * (double)bb + fabs((double)by) * (double)cc) / d2;
-    qy = (fabs((double)bx) * (double)cc + fabs((double)cx) * (double)bb) / d2;
-    r = sqrt(ux * ux + uy * uy);
-    xc = (double)a.x + ux;
-    yc = (double)a.y + uy;
-    slack = 32.0 * u * (qx + qy) +
-            8.0 * u * ((double)a.x + (double)a.y + fabs(ux) + fabs(uy) + r) + 8.0 * u;
-    bounds[0] = (xc - r) - slack;
-    bounds[1] = (yc - r) - slack;
-    bounds[2] = (xc + r) + slack;
-    bounds[3] = (yc + r) + slack;
-    return 1;
-}
-
 static unsigned probe_contraction(void)
 {
     volatile double va = 1.0 + 0x1p-30, vb = 1.0 + 0x1p-30;

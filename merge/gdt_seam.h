@@ -36,16 +36,21 @@
  * The merge by rows (gdt_merger_round).  Tiles are ordered by (j, i); a row
  * is the tiles of one j, rows without tiles are skipped.  For the rows
  * r = 0, 1, ... in that order: S_r is the seam of row r's tiles, A_r = S_0
- * u ... u S_r, C_r the certified triangles of rows <= r, Y_{r+1} the
- * merge-frame y of the south edge of the next row (every point of a later
- * row has y >= Y_{r+1}).  Round r holds a band W_r within A_r and a list of
- * walls (directed edges), triangulates W_r (DT(W_r) = T(W_r), the reference
- * triangulator) and classifies its triangles:
+ * u ... u S_r, C_r the certified triangles of rows <= r, [X0, X1] the
+ * cloud's x range in the merge frame (every seam vertex has X0 <= x <= X1),
+ * Y_{r+1} the merge-frame y of the south edge of the next row, and
+ *   Q_{r+1} = [X0, X1] x [Y_{r+1}, +inf):
+ * every point of a later row lies in Q_{r+1}, and so does every triangle
+ * with its vertices in later rows (Q_{r+1} is convex).  Round r holds a band
+ * W_r within A_r and a list of walls (directed edges), triangulates W_r
+ * (DT(W_r) = T(W_r), the reference triangulator) and classifies its
+ * triangles:
  *   covered: reached by a flood from the triangle left of every wall that
  *            never crosses a wall;
- *   emitted: not covered, and final: the conservative outer box of its
- *            closed circumdisk (gdt_circumdisk_bounds) ends below Y_{r+1};
- *            in the last round every triangle that is not covered;
+ *   emitted: not covered, and final: its closed circumdisk provably misses
+ *            Q_{r+1} (gdt_circumdisk_misses_strip, conservative: it may
+ *            leave a final triangle pending, never the reverse); in the
+ *            last round every triangle that is not covered;
  *   pending: the others.
  * It hands on to round r + 1:
  *   W'_r: the vertices of pending triangles and the vertices on the hull of
@@ -90,11 +95,12 @@
  * hull(A_r)).  A wall with K on its right has its reverse as a wall (I3:
  * K is neither Z_r nor outside the hull), with K on the left.  So K holds a seed, every
  * triangle outside Z_r is covered, and the uncovered triangles are Z*_r.
- * What is emitted is right: a final triangle t of Z*_r has its closed disk
- * below Y_{r+1}, so it holds no point of U \ A_r and t is in T(U) (b); it
- * does not overlap C_r, nor a certified triangle of a later row (those lie
- * at y >= Y_{r+1}), so t is in E* (c); it is not in E_{r-1} (Z_r excludes
- * it).  In the last round A_r = U and C_r = C, so Z*_r = E* \ E_{r-1}, all
+ * What is emitted is right: a final triangle t of Z*_r has a closed disk
+ * that misses Q_{r+1}, which holds every point of U \ A_r, so the disk holds
+ * no point of U \ A_r and t is in T(U) (b); only that is asked of the disk.
+ * t lies in its disk, so it does not overlap C_r, nor a certified triangle
+ * of a later row (that lies in Q_{r+1}), so t is in E* (c); it is not in
+ * E_{r-1} (Z_r excludes it).  In the last round A_r = U and C_r = C, so Z*_r = E* \ E_{r-1}, all
  * emitted.  Every face of E* is emitted once, and the hull of the last
  * DT(W_r) is the hull of U (I1), i.e. of P.
  * Round 0: W_0 = A_0, DT(W_0) = T(A_0); Z_0 is bounded by barrier edges
@@ -143,13 +149,16 @@
  *
  * Memory: a round holds W_r, DT(W_r) and the walls (about 200 bytes per
  * band vertex).  W'_r is the pending triangles' vertices (those whose disk
- * reaches the next row: about the northern seam of one row, more where
+ * reaches into Q_{r+1}: about the northern seam of one row, more where
  * empty space lets disks grow) plus the hull of A_r, never all seams.  Flat
  * slivers along the cloud's west and east sides have disks reaching far
- * north (the box test cannot see that only a thin lens of the disk lies
- * inside the cloud's x range), so they stay pending longer and the band
- * grows by a few vertices per row there.  The emitted faces of a round are
- * handed to the caller and dropped.
+ * north, but outside [X0, X1]: only a thin lens of such a disk lies in the
+ * cloud's x range, and it ends near the sliver.  Testing the disk against
+ * Q_{r+1} rather than against the half-plane y >= Y_{r+1} emits them: they
+ * do not make the band grow with the number of rows.  The hull of A_r stays whole (I1): where the cloud's west
+ * or east side is a straight lattice line holding many points (gridded
+ * data), every one of them stays in the band.  The emitted faces of a round
+ * are handed to the caller and dropped.
  */
 #ifndef GDT_SEAM_H
 #define GDT_SEAM_H
@@ -219,15 +228,22 @@ typedef struct gdt_merge_stats {
  * instance. */
 typedef struct gdt_merger gdt_merger;
 
-/* Ownership: *out is new; free with gdt_merger_destroy.  Errors: 7001. */
-gdt_status gdt_merger_create(gdt_merger **out, gdt_error *err);
+/* x0, x1: the cloud's x range in the merge frame, [X0, X1] of the proof:
+ * every seam vertex of every round has x0 <= x <= x1, with
+ * 0 <= x0 <= x1 <= 2^31 - 1.  A wider range is safe (only fewer triangles
+ * become final before the last round); a narrower one is refused by
+ * gdt_merger_round.
+ * Ownership: *out is new; free with gdt_merger_destroy.  Errors:
+ * GDT_EINTERNAL 7814 (x0, x1 out of order or out of range), 7001. */
+gdt_status gdt_merger_create(gdt_merger **out, int64_t x0, int64_t x1, gdt_error *err);
 void gdt_merger_destroy(gdt_merger *m);
 
 /* One round: row holds the seam of the tiles of the next row in tile order
  * (vertices by strictly increasing id, every id above those of earlier
  * rounds; the barrier edges name vertices of this row).  y_next: every seam
  * vertex of every later row has merge-frame y >= y_next (ignored when last
- * is nonzero: no later row).  row is only read during the call.
+ * is nonzero: no later row); a y_next outside [0, 2^31 - 1] keeps every
+ * uncovered triangle pending.  row is only read during the call.
  * On success *faces (owned by m, valid until the next call on m) holds
  * 3 * *nfaces output indices: the faces final in this round,
  * counter-clockwise, each rotated to start at its smallest index, sorted.
@@ -235,7 +251,9 @@ void gdt_merger_destroy(gdt_merger *m);
  * the rows, each once.
  * Errors: GDT_EINTERNAL 7810 (ids not increasing), 7811 (a wall missing from
  * DT(W_r), or covered on its uncovered side: a certification fault), 7812
- * (an edge names no vertex of the band), 7813 (a round after the last), the
+ * (an edge names no vertex of the band), 7813 (a round after the last), 7814
+ * (a vertex with x outside [x0, x1], or with y below an earlier round's
+ * y_next: the finality test of earlier rounds assumed otherwise), the
  * reference triangulator's 734x, 7001.  After an error m can only be
  * destroyed. */
 gdt_status gdt_merger_round(gdt_merger *m, const gdt_seam *row, int64_t y_next, int last,

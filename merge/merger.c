@@ -48,7 +48,10 @@ struct gdt_merger {
     uint64_t *faces;
     size_t cap_faces;
     uint64_t last_id; /* largest id so far (valid when have_id) */
-    int have_id, finished;
+    int64_t x0, x1;   /* every vertex has x0 <= x <= x1 */
+    int64_t y_floor;  /* every vertex of later rounds has y >= y_floor (the
+                         largest y_next so far; valid when have_floor) */
+    int have_id, have_floor, finished;
     gdt_merge_stats st;
 };
 
@@ -163,13 +166,20 @@ static uint64_t held_bytes(const gdt_merger *m)
     return b;
 }
 
-gdt_status gdt_merger_create(gdt_merger **out, gdt_error *err)
+gdt_status gdt_merger_create(gdt_merger **out, int64_t x0, int64_t x1, gdt_error *err)
 {
-    gdt_merger *m = calloc(1, sizeof *m);
+    gdt_merger *m;
     *out = NULL;
+    if (x0 < 0 || x0 > x1 || x1 > GDT_COORD_MAX)
+        return gdt_error_set(err, GDT_EINTERNAL, 7814,
+                             "seam merge x range [%lld, %lld] is not within [0, 2^31 - 1]",
+                             (long long)x0, (long long)x1);
+    m = calloc(1, sizeof *m);
     if (m == NULL)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     gdt_mesh_init(&m->dt);
+    m->x0 = x0;
+    m->x1 = x1;
     *out = m;
     return GDT_OK;
 }
@@ -220,7 +230,6 @@ gdt_status gdt_merger_round(gdt_merger *m, const gdt_seam *row, int64_t y_next, 
 {
     const gdt_mesh *dt = &m->dt;
     size_t nstack = 0, nf = 0, ncov = 0, nhull = 0, nt, nkeep;
-    const double ylim = (double)y_next;
     double t0 = now_s();
     gdt_status st;
 
@@ -237,6 +246,19 @@ gdt_status gdt_merger_round(gdt_merger *m, const gdt_seam *row, int64_t y_next, 
         }
         m->last_id = row->v[i].id;
         m->have_id = 1;
+        /* Q of the earlier rounds' finality test must hold every later vertex */
+        if (row->v[i].x < m->x0 || row->v[i].x > m->x1 ||
+            (m->have_floor && row->v[i].y < m->y_floor)) {
+            st = gdt_error_set(err, GDT_EINTERNAL, 7814,
+                               "seam vertex %llu at (%lld, %lld) of round %llu lies outside "
+                               "[%lld, %lld] x [%lld, inf), where the earlier rounds assumed "
+                               "every later vertex",
+                               (unsigned long long)row->v[i].id, (long long)row->v[i].x,
+                               (long long)row->v[i].y, (unsigned long long)m->st.rounds,
+                               (long long)m->x0, (long long)m->x1,
+                               (long long)(m->have_floor ? m->y_floor : 0));
+            goto fail;
+        }
     }
     if (grow((void **)&m->w, &m->cap_w, m->nw + row->nv, sizeof *m->w) != 0 ||
         grow((void **)&m->wall, &m->cap_wall, m->nwall + row->ne, sizeof *m->wall) != 0) {
@@ -362,11 +384,9 @@ gdt_status gdt_merger_round(gdt_merger *m, const gdt_seam *row, int64_t y_next, 
             ncov++;
             continue;
         }
-        if (!final) {
-            double box[4];
-            final = gdt_circumdisk_bounds(NULL, m->pts[v[0]], m->pts[v[1]], m->pts[v[2]], box) &&
-                    box[3] < ylim;
-        }
+        if (!final)
+            final = gdt_circumdisk_misses_strip(NULL, m->pts[v[0]], m->pts[v[1]], m->pts[v[2]],
+                                                m->x0, m->x1, y_next);
         if (final) {
             m->tri[t] |= TRI_EMITTED;
             nf++;
@@ -443,6 +463,9 @@ gdt_status gdt_merger_round(gdt_merger *m, const gdt_seam *row, int64_t y_next, 
     } else {
         gdt_seam_edge *swap = m->wall;
         size_t cap = m->cap_wall;
+        if (!m->have_floor || y_next > m->y_floor)
+            m->y_floor = y_next;
+        m->have_floor = 1;
         nkeep = 0;
         for (size_t i = 0; i < m->nw; i++)
             if (m->keep[i])
@@ -475,7 +498,8 @@ gdt_status gdt_merge_seams(const gdt_seam *s, uint64_t **faces_out, size_t *nfac
     *faces_out = NULL;
     *nfaces_out = 0;
     memset(ms, 0, sizeof *ms);
-    st = gdt_merger_create(&m, err);
+    /* one round, the last: no finality test, so the widest x range */
+    st = gdt_merger_create(&m, 0, GDT_COORD_MAX, err);
     if (st == GDT_OK)
         st = gdt_merger_round(m, s, 0, 1, &f, &nf, err);
     if (st != GDT_OK)

@@ -785,7 +785,11 @@ static gdt_status merge_rows(tr_ctx *c, gdt_error *err)
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         goto fail;
     }
-    st = gdt_merger_create(&m, err);
+    /* the merge frame is lattice minus the plan's minimum, so the cloud's x
+     * range is [0, max_x - min_x]; read_seam refuses any seam vertex beyond
+     * GDT_COORD_MAX, so clamping there keeps every vertex in the range */
+    st = gdt_merger_create(
+        &m, 0, pl->max_x - pl->min_x < GDT_COORD_MAX ? pl->max_x - pl->min_x : GDT_COORD_MAX, err);
     if (st != GDT_OK)
         goto fail;
     fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);

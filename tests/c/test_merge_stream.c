@@ -9,11 +9,12 @@
  *     the whole set), as canonical face sets, each face exactly once;
  *   - F_row and F_all are the same set, with the same hull and counts;
  *   - a second run by rows gives the same face sequence;
- *   - on many rows of tiles the largest band stays far below the seam.
+ *   - on many rows of tiles the largest band stays far below the seam, and
+ *     twice the rows (same width and density) give about the same band.
  * Layouts: uniform strips of 30+ rows, sparse points with empty rows, a void
  * wider than several rows with a lone point inside, co-circular grids,
  * clusters, points on tile borders, collinear sets, tiny sets; halos from 0
- * to wider than a tile.  Also the merger's refusals: 7810, 7811, 7812, 7813.
+ * to wider than a tile.  Also the merger's refusals: 7810 to 7814.
  */
 #include <inttypes.h>
 #include <stdio.h>
@@ -144,12 +145,13 @@ static void seam_append(gdt_seam *dst, const gdt_seam *src)
 /* The tiled pipeline on c (merge frame: every coordinate in [0, 2^31 - 1])
  * with tile side span and halo width h (lattice steps).  Fills cert (the
  * certified faces), rows[0..*nrows) (the seam of each non-empty row, in
- * order) and y_next[r] (south edge of the row after r). */
+ * order), y_next[r] (south edge of the row after r) and the x range. */
 typedef struct tiled {
     faces cert;
     gdt_seam *rows;
     int64_t *y_next;
     size_t nrows;
+    int64_t x0, x1; /* the cloud's x range */
     gdt_seam all;
 } tiled;
 
@@ -209,6 +211,8 @@ static int run_tiles(gdt_checks *ck, const char *label, cloud *c, int64_t span, 
         maxx = c->p[i].x > maxx ? c->p[i].x : maxx;
         maxy = c->p[i].y > maxy ? c->p[i].y : maxy;
     }
+    out->x0 = c->n > 0 ? minx : 0;
+    out->x1 = c->n > 0 ? maxx : 0;
     out->rows = calloc(c->n + 1, sizeof *out->rows);
     out->y_next = calloc(c->n + 1, sizeof *out->y_next);
     if (out->rows == NULL || out->y_next == NULL)
@@ -301,7 +305,7 @@ static int merge_by_rows(gdt_checks *ck, const char *label, const tiled *t, face
     int rc = -1;
 
     gdt_error_clear(&err);
-    if (gdt_merger_create(&m, &err) != GDT_OK)
+    if (gdt_merger_create(&m, t->x0, t->x1, &err) != GDT_OK)
         return -1;
     for (size_t r = 0; r < t->nrows; r++) {
         const uint64_t *f;
@@ -472,6 +476,46 @@ static void test_tall_strips(gdt_checks *ck)
     }
 }
 
+/* The band is bounded by the tile size, not by the number of rows: the same
+ * strip (width, density, halos) with R and 2R rows of tiles must have about
+ * the same largest band.  Hull slivers along the west and east sides have
+ * disks reaching far north, but outside the cloud's x range; a finality test
+ * blind to that range keeps them pending and the band grows with every row
+ * (here by more than a third from R to 2R).  The lattice is fine (tile side
+ * 2^16) so that hardly any point lies exactly on the cloud's west or east
+ * line: those are hull vertices of every later band (I1 of gdt_seam.h),
+ * another effect. */
+static void test_band_bounded(gdt_checks *ck)
+{
+    const int64_t span = INT64_C(1) << 16, rows = 60, cols = 2, per_tile = 40;
+    const int64_t halos[] = {0, span / 25};
+    for (int k = 0; k < 2; k++) {
+        uint64_t band[2] = {0, 0}, seam[2] = {0, 0};
+        char label[96];
+        for (int q = 0; q < 2; q++) {
+            cloud c = {NULL, 0, 0};
+            uint64_t s = 400 + (uint64_t)k;
+            int64_t nrows = rows << q;
+            case_result r;
+            gen_uniform(&c, &s, (size_t)(cols * nrows * per_tile), 0, cols * span, 0, nrows * span);
+            snprintf(label, sizeof label, "strip of %" PRId64 " rows, halo %" PRId64, nrows,
+                     halos[k]);
+            run_case(ck, label, &c, span, halos[k], &r);
+            GDT_CHECK(ck, r.rounds == (uint64_t)nrows, "%s: %" PRIu64 " rounds", label, r.rounds);
+            band[q] = r.band;
+            seam[q] = r.seam;
+            free(c.p);
+        }
+        printf("band, halo %" PRId64 ": %" PRIu64 " of %" PRIu64 " seam vertices in %" PRId64
+               " rows, %" PRIu64 " of %" PRIu64 " in %" PRId64 " rows\n",
+               halos[k], band[0], seam[0], rows, band[1], seam[1], 2 * rows);
+        GDT_CHECK(ck, band[0] > 0 && 10 * band[1] < 13 * band[0],
+                  "halo %" PRId64 ": the largest band grows with the rows: %" PRIu64 " in %" PRId64
+                  " rows, %" PRIu64 " in %" PRId64,
+                  halos[k], band[0], rows, band[1], 2 * rows);
+    }
+}
+
 /* Disks crossing several rows: sparse points, empty rows, a large void. */
 static void test_sparse_and_voids(gdt_checks *ck)
 {
@@ -631,7 +675,7 @@ static void test_errors(gdt_checks *ck)
     gdt_error_clear(&err);
     row.e = &bogus;
     row.ne = 1;
-    GDT_CHECK(ck, gdt_merger_create(&m, &err) == GDT_OK, "create");
+    GDT_CHECK(ck, gdt_merger_create(&m, 0, 100, &err) == GDT_OK, "create");
     GDT_CHECK(ck,
               gdt_merger_round(m, &row, 0, 1, &f, &nf, &err) == GDT_EINTERNAL && err.code == 7811,
               "a barrier edge missing from DT: GDT-%d %s", err.code, err.msg);
@@ -639,7 +683,7 @@ static void test_errors(gdt_checks *ck)
 
     gdt_error_clear(&err);
     row.e = &missing;
-    gdt_merger_create(&m, &err);
+    gdt_merger_create(&m, 0, 100, &err);
     GDT_CHECK(ck,
               gdt_merger_round(m, &row, 0, 1, &f, &nf, &err) == GDT_EINTERNAL && err.code == 7812,
               "an edge naming no band vertex: GDT-%d %s", err.code, err.msg);
@@ -647,7 +691,7 @@ static void test_errors(gdt_checks *ck)
 
     gdt_error_clear(&err);
     row.ne = 0;
-    gdt_merger_create(&m, &err);
+    gdt_merger_create(&m, 0, 100, &err);
     GDT_CHECK(ck, gdt_merger_round(m, &row, 50, 0, &f, &nf, &err) == GDT_OK, "round 0: %s",
               err.msg);
     GDT_CHECK(
@@ -656,7 +700,7 @@ static void test_errors(gdt_checks *ck)
     gdt_merger_destroy(m);
 
     gdt_error_clear(&err);
-    gdt_merger_create(&m, &err);
+    gdt_merger_create(&m, 0, 100, &err);
     GDT_CHECK(ck, gdt_merger_round(m, &row, 0, 1, &f, &nf, &err) == GDT_OK && nf == 2,
               "the square in one round: %zu faces", nf);
     GDT_CHECK(ck, gdt_merger_stats(m)->hull_vertices == 4, "hull of the square");
@@ -664,6 +708,48 @@ static void test_errors(gdt_checks *ck)
               gdt_merger_round(m, &row, 0, 1, &f, &nf, &err) == GDT_EINTERNAL && err.code == 7813,
               "a round after the last: GDT-%d %s", err.code, err.msg);
     gdt_merger_destroy(m);
+
+    /* the x range must hold every vertex, and a row must start at or above
+     * every earlier y_next: earlier rounds' finality tests assumed both */
+    gdt_error_clear(&err);
+    GDT_CHECK(ck,
+              gdt_merger_create(&m, 5, 4, &err) == GDT_EINTERNAL && err.code == 7814 && m == NULL,
+              "x range out of order: GDT-%d %s", err.code, err.msg);
+    GDT_CHECK(ck,
+              gdt_merger_create(&m, 0, GDT_COORD_MAX + 1, &err) == GDT_EINTERNAL &&
+                  err.code == 7814 && m == NULL,
+              "x range beyond the lattice: GDT-%d %s", err.code, err.msg);
+    for (int k = 0; k < 2; k++) {
+        gdt_error_clear(&err);
+        gdt_merger_create(&m, k == 0 ? 1 : 0, k == 0 ? 100 : 99, &err);
+        GDT_CHECK(
+            ck, gdt_merger_round(m, &row, 0, 1, &f, &nf, &err) == GDT_EINTERNAL && err.code == 7814,
+            "a vertex %s of the x range: GDT-%d %s", k == 0 ? "west" : "east", err.code, err.msg);
+        gdt_merger_destroy(m);
+    }
+    {
+        gdt_seam_vertex low[2] = {{20, 0, 49}, {21, 100, 120}};
+        gdt_seam below = {low, 2, 2, NULL, 0, 0};
+        gdt_error_clear(&err);
+        gdt_merger_create(&m, 0, 100, &err);
+        row.nv = 3;
+        GDT_CHECK(ck, gdt_merger_round(m, &row, 50, 0, &f, &nf, &err) == GDT_OK, "round 0: %s",
+                  err.msg);
+        GDT_CHECK(ck,
+                  gdt_merger_round(m, &below, 200, 1, &f, &nf, &err) == GDT_EINTERNAL &&
+                      err.code == 7814,
+                  "a vertex below the last y_next: GDT-%d %s", err.code, err.msg);
+        gdt_merger_destroy(m);
+        low[0].y = 50;
+        gdt_error_clear(&err);
+        gdt_merger_create(&m, 0, 100, &err);
+        GDT_CHECK(ck,
+                  gdt_merger_round(m, &row, 50, 0, &f, &nf, &err) == GDT_OK &&
+                      gdt_merger_round(m, &below, 200, 1, &f, &nf, &err) == GDT_OK,
+                  "a vertex on the last y_next: GDT-%d %s", err.code, err.msg);
+        gdt_merger_destroy(m);
+        row.nv = 4;
+    }
 }
 
 int main(int argc, char **argv)
@@ -672,6 +758,7 @@ int main(int argc, char **argv)
     int cases = argc > 1 ? atoi(argv[1]) : 40;
     test_errors(&ck);
     test_tall_strips(&ck);
+    test_band_bounded(&ck);
     test_sparse_and_voids(&ck);
     test_layouts(&ck);
     test_random(&ck, cases);

@@ -598,6 +598,305 @@ static void test_flip_generic(gdt_pred_stats *st)
     CHECK(n > 10000, "generic flip generator degenerate");
 }
 
+/* ---------------------------------------------------------------------
+ * gdt_circumdisk_misses_strip against an exact oracle.
+ * ------------------------------------------------------------------- */
+
+/* r += v * 2^(64 k), r a 256-bit number in four 64-bit limbs (little end
+ * first); the callers' sums stay below 2^256. */
+static void acc64(uint64_t r[4], uint64_t v, int k)
+{
+    for (; k < 4 && v != 0; k++) {
+        uint64_t s = r[k] + v;
+        v = s < v;
+        r[k] = s;
+    }
+}
+
+static void acc128(uint64_t r[4], u128 v, int k)
+{
+    acc64(r, (uint64_t)v, k);
+    acc64(r, (uint64_t)(v >> 64), k + 1);
+}
+
+/* r += v^2 for |v| < 2^127. */
+static void acc_square(uint64_t r[4], i128 v)
+{
+    u128 m = v < 0 ? (u128)0 - (u128)v : (u128)v;
+    uint64_t lo = (uint64_t)m, hi = (uint64_t)(m >> 64);
+    acc128(r, (u128)lo * lo, 0);
+    acc128(r, (u128)lo * hi, 1);
+    acc128(r, (u128)lo * hi, 1);
+    acc128(r, (u128)hi * hi, 2);
+}
+
+static int cmp256(const uint64_t a[4], const uint64_t b[4])
+{
+    for (int k = 3; k >= 0; k--)
+        if (a[k] != b[k])
+            return a[k] < b[k] ? -1 : 1;
+    return 0;
+}
+
+/* p^2 + q^2 - (s^2 + t^2), as a sign. */
+static int cmp_sums(i128 p, i128 q, i128 s, i128 t)
+{
+    uint64_t l[4] = {0, 0, 0, 0}, r[4] = {0, 0, 0, 0};
+    acc_square(l, p);
+    acc_square(l, q);
+    acc_square(r, s);
+    acc_square(r, t);
+    return cmp256(l, r);
+}
+
+static i128 clamp128(i128 v, i128 lo, i128 hi)
+{
+    return v < lo ? lo : (v > hi ? hi : v);
+}
+
+/* Exact: does the closed circumdisk of a, b, c (not collinear) meet
+ * Q = [x0, x1] x [y, +inf)?  With D = 2 det(b - a, c - a) (made positive)
+ * the centre is O / D with O = a D + (n_x, n_y), the radius |(n_x, n_y)| / D;
+ * the point of Q nearest to the centre is the centre clamped into Q, so the
+ * disk meets Q iff |clamp(O) - O|^2 <= n_x^2 + n_y^2 (all scaled by D).
+ * |O| < 2^96, so the squares need 256 bits.  Also checks that O / D is
+ * equidistant from a, b and c (the oracle's own formula). */
+static int oracle_meets(gdt_ipt a, gdt_ipt b, gdt_ipt c, int64_t x0, int64_t x1, int64_t y)
+{
+    i128 bx = b.x - a.x, by = b.y - a.y, cx = c.x - a.x, cy = c.y - a.y;
+    i128 det = bx * cy - by * cx, bb = bx * bx + by * by, cc = cx * cx + cy * cy;
+    i128 nx = cy * bb - by * cc, ny = bx * cc - cx * bb, d = 2 * det;
+    i128 ox, oy;
+    if (d < 0) {
+        d = -d;
+        nx = -nx;
+        ny = -ny;
+    }
+    ox = (i128)a.x * d + nx;
+    oy = (i128)a.y * d + ny;
+    CHECK(cmp_sums((i128)b.x * d - ox, (i128)b.y * d - oy, nx, ny) == 0 &&
+              cmp_sums((i128)c.x * d - ox, (i128)c.y * d - oy, nx, ny) == 0,
+          "oracle centre not equidistant");
+    return cmp_sums(clamp128(ox, (i128)x0 * d, (i128)x1 * d) - ox,
+                    (oy > (i128)y * d ? oy : (i128)y * d) - oy, nx, ny) <= 0;
+}
+
+typedef struct strip_tally {
+    uint64_t cases, meets, misses, proven, box_blind, box_blind_proven, lattice, lattice_proven;
+} strip_tally;
+
+/* One case: the predicate never claims a miss the oracle refutes; it does
+ * not depend on the orientation; the tallies feed the strength checks. */
+static void strip_case(gdt_pred_stats *st, strip_tally *t, gdt_ipt a, gdt_ipt b, gdt_ipt c,
+                       int64_t x0, int64_t x1, int64_t y, int lattice, const char *kind)
+{
+    double box[4];
+    int ccw, got, meets, box_misses;
+    if (ref_orient(a, b, c) == 0) {
+        CHECK(gdt_circumdisk_misses_strip(st, a, b, c, x0, x1, y) == 0, "%s: collinear", kind);
+        return;
+    }
+    if (x0 > x1) {
+        int64_t s = x0;
+        x0 = x1;
+        x1 = s;
+    }
+    got = gdt_circumdisk_misses_strip(st, a, b, c, x0, x1, y);
+    meets = oracle_meets(a, b, c, x0, x1, y);
+    CHECK(got == 0 || got == 1, "%s: result %d", kind, got);
+    CHECK(!(got && meets),
+          "%s: claims a miss, but the disk of (%lld %lld) (%lld %lld) (%lld %lld) meets "
+          "[%lld, %lld] x [%lld, inf)",
+          kind, (long long)a.x, (long long)a.y, (long long)b.x, (long long)b.y, (long long)c.x,
+          (long long)c.y, (long long)x0, (long long)x1, (long long)y);
+    CHECK(gdt_circumdisk_misses_strip(st, a, c, b, x0, x1, y) == got, "%s: orientation", kind);
+    ccw = ref_orient(a, b, c) > 0;
+    gdt_circumdisk_bounds(NULL, a, ccw ? b : c, ccw ? c : b, box);
+    box_misses = box[3] < (double)y || box[2] < (double)x0 || box[0] > (double)x1;
+    CHECK(!box_misses || got, "%s: the box misses Q, the predicate says %d", kind, got);
+    t->cases++;
+    t->meets += meets;
+    if (!meets) {
+        t->misses++;
+        t->proven += got;
+        t->box_blind += !box_misses;
+        t->box_blind_proven += !box_misses && got;
+        t->lattice += lattice;
+        t->lattice_proven += lattice && got;
+    }
+}
+
+/* v rounded to an integer, clamped to [-2, L + 2] first (centres of slivers
+ * lie far outside the range). */
+static int64_t round_near_range(double v)
+{
+    if (!(v > -2.0))
+        return -2;
+    if (v > (double)(L + 2))
+        return L + 2;
+    return (int64_t)llround(v);
+}
+
+/* A point of the circle of centre (ox, oy) and radius rad at angle th,
+ * rounded, moved by up to j, clamped into the range. */
+static gdt_ipt on_circle(rng *r, double ox, double oy, double rad, double th, int64_t j)
+{
+    return pt(clamp_coord(round_near_range(ox + rad * cos(th)) + rng_range(r, -j, j)),
+              clamp_coord(round_near_range(oy + rad * sin(th)) + rng_range(r, -j, j)));
+}
+
+static void test_strip(gdt_pred_stats *st)
+{
+    const double pi = 3.14159265358979323846;
+    rng r = {11};
+    strip_tally t;
+    const int n = 240000;
+    memset(&t, 0, sizeof t);
+    for (int i = 0; i < n; i++) {
+        gdt_ipt p[3], q;
+        int kind = i % 8;
+        int64_t x0, x1, y, w;
+        double ox, oy, rad, d, th;
+        if (kind == 0) { /* uniform over the whole range */
+            for (int k = 0; k < 3; k++)
+                p[k] = pt(rng_range(&r, 0, L), rng_range(&r, 0, L));
+        } else if (kind == 1) { /* small, anywhere, at the ends of the range too */
+            int64_t bx =
+                rng_next(&r) % 3 == 0 ? (rng_next(&r) % 2 ? 0 : L - 64) : rng_range(&r, 0, L - 64);
+            int64_t by = rng_range(&r, 0, L - 64);
+            for (int k = 0; k < 3; k++)
+                p[k] = pt(bx + rng_range(&r, 0, 64), by + rng_range(&r, 0, 64));
+        } else if (kind == 2 || kind == 3) { /* slivers: c next to the segment a-b */
+            double s = (double)(rng_next(&r) >> 11) * 0x1p-53;
+            int64_t ext = kind == 2 ? L : rng_range(&r, 100, 1 << 20);
+            p[0] = pt(rng_range(&r, 0, L), rng_range(&r, 0, L));
+            p[1] = pt(clamp_coord(p[0].x + rng_range(&r, -ext, ext)),
+                      clamp_coord(p[0].y + rng_range(&r, -ext, ext)));
+            p[2] = pt(clamp_coord(p[0].x + (int64_t)(s * (double)(p[1].x - p[0].x)) +
+                                  rng_range(&r, -2, 2)),
+                      clamp_coord(p[0].y + (int64_t)(s * (double)(p[1].y - p[0].y)) +
+                                  rng_range(&r, -2, 2)));
+        } else if (kind == 4) { /* a hull sliver on a west or east side: near-vertical */
+            int64_t x = rng_next(&r) % 2 ? rng_range(&r, 0, 50) : rng_range(&r, L - 50, L);
+            int64_t y0 = rng_range(&r, 0, L - 2000), len = rng_range(&r, 10, 1000);
+            p[0] = pt(x, y0);
+            p[1] = pt(clamp_coord(x + rng_range(&r, -3, 3)), y0 + 2 * len);
+            p[2] = pt(clamp_coord(x + rng_range(&r, -3, 3)), y0 + rng_range(&r, 1, 2 * len - 1));
+        } else { /* lattice circles: centre (cx, cy), radius 5k, points of 3-4-5 */
+            int64_t k = kind == 5 ? rng_range(&r, 1, 1000) : rng_range(&r, 1, L / 12);
+            int64_t cx = rng_range(&r, 5 * k, L - 5 * k), cy = rng_range(&r, 5 * k, L - 5 * k);
+            int64_t a3 = 3 * k, a4 = 4 * k, a5 = 5 * k, e = rng_range(&r, -1, 1);
+            if (kind == 7) { /* right angle: a diameter as an edge */
+                p[0] = pt(cx - a5, cy);
+                p[1] = pt(cx + a5, cy);
+                p[2] = pt(cx - a3, cy - a4);
+            } else {
+                p[0] = pt(cx + a3, cy - a4);
+                p[1] = pt(cx - a5, cy);
+                p[2] = pt(cx + a4, cy - a3);
+            }
+            /* Q touching the circle at a lattice point, or 1 off */
+            switch (rng_next(&r) % 4) {
+            case 0: /* west corner (x0, y) = (cx + 4k, cy + 3k) */
+                x0 = cx + a4 + (e > 0);
+                y = cy + a3 + (e < 0);
+                x1 = clamp_coord(x0 + rng_range(&r, 0, L / 4));
+                break;
+            case 1: /* east corner (x1, y) = (cx - 3k, cy + 4k) */
+                x1 = cx - a3 - (e > 0);
+                y = cy + a4 + (e < 0);
+                x0 = clamp_coord(x1 - rng_range(&r, 0, L / 4));
+                break;
+            case 2: /* the top: (cx, cy + 5k) */
+                y = cy + a5 + e;
+                x0 = clamp_coord(cx - rng_range(&r, 0, a5));
+                x1 = clamp_coord(cx + rng_range(&r, 0, a5));
+                break;
+            default: /* the east side: x0 = cx + 5k, y below the centre */
+                x0 = cx + a5 + e;
+                x1 = clamp_coord(x0 + rng_range(&r, 0, 1000));
+                y = cy - rng_range(&r, 0, a5);
+                break;
+            }
+            if (x0 >= 0 && x1 <= L && y >= 0 && y <= L)
+                strip_case(st, &t, p[0], p[1], p[2], x0, x1, y, e != 0, "lattice circle");
+            continue;
+        }
+        /* Q near the circle, from the double centre (only a generator) */
+        {
+            double bx = (double)(p[1].x - p[0].x), by = (double)(p[1].y - p[0].y);
+            double cx = (double)(p[2].x - p[0].x), cy = (double)(p[2].y - p[0].y);
+            double det = bx * cy - by * cx;
+            if (det == 0.0)
+                continue;
+            ox = (double)p[0].x + (cy * (bx * bx + by * by) - by * (cx * cx + cy * cy)) / (2 * det);
+            oy = (double)p[0].y + (bx * (cx * cx + cy * cy) - cx * (bx * bx + by * by)) / (2 * det);
+            rad = hypot(ox - (double)p[0].x, oy - (double)p[0].y);
+        }
+        d = rad * (double)(rng_next(&r) % 2 ? 1e-3 : 1e-7) + 2.0;
+        w = rng_range(&r, 0, L / 2);
+        switch (rng_next(&r) % 5) {
+        case 0: /* corner (x0, y) up and to the right of the centre */
+            th = 0.5 * pi * (double)(rng_next(&r) >> 11) * 0x1p-53;
+            q = on_circle(&r, ox, oy, rad + d * (double)rng_range(&r, -1, 1), th, 1);
+            x0 = q.x;
+            y = q.y;
+            x1 = clamp_coord(x0 + w);
+            break;
+        case 1: /* corner (x1, y) up and to the left */
+            th = 0.5 * pi * (1.0 + (double)(rng_next(&r) >> 11) * 0x1p-53);
+            q = on_circle(&r, ox, oy, rad + d * (double)rng_range(&r, -1, 1), th, 1);
+            x1 = q.x;
+            y = q.y;
+            x0 = clamp_coord(x1 - w);
+            break;
+        case 2: /* near the top */
+            q = on_circle(&r, ox, oy, rad + d * (double)rng_range(&r, -1, 1), 0.5 * pi, 1);
+            y = q.y;
+            x0 = clamp_coord(q.x - w);
+            x1 = clamp_coord(q.x + rng_range(&r, 0, L / 2));
+            break;
+        case 3: /* near the east or west side, the centre at or above y */
+            th = rng_next(&r) % 2 ? 0.0 : pi;
+            q = on_circle(&r, ox, oy, rad + d * (double)rng_range(&r, -1, 1), th, 1);
+            y = clamp_coord(round_near_range(oy) - rng_range(&r, 0, (int64_t)fmin(rad, 1e9)));
+            x0 = th == 0.0 ? q.x : clamp_coord(q.x - w);
+            x1 = th == 0.0 ? clamp_coord(q.x + w) : q.x;
+            break;
+        default: /* anywhere */
+            x0 = rng_range(&r, 0, L);
+            x1 = rng_range(&r, 0, L);
+            y = rng_range(&r, 0, L);
+            break;
+        }
+        strip_case(st, &t, p[0], p[1], p[2], x0, x1, y, 0, "random");
+    }
+    printf("strip: %llu cases, %llu disks meet Q; of %llu misses %llu proven; %llu misses the "
+           "box cannot see, %llu of them proven; %llu lattice misses 1 off the circle, %llu "
+           "proven\n",
+           (unsigned long long)t.cases, (unsigned long long)t.meets, (unsigned long long)t.misses,
+           (unsigned long long)t.proven, (unsigned long long)t.box_blind,
+           (unsigned long long)t.box_blind_proven, (unsigned long long)t.lattice,
+           (unsigned long long)t.lattice_proven);
+    /* the generator must produce both answers in bulk, and disks only the
+     * corner test can separate from Q */
+    CHECK(t.meets > t.cases / 5 && t.misses > t.cases / 5 && t.box_blind > t.cases / 20,
+          "strip generator degenerate");
+    CHECK(t.proven * 10 > t.misses * 9, "strip: too few misses proven");
+    CHECK(t.box_blind_proven * 10 > t.box_blind * 9, "strip: the corner test proves too little");
+    CHECK(t.lattice_proven * 100 > t.lattice * 99, "strip: lattice misses 1 off the circle");
+    /* out-of-range arguments: undecided */
+    CHECK(gdt_circumdisk_misses_strip(st, pt(0, 0), pt(10, 0), pt(0, 10), 100, 50, 1000) == 0 &&
+              gdt_circumdisk_misses_strip(st, pt(0, 0), pt(10, 0), pt(0, 10), -1, 50, 1000) == 0 &&
+              gdt_circumdisk_misses_strip(st, pt(0, 0), pt(10, 0), pt(0, 10), 0, L + 1, 1000) ==
+                  0 &&
+              gdt_circumdisk_misses_strip(st, pt(0, 0), pt(10, 0), pt(0, 10), 0, 50, L + 1) == 0 &&
+              gdt_circumdisk_misses_strip(st, pt(0, 0), pt(10, 0), pt(0, 10), 0, 50, -1) == 0,
+          "strip: arguments out of range");
+    CHECK(gdt_circumdisk_misses_strip(st, pt(0, 0), pt(10, 0), pt(0, 10), 0, 50, 1000) == 1,
+          "strip: a small disk far below Q");
+}
+
 int main(void)
 {
     gdt_pred_stats st;
@@ -609,6 +908,7 @@ int main(void)
     test_cocircular_quads(&st);
     test_prefer_random(&st);
     test_flip_generic(&st);
+    test_strip(&st);
     printf("counters: orient %llu incircle %llu incircle_exact %llu tiebreak %llu\n",
            (unsigned long long)st.orient_calls, (unsigned long long)st.incircle_calls,
            (unsigned long long)st.incircle_exact, (unsigned long long)st.tiebreak_calls);

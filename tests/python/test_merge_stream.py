@@ -9,6 +9,9 @@ final, so:
   - layouts whose band triangles have circumdisks over several rows (sparse
     rows, empty rows, a void wider than several rows, two far-apart point
     columns joined by slivers) still give exactly the reference;
+  - the same strip (width, density) with twice the rows has about the same
+    largest band: hull slivers along the cloud's west and east sides, whose
+    disks reach far north but outside the cloud's x range, are emitted;
   - output bytes are the same on every run, and <job>/merge.faces holds the
     merge's faces, in the order they end the PLY.
 Every run is also checked against its kept job (test_tiled.check_job).
@@ -89,9 +92,36 @@ def test_tall_strip_small(gdt_bin, tmp_path):
     X, Y = tall_strip(np.random.default_rng(43), 2, 31, 25)
     s, *_ = merge_run(gdt_bin, tmp_path, X, Y, "1", "small")
     assert s["merge_rounds"] >= 30
-    # sparse tiles: most points are seam, and the cloud's sides keep slivers
-    # pending longer; the band is still a small part of the seam
+    # sparse tiles: most points are seam; the band is still a small part of it
     assert 5 * s["merge_max_band_vertices"] < s["seam_vertices"]
+
+
+# A fine lattice (1000 lattice steps per texel): hardly any point lies exactly
+# on the cloud's west or east line, whose points would all stay in the band
+# as hull vertices (a separate effect).
+T_FINE = 64 * 1000
+ARGS_FINE = ["--tile", "64", "--cell", "10.00"]
+
+
+@pytest.mark.sanitize
+def test_band_does_not_grow_with_rows(gdt_bin, tmp_path):
+    bands = {}
+    for rows in (40, 80):
+        rng = np.random.default_rng(46)
+        n = 2 * rows * 40
+        X, Y = rng.integers(0, 2 * T_FINE, n), rng.integers(0, rows * T_FINE, n)
+        name = f"fine{rows}"
+        cloud = cloud_file(tmp_path, name, X, Y)
+        ref = tu.run_reference(gdt_bin, cloud, tmp_path / f"{name}.ref.ply")
+        s, _, _, cmd = tiled_vs_reference(gdt_bin, tmp_path, cloud, ref,
+                                          ARGS_FINE + ["--halo", "1"], tag=name)
+        assert s["merge_rounds"] == rows, f"{cmd}: {s['merge_rounds']} rounds for {rows} rows"
+        bands[rows] = (s["merge_max_band_vertices"], s["seam_vertices"])
+    (b1, s1), (b2, s2) = bands[40], bands[80]
+    print(f"largest band: {b1} of {s1} seam vertices in 40 rows, {b2} of {s2} in 80")
+    assert 0 < b1 and 10 * b2 < 13 * b1, \
+        f"the largest band grows with the rows: {b1} of {s1} seam vertices in 40 rows, " \
+        f"{b2} of {s2} in 80"
 
 
 def layout(name, rng):
