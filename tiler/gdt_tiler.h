@@ -127,6 +127,8 @@ typedef struct gdt_tiler_opts {
      * stays consistent (pass 2 starts over when run again). */
     int (*progress)(void *ctx, int stage, uint64_t done, uint64_t total);
     void *progress_ctx;
+    int threads;           /* host threads for the --dup merge (0 or 1: one);
+                              the files do not depend on it */
     /* Test knobs: none of them changes a byte of the output. */
     int test_tiny;         /* tiny buffers, 4 descriptors, out-of-core merge from 64
                               records: forces every spill and merge path */

@@ -20,11 +20,20 @@
  * Memory: cap records plus the hash table (at most 4 cap 32-bit words) or the
  * sort scratch (cap records), K small write or read buffers.  Descriptors:
  * at most K + 2 at a time.
+ *
+ * Tiles are independent, so tl_merge_tiles runs W workers (threads, the
+ * caller's own among them) that take tiles in index order from a shared
+ * counter, each with its own scratch of merge_cap / W records.  W is the
+ * largest count up to the tiler's threads whose share still holds the
+ * largest tile in memory (the one-tile path), within the descriptor budget.
+ * Each tile's files depend only on its .raw file, so the bytes do not
+ * depend on W; only the caller's thread reports progress.
  */
 #include "private/tiler_impl.h"
 #include "private/tiler_io.h"
 
 #include <inttypes.h>
+#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
@@ -38,11 +47,21 @@ typedef struct sink {
     int64_t x0, y0, span, h;
 } sink;
 
+/* One worker's scratch, reused from tile to tile: records, and the hash
+ * table of collapse. */
+typedef struct scratch {
+    gdt_point *buf;
+    size_t cap;
+    uint32_t *tab;
+    size_t tab_cap;
+} scratch;
+
 typedef struct mctx {
     gdt_tiler *t;
     uint64_t k;         /* tile */
-    gdt_point *buf;     /* owned by the caller of merge_file, cap records */
+    gdt_point *buf;     /* the worker's records, cap of them */
     size_t cap;
+    scratch *scr;
     unsigned deepest;
 } mctx;
 
@@ -119,16 +138,16 @@ static gdt_status collapse(mctx *m, size_t *used, gdt_error *err)
     while (cap < 2 * n)
         cap *= 2;
     /* n <= MERGE_CAP_MAX < 2^32: indices + 1 fit 32 bits */
-    if (cap > m->t->dup_tab_cap) {
-        free(m->t->dup_tab);
-        m->t->dup_tab_cap = 0;
-        m->t->dup_tab = malloc(cap * sizeof *m->t->dup_tab);
-        if (m->t->dup_tab == NULL)
+    if (cap > m->scr->tab_cap) {
+        free(m->scr->tab);
+        m->scr->tab_cap = 0;
+        m->scr->tab = malloc(cap * sizeof *m->scr->tab);
+        if (m->scr->tab == NULL)
             return gdt_error_set(err, GDT_EINTERNAL, 7001,
                                  "out of memory (--dup merge of %zu points)", n);
-        m->t->dup_tab_cap = cap;
+        m->scr->tab_cap = cap;
     }
-    tab = m->t->dup_tab;
+    tab = m->scr->tab;
     memset(tab, 0, cap * sizeof *tab);
     for (size_t i = 0; i < n; i++) {
         size_t s = hash_xy(&b[i], cap - 1);
@@ -354,7 +373,10 @@ fail:
     return st;
 }
 
-gdt_status tl_merge_tile(gdt_tiler *t, uint64_t k, gdt_error *err)
+/* The merge of tile k with the worker's scratch scr (cap records at most);
+ * *deepest receives its partition depth (0: in memory). */
+static gdt_status merge_tile(gdt_tiler *t, uint64_t k, scratch *scr, size_t cap,
+                             unsigned *deepest, gdt_error *err)
 {
     tl_tile *tl = &t->tiles[k];
     char *raw = tl_tile_file(t, k, "raw", !t->opts.keep_spill);
@@ -375,25 +397,26 @@ gdt_status tl_merge_tile(gdt_tiler *t, uint64_t k, gdt_error *err)
     }
     m.t = t;
     m.k = k;
-    m.cap = t->sz.merge_cap;
+    m.cap = cap;
     if ((uint64_t)m.cap > tl->count)
         m.cap = (size_t)tl->count; /* a small tile needs no more */
     if (m.cap > MERGE_CAP_MAX)
         m.cap = MERGE_CAP_MAX; /* the result does not depend on cap */
     if (m.cap < 2)
         m.cap = 2;
-    if (m.cap > t->dup_cap) {
-        free(t->dup_buf);
-        t->dup_cap = 0;
-        t->dup_buf = malloc(m.cap * sizeof *t->dup_buf);
-        if (t->dup_buf == NULL) {
+    if (m.cap > scr->cap) {
+        free(scr->buf);
+        scr->cap = 0;
+        scr->buf = malloc(m.cap * sizeof *scr->buf);
+        if (scr->buf == NULL) {
             st = gdt_error_set(err, GDT_EINTERNAL, 7001,
                                "out of memory (--dup merge of %zu points)", m.cap);
             goto fail;
         }
-        t->dup_cap = m.cap;
+        scr->cap = m.cap;
     }
-    m.buf = t->dup_buf;
+    m.buf = scr->buf;
+    m.scr = scr;
     st = tl_wfile_init(&wp, pts_tmp, pts, t->sz.part_recs, !t->opts.test_nosync, err);
     if (st == GDT_OK)
         st = tl_wfile_init(&we, edge_tmp, edge, t->sz.part_recs, !t->opts.test_nosync, err);
@@ -417,11 +440,7 @@ gdt_status tl_merge_tile(gdt_tiler *t, uint64_t k, gdt_error *err)
         goto fail;
     if (!t->opts.keep_spill)
         unlink(raw);
-    t->stats.merged_duplicates += tl->count - tl->points;
-    if (m.deepest > 0)
-        t->stats.external_merges++;
-    if (m.deepest > t->stats.merge_levels)
-        t->stats.merge_levels = m.deepest;
+    *deepest = m.deepest;
 fail:
     tl_wfile_abort(&wp);
     tl_wfile_abort(&we);
@@ -430,5 +449,160 @@ fail:
     free(pts);
     free(edge_tmp);
     free(edge);
+    return st;
+}
+
+#define MAX_WORKERS 16
+
+/* State shared by the workers of tl_merge_tiles; mu guards every field. */
+typedef struct pool {
+    gdt_tiler *t;
+    size_t cap;          /* records per worker */
+    pthread_mutex_t mu;
+    uint64_t next;       /* the next tile to take */
+    uint64_t done;       /* tiles merged */
+    int stop;            /* an error or a stop request: take no more tiles */
+    uint64_t err_k;      /* the lowest tile that failed (UINT64_MAX: none) */
+    gdt_status st;
+    gdt_error err;
+    unsigned *deepest;   /* per tile */
+} pool;
+
+typedef struct worker {
+    pool *p;
+    scratch scr;
+    pthread_t tid;
+} worker;
+
+/* Takes tiles until none is left or the pool stops; with report (the
+ * caller's thread) also calls the progress callback once per merged tile,
+ * in order of completion. */
+static void work(worker *w, int report, uint64_t *reported)
+{
+    pool *p = w->p;
+    for (;;) {
+        uint64_t k, done;
+        int stop;
+        gdt_status st;
+        gdt_error e;
+        pthread_mutex_lock(&p->mu);
+        k = p->stop ? p->t->ntiles : p->next++;
+        pthread_mutex_unlock(&p->mu);
+        if (k >= p->t->ntiles)
+            return;
+        gdt_error_clear(&e);
+        st = merge_tile(p->t, k, &w->scr, p->cap, &p->deepest[k], &e);
+        pthread_mutex_lock(&p->mu);
+        if (st != GDT_OK) {
+            p->stop = 1;
+            if (k < p->err_k) {
+                p->err_k = k;
+                p->st = st;
+                p->err = e;
+            }
+        } else {
+            p->done++;
+        }
+        done = p->done;
+        stop = p->stop;
+        pthread_mutex_unlock(&p->mu);
+        while (report && !stop && *reported < done) {
+            st = tl_progress(p->t, 3, ++*reported, p->t->ntiles, &e);
+            if (st != GDT_OK) {
+                pthread_mutex_lock(&p->mu);
+                p->stop = stop = 1;
+                if (p->err_k == UINT64_MAX) {
+                    /* a stop request ranks after every tile's own error */
+                    p->err_k = p->t->ntiles;
+                    p->st = st;
+                    p->err = e;
+                }
+                pthread_mutex_unlock(&p->mu);
+            }
+        }
+    }
+}
+
+static void *worker_main(void *arg)
+{
+    work(arg, 0, NULL);
+    return NULL;
+}
+
+/* Workers: as many as the tiler's threads allow while each share of the
+ * records still holds the largest tile, and each has its descriptors. */
+static unsigned worker_count(const gdt_tiler *t)
+{
+    uint64_t largest = 0;
+    unsigned w = t->opts.threads > 1 ? (unsigned)t->opts.threads : 1;
+    unsigned fd_per = t->sz.merge_k + 5;
+    for (uint64_t k = 0; k < t->ntiles; k++)
+        if (t->tiles[k].count > largest)
+            largest = t->tiles[k].count;
+    if (w > MAX_WORKERS)
+        w = MAX_WORKERS;
+    if ((uint64_t)w > t->ntiles)
+        w = t->ntiles > 0 ? (unsigned)t->ntiles : 1;
+    while (w > 1 && ((uint64_t)(t->sz.merge_cap / w) < largest || w * fd_per > t->fd_budget))
+        w--;
+    return w;
+}
+
+gdt_status tl_merge_tiles(gdt_tiler *t, gdt_error *err)
+{
+    unsigned nw = worker_count(t), started = 0;
+    worker ws[MAX_WORKERS];
+    uint64_t reported = 0;
+    pool p;
+    gdt_status st = GDT_OK;
+
+    memset(&p, 0, sizeof p);
+    memset(ws, 0, sizeof ws);
+    p.t = t;
+    p.cap = t->sz.merge_cap / nw;
+    p.err_k = UINT64_MAX;
+    p.deepest = calloc(t->ntiles + 1, sizeof *p.deepest);
+    if (p.deepest == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    if (pthread_mutex_init(&p.mu, NULL) != 0) {
+        free(p.deepest);
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "cannot create a mutex");
+    }
+    for (unsigned i = 0; i < nw; i++)
+        ws[i].p = &p;
+    /* a worker that cannot be started leaves its tiles to the others */
+    for (unsigned i = 1; i < nw; i++)
+        if (pthread_create(&ws[i].tid, NULL, worker_main, &ws[i]) == 0)
+            started |= 1u << i;
+    work(&ws[0], 1, &reported);
+    for (unsigned i = 1; i < nw; i++)
+        if (started & (1u << i))
+            pthread_join(ws[i].tid, NULL);
+    /* progress the last tiles (merged by other workers after ours) */
+    while (p.err_k == UINT64_MAX && reported < p.done) {
+        st = tl_progress(t, 3, ++reported, t->ntiles, err);
+        if (st != GDT_OK)
+            break;
+    }
+    if (st == GDT_OK && p.err_k != UINT64_MAX) {
+        st = p.st;
+        *err = p.err;
+    }
+    for (uint64_t k = 0; st == GDT_OK && k < t->ntiles; k++) {
+        const tl_tile *tl = &t->tiles[k];
+        t->stats.merged_duplicates += tl->count - tl->points;
+        if (p.deepest[k] > 0)
+            t->stats.external_merges++;
+        if (p.deepest[k] > t->stats.merge_levels)
+            t->stats.merge_levels = p.deepest[k];
+        if (tl->points > t->stats.max_tile_points)
+            t->stats.max_tile_points = tl->points;
+    }
+    for (unsigned i = 0; i < nw; i++) {
+        free(ws[i].scr.buf);
+        free(ws[i].scr.tab);
+    }
+    pthread_mutex_destroy(&p.mu);
+    free(p.deepest);
     return st;
 }

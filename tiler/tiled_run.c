@@ -1428,6 +1428,7 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     to.halo = opts->halo;
     to.mem_budget = opts->mem_budget;
     to.dup = opts->dup;
+    to.threads = host_threads(opts->threads);
     to.job_dir = c.job;
     to.log = &c.log;
     to.progress = tiler_progress;

@@ -213,8 +213,6 @@ void gdt_tiler_destroy(gdt_tiler *t)
     tl_density_free(&t->density);
     tl_map_free(&t->map);
     free(t->tiles);
-    free(t->dup_buf);
-    free(t->dup_tab);
     free(t->job_dir);
     free(t->tiles_dir);
     free(t);
@@ -523,20 +521,9 @@ gdt_status gdt_tiler_pass2(gdt_tiler *t, gdt_error *err)
     t->stats.t_pass2 = t1 - t0;
     gdt_log_note(t->log, "tiler pass 2: %" PRIu64 " points in %.2f s (%u bucket levels)",
                  t->plan.points, t->stats.t_pass2, t->stats.spill_levels);
-    for (uint64_t k = 0; k < t->ntiles; k++) {
-        st = tl_merge_tile(t, k, err);
-        if (st == GDT_OK)
-            st = tl_progress(t, 3, k + 1, t->ntiles, err);
-        if (st != GDT_OK)
-            return st;
-        if (t->tiles[k].points > t->stats.max_tile_points)
-            t->stats.max_tile_points = t->tiles[k].points;
-    }
-    free(t->dup_buf);
-    free(t->dup_tab);
-    t->dup_buf = NULL;
-    t->dup_tab = NULL;
-    t->dup_cap = t->dup_tab_cap = 0;
+    st = tl_merge_tiles(t, err);
+    if (st != GDT_OK)
+        return st;
     st = tl_sync_dir(t->tiles_dir, err);
     if (st != GDT_OK)
         return st;

@@ -216,6 +216,7 @@ typedef struct run_opts {
     unsigned voxels;
     int nosync;
     prog *progress;
+    int threads;         /* --dup merge workers (0: one) */
 } run_opts;
 
 typedef struct vdb_check {
@@ -384,6 +385,7 @@ static gdt_status open_tiler(const char *pcd, const char *job, const run_opts *r
     o.keep_spill = 1;
     o.density_voxels = ro->voxels;
     o.test_nosync = ro->nosync;
+    o.threads = ro->threads;
     if (ro->progress != NULL) {
         o.progress = on_progress;
         o.progress_ctx = ro->progress;
@@ -493,7 +495,7 @@ int main(int argc, char **argv)
 
     /* Given cell and halo, every --dup rule, normal and tiny budgets. */
     for (int r = 0; r < 3; r++) {
-        run_opts ro = {64, 13.0, 5, rules[r], 0, 0, r > 0, NULL};
+        run_opts ro = {64, 13.0, 5, rules[r], 0, 0, r > 0, NULL, 0};
         gdt_cloud *c1 = NULL, *c2 = NULL;
         gdt_tiler *a, *b;
         char what[64];
@@ -541,7 +543,7 @@ int main(int argc, char **argv)
     {
         long halos[2] = {100, 0};
         for (int q = 0; q < 2; q++) {
-            run_opts ro = {64, 9.0, halos[q], GDT_DUP_FIRST, q == 0, 0, 1, NULL};
+            run_opts ro = {64, 9.0, halos[q], GDT_DUP_FIRST, q == 0, 0, 1, NULL, 0};
             gdt_cloud *c = NULL;
             gdt_tiler *t;
             char what[64];
@@ -563,7 +565,7 @@ int main(int argc, char **argv)
 
     /* Auto cell and halo: about N^2/4 points per tile, exact counts. */
     {
-        run_opts ro = {64, 0.0, -1, GDT_DUP_FIRST, 0, 0, 1, NULL};
+        run_opts ro = {64, 0.0, -1, GDT_DUP_FIRST, 0, 0, 1, NULL, 0};
         gdt_cloud *c = NULL;
         gdt_tiler *t;
         snprintf(job, sizeof job, "%s/job-auto", workdir);
@@ -609,7 +611,7 @@ int main(int argc, char **argv)
     /* A density grid forced to coarsen: the counts stay exact (given cell:
      * same tiles as before; auto cell: the voxel still divides the tile). */
     {
-        run_opts ro = {64, 13.0, 5, GDT_DUP_FIRST, 0, 64, 1, NULL};
+        run_opts ro = {64, 13.0, 5, GDT_DUP_FIRST, 0, 64, 1, NULL, 0};
         gdt_cloud *c = NULL;
         gdt_tiler *t;
         snprintf(job, sizeof job, "%s/job-coarse", workdir);
@@ -635,7 +637,7 @@ int main(int argc, char **argv)
     /* Progress reports, and a stop request in the middle of pass 2. */
     {
         prog pr;
-        run_opts ro = {64, 13.0, 5, GDT_DUP_FIRST, 0, 0, 1, &pr};
+        run_opts ro = {64, 13.0, 5, GDT_DUP_FIRST, 0, 0, 1, &pr, 0};
         gdt_cloud *c = NULL;
         gdt_tiler *t = NULL;
         gdt_status st;
@@ -668,11 +670,62 @@ int main(int argc, char **argv)
         check_no_temporaries(job);
     }
 
+    /* The --dup merge on several workers: the same tile files as on one,
+     * one progress call per tile in increasing order, and a stop request
+     * in the merge stops it with the job left to run again. */
+    {
+        prog pr;
+        run_opts r1 = {64, 13.0, 5, GDT_DUP_FIRST, 0, 0, 1, NULL, 1};
+        run_opts r4 = {64, 13.0, 5, GDT_DUP_FIRST, 0, 0, 1, &pr, 4};
+        gdt_cloud *c1 = NULL, *c4 = NULL;
+        gdt_tiler *t1, *t4;
+        gdt_status st;
+        memset(&pr, 0, sizeof pr);
+        snprintf(job, sizeof job, "%s/job-workers1", workdir);
+        t1 = run(pcd, job, &r1, &c1);
+        snprintf(job, sizeof job, "%s/job-workers4", workdir);
+        t4 = run(pcd, job, &r4, &c4);
+        if (t1 != NULL && t4 != NULL) {
+            CHECK(gdt_tiler_tile_count(t4) >= 4, "only %" PRIu64 " tiles",
+                  gdt_tiler_tile_count(t4));
+            compare_jobs(t1, t4, "4 merge workers against 1");
+            CHECK(gdt_tiler_get_stats(t4)->merged_duplicates ==
+                      gdt_tiler_get_stats(t1)->merged_duplicates,
+                  "merged duplicates differ: %" PRIu64 " and %" PRIu64,
+                  gdt_tiler_get_stats(t4)->merged_duplicates,
+                  gdt_tiler_get_stats(t1)->merged_duplicates);
+            CHECK(pr.bad == 0 && pr.calls[3] == gdt_tiler_tile_count(t4) &&
+                      pr.last[3] == gdt_tiler_tile_count(t4),
+                  "progress with 4 workers: %d bad, %u calls, last %" PRIu64, pr.bad,
+                  pr.calls[3], pr.last[3]);
+        }
+        finish(t1, c1);
+        finish(t4, c4);
+        memset(&pr, 0, sizeof pr);
+        pr.stop_stage = 3;
+        t4 = NULL;
+        c4 = NULL;
+        gdt_error_clear(&err);
+        st = open_tiler(pcd, job, &r4, &c4, &t4, &err);
+        if (st == GDT_OK)
+            st = gdt_tiler_pass1(t4, &err);
+        if (st == GDT_OK)
+            st = gdt_tiler_pass2(t4, &err);
+        CHECK(st == GDT_EINTERRUPTED && err.code == 1301 && pr.calls[3] == 1,
+              "stop request in the merge: %d %s (%u calls)", st, err.msg, pr.calls[3]);
+        finish(t4, c4);
+        pr.stop_stage = 0;
+        t4 = run(pcd, job, &r4, &c4);
+        if (t4 != NULL)
+            check_run(t4, job, in, n, merged, nmerged, "4 workers after a stop");
+        finish(t4, c4);
+    }
+
     /* Refused: tile-local range beyond 2^31, a budget below the minimum. */
     {
         gdt_cloud *c = NULL;
         gdt_tiler *t = NULL;
-        run_opts ro = {1024, 4194304.0, 0, GDT_DUP_FIRST, 0, 0, 1, NULL};
+        run_opts ro = {1024, 4194304.0, 0, GDT_DUP_FIRST, 0, 0, 1, NULL, 0};
         gdt_status st;
         snprintf(job, sizeof job, "%s/job-refused", workdir);
         make_dir(job);
@@ -779,7 +832,7 @@ int main(int argc, char **argv)
     {
         gdt_cloud *c = NULL;
         gdt_tiler *t = NULL;
-        run_opts ro = {64, 13.0, 5, GDT_DUP_FIRST, 0, 0, 1, NULL};
+        run_opts ro = {64, 13.0, 5, GDT_DUP_FIRST, 0, 0, 1, NULL, 0};
         gdt_status st;
         char moved[2100];
         snprintf(moved, sizeof moved, "%s/moved.pcd", workdir);

@@ -91,12 +91,6 @@ struct gdt_tiler {
     tl_map map;             /* (i, j) -> index in tiles (after pass 1) */
     tl_density density;     /* pass 1 */
     gdt_tiler_stats stats;
-    /* scratch of the --dup merge, reused from tile to tile within pass 2
-     * (records, and the hash table of collapse); freed after pass 2 */
-    gdt_point *dup_buf;
-    size_t dup_cap;
-    uint32_t *dup_tab;
-    size_t dup_tab_cap;
 };
 
 /* plan.c: turns the pass-1 results into the plan and the tile table.
@@ -109,8 +103,10 @@ gdt_status tl_plan_finish(gdt_tiler *t, gdt_error *err);
  * .raw file; counts in tiles[].written. */
 gdt_status tl_spill(gdt_tiler *t, gdt_error *err);
 
-/* merge_dup.c: the --dup merge of tile k: .raw -> .pts + .edge. */
-gdt_status tl_merge_tile(gdt_tiler *t, uint64_t k, gdt_error *err);
+/* merge_dup.c: the --dup merge of every tile (.raw -> .pts + .edge), on
+ * up to opts.threads workers; fills tiles[].points/.edge and the merge
+ * counters of t->stats. */
+gdt_status tl_merge_tiles(gdt_tiler *t, gdt_error *err);
 
 /* Paths of tile k's files; malloc'd, NULL when out of memory.  kind is
  * "raw", "pts" or "edge"; tmp adds ".tmp". */
