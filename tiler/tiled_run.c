@@ -1100,6 +1100,8 @@ static gdt_status write_summary(const tr_ctx *c, gdt_error *err)
     gdt_json_uint(&j, "merge_rounds", s->merge.rounds);
     gdt_json_uint(&j, "merge_max_band_vertices", s->merge.max_band_vertices);
     gdt_json_uint(&j, "merge_peak_bytes", s->merge.peak_bytes);
+    /* the band triangulations' Lawson flips (insertion and closing pass) */
+    gdt_json_uint(&j, "merge_flips", s->merge.ref.insert_flips + s->merge.ref.final.flips);
     gdt_json_begin_object(&j, "certification");
     gdt_json_uint(&j, "triangles", s->cert.triangles);
     gdt_json_uint(&j, "inner", s->cert.inner);

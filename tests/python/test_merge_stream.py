@@ -49,8 +49,10 @@ def merge_run(gdt_bin, tmp_path, X, Y, halo, name):
     s, mesh, out, cmd = tiled_vs_reference(gdt_bin, tmp_path, cloud, ref,
                                            ARGS + ["--halo", halo], job=True, XY=(X, Y),
                                            tag=name)
-    for k in ("merge_rounds", "merge_max_band_vertices", "merge_peak_bytes"):
+    for k in ("merge_rounds", "merge_max_band_vertices", "merge_peak_bytes", "merge_flips"):
         assert isinstance(s.get(k), int), f"{cmd}: summary lacks {k}"
+    # a band of more than a handful of seam points is not Delaunay as inserted
+    assert s["merge_flips"] > 0 or s["seam_vertices"] < 8, f"{cmd}: no merge flips"
     assert s["merge_rounds"] == rows_of(Y), \
         f"{cmd}: {s['merge_rounds']} merge rounds for {rows_of(Y)} rows of tiles"
     assert 0 < s["merge_max_band_vertices"] <= s["seam_vertices"]
