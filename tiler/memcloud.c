@@ -171,3 +171,22 @@ gdt_status gdt_memcloud_finish(const gdt_memcloud *mc, const gdt_options *opts,
     *t_write = gdt_now() - t0;
     return st;
 }
+
+gdt_status gdt_memcloud_json_head(gdt_json *j, const gdt_memcloud *mc, const gdt_options *opts,
+                                  const char *mode, uint64_t faces, gdt_error *err)
+{
+    const gdt_cloud_info *ci = gdt_cloud_get_info(mc->cloud);
+    gdt_status st = gdt_json_open(j, opts->json, err);
+    if (st != GDT_OK)
+        return st;
+    gdt_json_begin_object(j, NULL);
+    gdt_json_string(j, "mode", mode);
+    gdt_json_string(j, "output", opts->output);
+    gdt_json_uint(j, "inputs", ci->ninputs);
+    gdt_json_uint(j, "points", mc->read);
+    gdt_json_uint(j, "vertices", mc->kept);
+    gdt_json_uint(j, "duplicates_merged", mc->read - mc->kept);
+    gdt_json_uint(j, "faces", faces);
+    gdt_json_string(j, "crs", ci->crs_desc);
+    return GDT_OK;
+}

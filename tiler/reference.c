@@ -35,22 +35,13 @@ typedef struct ref_summary {
     int checked;
 } ref_summary;
 
-static gdt_status write_summary(const gdt_options *opts, const gdt_cloud_info *ci,
+static gdt_status write_summary(const gdt_options *opts, const gdt_memcloud *mc,
                                 const ref_summary *s, gdt_error *err)
 {
     gdt_json j;
-    gdt_status st = gdt_json_open(&j, opts->json, err);
+    gdt_status st = gdt_memcloud_json_head(&j, mc, opts, "reference", s->faces, err);
     if (st != GDT_OK)
         return st;
-    gdt_json_begin_object(&j, NULL);
-    gdt_json_string(&j, "mode", "reference");
-    gdt_json_string(&j, "output", opts->output);
-    gdt_json_uint(&j, "inputs", ci->ninputs);
-    gdt_json_uint(&j, "points", s->points_read);
-    gdt_json_uint(&j, "vertices", s->vertices);
-    gdt_json_uint(&j, "duplicates_merged", s->duplicates_merged);
-    gdt_json_uint(&j, "faces", s->faces);
-    gdt_json_string(&j, "crs", ci->crs_desc);
     gdt_json_begin_object(&j, "times_s");
     gdt_json_double(&j, "read", s->t_read);
     gdt_json_double(&j, "triangulate", s->t_triangulate);
@@ -104,7 +95,7 @@ gdt_status gdt_cli_reference(const gdt_options *opts, gdt_error *err)
         goto fail;
 
     if (opts->json != NULL) {
-        st = write_summary(opts, gdt_cloud_get_info(mc.cloud), &s, err);
+        st = write_summary(opts, &mc, &s, err);
         if (st != GDT_OK)
             goto fail;
     }

@@ -32,23 +32,15 @@ typedef struct st_summary {
     const char *device;
 } st_summary;
 
-static gdt_status st_write_summary(const gdt_options *opts, const gdt_cloud_info *ci,
+static gdt_status st_write_summary(const gdt_options *opts, const gdt_memcloud *mc,
                                    const st_summary *s, gdt_error *err)
 {
     const gdt_core_stats *c = &s->cs;
+    const gdt_cloud_info *ci = gdt_cloud_get_info(mc->cloud);
     gdt_json j;
-    gdt_status st = gdt_json_open(&j, opts->json, err);
+    gdt_status st = gdt_memcloud_json_head(&j, mc, opts, "single-tile", s->faces, err);
     if (st != GDT_OK)
         return st;
-    gdt_json_begin_object(&j, NULL);
-    gdt_json_string(&j, "mode", "single-tile");
-    gdt_json_string(&j, "output", opts->output);
-    gdt_json_uint(&j, "inputs", ci->ninputs);
-    gdt_json_uint(&j, "points", s->points_read);
-    gdt_json_uint(&j, "vertices", s->vertices);
-    gdt_json_uint(&j, "duplicates_merged", s->duplicates_merged);
-    gdt_json_uint(&j, "faces", s->faces);
-    gdt_json_string(&j, "crs", ci->crs_desc);
     gdt_json_string(&j, "device", s->device);
     gdt_json_begin_array(&j, "tiles");
     gdt_json_begin_object(&j, NULL);
@@ -165,7 +157,7 @@ gdt_status gdt_cli_single_tile(const gdt_options *opts, gdt_error *err)
         goto fail;
 
     if (opts->json != NULL) {
-        st = st_write_summary(opts, gdt_cloud_get_info(mc.cloud), &s, err);
+        st = st_write_summary(opts, &mc, &s, err);
         if (st != GDT_OK)
             goto fail;
     }

@@ -18,6 +18,7 @@
 #include "gdt_error.h"
 #include "gdt_mesh.h"
 #include "gdt_predicates.h"
+#include "private/json_out.h"
 
 typedef struct gdt_memcloud {
     gdt_cloud *cloud;   /* open; owned */
@@ -51,5 +52,13 @@ gdt_status gdt_memcloud_write(const gdt_memcloud *mc, const gdt_options *opts,
 gdt_status gdt_memcloud_finish(const gdt_memcloud *mc, const gdt_options *opts,
                                const gdt_mesh *mesh, gdt_pred_stats *pred, double *t_check,
                                double *t_write, int *checked, gdt_error *err);
+
+/* Opens the --json summary of an in-memory mode and writes its head: mode,
+ * output, inputs, points read, vertices, duplicates merged, faces and crs,
+ * inside the top-level object the caller goes on filling and closes with
+ * gdt_json_end_object and gdt_json_close.  returns: gdt_json_open's
+ * errors. */
+gdt_status gdt_memcloud_json_head(gdt_json *j, const gdt_memcloud *mc, const gdt_options *opts,
+                                  const char *mode, uint64_t faces, gdt_error *err);
 
 #endif
