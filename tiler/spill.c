@@ -15,7 +15,6 @@
  * most read buffer + write_bytes (one pool, split evenly between the
  * level's files), and descriptors at most writers + 1.
  */
-#include "private/prefetch.h"
 #include "private/tiler_impl.h"
 #include "private/tiler_io.h"
 
@@ -25,7 +24,7 @@
 #include <unistd.h>
 
 typedef struct spill_src {
-    tl_prefetch *cloud; /* either the cloud, read ahead ... */
+    gdt_cloud *cloud;   /* either the cloud ... */
     tl_rfile *rf;       /* ... or a bucket file */
 } spill_src;
 
@@ -57,14 +56,10 @@ static void buckets_free(bucket_list *l)
     memset(l, 0, sizeof *l);
 }
 
-/* The next batch of s: *pts, *n (0 at the end); buf (cap records) is the
- * read buffer of a bucket file. */
-static gdt_status src_next(spill_src *s, gdt_point *buf, size_t cap, const gdt_point **pts,
-                           size_t *n, gdt_error *err)
+static gdt_status src_read(spill_src *s, gdt_point *buf, size_t cap, size_t *n, gdt_error *err)
 {
     if (s->cloud != NULL)
-        return tl_prefetch_next(s->cloud, pts, n, err);
-    *pts = buf;
+        return gdt_cloud_read(s->cloud, buf, cap, n, err);
     return tl_rfile_read(s->rf, buf, cap, n, err);
 }
 
@@ -162,24 +157,23 @@ static gdt_status run_level(gdt_tiler *t, spill_src *s, uint64_t src_recs, uint6
             goto fail;
     }
     for (;;) {
-        const gdt_point *pts = NULL;
         size_t n = 0;
-        st = src_next(s, buf, t->sz.read_cap, &pts, &n, err);
+        st = src_read(s, buf, t->sz.read_cap, &n, err);
         if (st != GDT_OK)
             goto fail;
         if (n == 0)
             break;
         for (size_t i = 0; i < n; i++) {
-            uint64_t k = find_tile(t, &cache, &pts[i]);
+            uint64_t k = find_tile(t, &cache, &buf[i]);
             if (k < a || k >= b) {
                 st = gdt_error_set(err, GDT_EINPUT, 3501,
                                    "the input changed between the two passes: point %" PRIu64
                                    " at lattice (%" PRId64 ", %" PRId64
                                    ") is in no tile counted by pass 1",
-                                   pts[i].ord, pts[i].x, pts[i].y);
+                                   buf[i].ord, buf[i].x, buf[i].y);
                 goto fail;
             }
-            st = tl_wfile_put(&w[(k - a) / group], &pts[i], err);
+            st = tl_wfile_put(&w[(k - a) / group], &buf[i], err);
             if (st != GDT_OK)
                 goto fail;
         }
@@ -253,7 +247,7 @@ static gdt_status run_bucket(gdt_tiler *t, bucket *bk, unsigned level, gdt_point
 
 gdt_status tl_spill(gdt_tiler *t, gdt_error *err)
 {
-    spill_src s = {NULL, NULL};
+    spill_src s = {t->cloud, NULL};
     bucket_list children = {0};
     gdt_point *buf;
     gdt_status st;
@@ -271,12 +265,7 @@ gdt_status tl_spill(gdt_tiler *t, gdt_error *err)
         free(buf);
         return st;
     }
-    /* the cloud is decoded one batch ahead while this thread sends points
-     * to their files (the same batches, so the same files) */
-    st = tl_prefetch_start(&s.cloud, t->cloud, t->sz.read_cap, err);
-    if (st == GDT_OK)
-        st = run_level(t, &s, t->plan.points, 0, t->ntiles, 0, buf, &children, err);
-    tl_prefetch_stop(s.cloud);
+    st = run_level(t, &s, t->plan.points, 0, t->ntiles, 0, buf, &children, err);
     for (size_t i = 0; i < children.n && st == GDT_OK; i++)
         st = run_bucket(t, &children.v[i], 1, buf, err);
     buckets_free(&children);
