@@ -62,15 +62,17 @@ void gdt_log_init(gdt_log *log, int verbosity)
 void gdt_log_warn(gdt_log *log, int code, const char *fmt, ...)
 {
     if (log != NULL)
-        log->warnings++;
+        __atomic_fetch_add(&log->warnings, 1, __ATOMIC_RELAXED);
     if (log != NULL && log->verbosity < 0)
         return;
     FILE *out = (log != NULL && log->stream != NULL) ? log->stream : stderr;
     va_list ap;
     va_start(ap, fmt);
+    flockfile(out); /* one whole line, whatever other threads write */
     fprintf(out, "gdt-tile: warning GDT-%04d: ", code);
     vfprintf(out, fmt, ap);
     fputc('\n', out);
+    funlockfile(out);
     va_end(ap);
 }
 
@@ -81,8 +83,10 @@ void gdt_log_note(gdt_log *log, const char *fmt, ...)
     FILE *out = log->stream != NULL ? log->stream : stderr;
     va_list ap;
     va_start(ap, fmt);
+    flockfile(out);
     fputs("gdt-tile: ", out);
     vfprintf(out, fmt, ap);
     fputc('\n', out);
+    funlockfile(out);
     va_end(ap);
 }

@@ -59,8 +59,8 @@ void gdt_error_print(const gdt_error *err, FILE *stream);
 /* Short name of a status class ("bad input", "I/O", ...). */
 const char *gdt_status_name(gdt_status st);
 
-/* Diagnostics sink for warnings and verbose notes.  Not thread-safe per
- * instance.  verbosity: -1 quiet (warnings still counted), 0 normal, 1 -v. */
+/* Diagnostics sink for warnings and verbose notes.  Threads may share
+ * one: each message is written as one whole line and the count is atomic.  verbosity: -1 quiet (warnings still counted), 0 normal, 1 -v. */
 typedef struct gdt_log {
     int verbosity;
     FILE *stream;        /* NULL means stderr */

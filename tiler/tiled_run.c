@@ -27,14 +27,10 @@
 #include "private/json_out.h"
 #include "private/progress.h"
 #include "private/run_stats.h"
+#include "private/tiled_files.h"
+#include "private/tiled_out.h"
 #include "private/tiler_io.h"
 
-#define TR_MAGIC "GDTTRI01"
-#define TR_HEADER 64
-#define TR_CHUNK 65536
-#define MF_NAME "merge.faces"
-#define MF_MAGIC "GDTMRG01"
-#define MF_HEADER 16
 
 typedef struct tr_summary {
     uint64_t points_read, vertices, tiles, faces, certified, merge_faces;
@@ -98,6 +94,7 @@ struct tr_ctx {
     size_t cap_lp;
     tr_slot slot[2];    /* tile k uses slot[k & 1] */
     tr_post post;
+    tr_out *out;        /* the PLY writer, from the tile stage on */
     uint8_t *cert;
     size_t cap_cert;
     uint32_t *faces;    /* certified faces of the current tile, 3 per face */
@@ -121,39 +118,6 @@ static int stopped(const tr_ctx *c)
     return c->opts->stop != NULL && *c->opts->stop != 0;
 }
 
-static gdt_status interrupted_in(const char *job, const char *where, gdt_error *err)
-{
-    return gdt_error_set(err, GDT_EINTERRUPTED, 1302,
-                         "stopped by a signal during %s; rerun the same command (or "
-                         "gdt-tile --resume %s) to continue",
-                         where, job);
-}
-
-static void put_u64(unsigned char *p, uint64_t v)
-{
-    for (int i = 0; i < 8; i++)
-        p[i] = (unsigned char)(v >> (8 * i));
-}
-
-static void put_u32(unsigned char *p, uint32_t v)
-{
-    for (int i = 0; i < 4; i++)
-        p[i] = (unsigned char)(v >> (8 * i));
-}
-
-static uint64_t get_u64(const unsigned char *p)
-{
-    uint64_t v = 0;
-    for (int i = 7; i >= 0; i--)
-        v = (v << 8) | p[i];
-    return v;
-}
-
-static uint32_t get_u32(const unsigned char *p)
-{
-    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
-}
-
 static int reserve(void **p, size_t *cap, size_t need, size_t elem)
 {
     void *q;
@@ -165,18 +129,6 @@ static int reserve(void **p, size_t *cap, size_t need, size_t elem)
     *p = q;
     *cap = need;
     return 0;
-}
-
-static char *path_join(const char *a, const char *b)
-{
-    size_t la = strlen(a), lb = strlen(b);
-    char *p = malloc(la + lb + 2);
-    if (p == NULL)
-        return NULL;
-    memcpy(p, a, la);
-    p[la] = '/';
-    memcpy(p + la + 1, b, lb + 1);
-    return p;
 }
 
 static gdt_status make_dir(const char *path, gdt_error *err)
@@ -315,15 +267,6 @@ static gdt_status sort_faces(tr_ctx *c, const gdt_mesh *m, size_t nf, uint32_t b
     return GDT_OK;
 }
 
-static gdt_status tile_path(tr_ctx *c, const gdt_tile_desc *d, const char *ext, char **out,
-                            gdt_error *err)
-{
-    char name[96];
-    snprintf(name, sizeof name, "tile_%" PRId64 "_%" PRId64 ".%s", d->i, d->j, ext);
-    *out = path_join(c->tiles_dir, name);
-    return *out == NULL ? gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory") : GDT_OK;
-}
-
 /* --threads K, 0 = the online cores. */
 static int host_threads(int k)
 {
@@ -444,24 +387,24 @@ static gdt_status post_tile(tr_ctx *c, tr_slot *sl, gdt_error *err)
     p = c->fbuf;
     memset(p, 0, TR_HEADER);
     memcpy(p, TR_MAGIC, 8);
-    put_u64(p + 8, c->base[k]);
-    put_u64(p + 16, sl->n);
-    put_u64(p + 24, nf);
-    put_u64(p + 32, c->seam.nv);
-    put_u64(p + 40, c->seam.ne);
+    tr_put_u64(p + 8, c->base[k]);
+    tr_put_u64(p + 16, sl->n);
+    tr_put_u64(p + 24, nf);
+    tr_put_u64(p + 32, c->seam.nv);
+    tr_put_u64(p + 40, c->seam.ne);
     p += TR_HEADER;
     for (size_t i = 0; i < 3 * nf; i++, p += 4)
-        put_u32(p, c->faces[i]);
+        tr_put_u32(p, c->faces[i]);
     for (size_t i = 0; i < c->seam.nv; i++, p += 24) {
-        put_u64(p, c->seam.v[i].id);
-        put_u64(p + 8, (uint64_t)c->seam.v[i].x);
-        put_u64(p + 16, (uint64_t)c->seam.v[i].y);
+        tr_put_u64(p, c->seam.v[i].id);
+        tr_put_u64(p + 8, (uint64_t)c->seam.v[i].x);
+        tr_put_u64(p + 16, (uint64_t)c->seam.v[i].y);
     }
     for (size_t i = 0; i < c->seam.ne; i++, p += 16) {
-        put_u64(p, c->seam.e[i].a);
-        put_u64(p + 8, c->seam.e[i].b);
+        tr_put_u64(p, c->seam.e[i].a);
+        tr_put_u64(p + 8, c->seam.e[i].b);
     }
-    st = tile_path(c, d, "tri", &path, err);
+    st = tr_tile_path(c->tiles_dir, d, "tri", &path, err);
     /* durability comes in batches: see flush_pending */
     if (st == GDT_OK)
         st = write_atomic(path, c->fbuf, len, 1, err);
@@ -540,7 +483,7 @@ static gdt_status flush_pending(tr_ctx *c, gdt_error *err)
         char *path = NULL;
         st = gdt_tiler_tile_info(c->tiler, c->pending[i].k, &d, err);
         if (st == GDT_OK)
-            st = tile_path(c, &d, "tri", &path, err);
+            st = tr_tile_path(c->tiles_dir, &d, "tri", &path, err);
         if (st == GDT_OK)
             st = gdt_job_put_tile(c->jobdb, c->pending[i].k, path, c->pending[i].size,
                                   c->pending[i].checksum, err);
@@ -569,7 +512,7 @@ static gdt_status reuse_tile(tr_ctx *c, uint64_t k, uint64_t size, uint64_t sum,
 
     *ok = 0;
     if (st == GDT_OK)
-        st = tile_path(c, &d, "tri", &path, err);
+        st = tr_tile_path(c->tiles_dir, &d, "tri", &path, err);
     if (st != GDT_OK)
         return st;
     if (size < TR_HEADER || size > SIZE_MAX ||
@@ -589,72 +532,16 @@ static gdt_status reuse_tile(tr_ctx *c, uint64_t k, uint64_t size, uint64_t sum,
     }
     fclose(f);
     p = c->fbuf;
-    nf = get_u64(p + 24);
-    nv = get_u64(p + 32);
-    ne = get_u64(p + 40);
-    if (memcmp(p, TR_MAGIC, 8) != 0 || get_u64(p + 8) != c->base[k] ||
-        get_u64(p + 16) != d.points || TR_HEADER + 12 * nf + 24 * nv + 16 * ne != size)
+    nf = tr_get_u64(p + 24);
+    nv = tr_get_u64(p + 32);
+    ne = tr_get_u64(p + 40);
+    if (memcmp(p, TR_MAGIC, 8) != 0 || tr_get_u64(p + 8) != c->base[k] ||
+        tr_get_u64(p + 16) != d.points || TR_HEADER + 12 * nf + 24 * nv + 16 * ne != size)
         return GDT_OK;
     c->seam_total += nv;
     c->s.certified += nf;
     *ok = 1;
     return GDT_OK;
-}
-
-/* Copies nf face records (3 x u32 output indices, little-endian) from the
- * current position of f to the PLY, TR_CHUNK at a time through the caller's
- * buffers tri (3 TR_CHUNK) and raw (12 TR_CHUNK).  path names f in errors. */
-static gdt_status copy_face_records(FILE *f, const char *path, uint64_t nf, gdt_ply_writer *w,
-                                    int32_t *tri, unsigned char *raw, gdt_error *err)
-{
-    for (uint64_t done = 0; done < nf;) {
-        size_t m = nf - done < TR_CHUNK ? (size_t)(nf - done) : TR_CHUNK;
-        gdt_status st;
-        if (fread(raw, 12, m, f) != m)
-            return gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
-        for (size_t i = 0; i < 3 * m; i++)
-            tri[i] = (int32_t)get_u32(raw + 4 * i);
-        st = gdt_ply_write_faces(w, tri, m, err);
-        if (st != GDT_OK)
-            return st;
-        done += m;
-    }
-    return GDT_OK;
-}
-
-/* Reads the certified faces of tile k's .tri file into the PLY (tri, raw:
- * the buffers of copy_face_records). */
-static gdt_status copy_faces(tr_ctx *c, uint64_t k, gdt_ply_writer *w, int32_t *tri,
-                             unsigned char *raw, gdt_error *err)
-{
-    gdt_tile_desc d;
-    unsigned char hdr[TR_HEADER];
-    char *path = NULL;
-    FILE *f = NULL;
-    uint64_t nf;
-    gdt_status st = gdt_tiler_tile_info(c->tiler, k, &d, err);
-
-    if (st == GDT_OK)
-        st = tile_path(c, &d, "tri", &path, err);
-    if (st != GDT_OK)
-        return st;
-    f = fopen(path, "rb");
-    if (f == NULL) {
-        st = gdt_error_set(err, GDT_EIO, 4805, "%s: cannot open: %s", path, strerror(errno));
-        goto fail;
-    }
-    if (fread(hdr, 1, TR_HEADER, f) != TR_HEADER || memcmp(hdr, TR_MAGIC, 8) != 0 ||
-        get_u64(hdr + 8) != c->base[k] || get_u64(hdr + 16) != d.points) {
-        st = gdt_error_set(err, GDT_EJOB, 6801, "%s: not the tile file this run wrote", path);
-        goto fail;
-    }
-    nf = get_u64(hdr + 24);
-    st = copy_face_records(f, path, nf, w, tri, raw, err);
-fail:
-    if (f != NULL)
-        fclose(f);
-    free(path);
-    return st;
 }
 
 /* Appends the seam section of tile k's .tri file (seam vertices and barrier
@@ -675,7 +562,7 @@ static gdt_status read_seam(tr_ctx *c, uint64_t k, gdt_error *err)
     gdt_status st = gdt_tiler_tile_info(c->tiler, k, &d, err);
 
     if (st == GDT_OK)
-        st = tile_path(c, &d, "tri", &path, err);
+        st = tr_tile_path(c->tiles_dir, &d, "tri", &path, err);
     if (st != GDT_OK)
         return st;
     hi = lo + d.points;
@@ -685,14 +572,14 @@ static gdt_status read_seam(tr_ctx *c, uint64_t k, gdt_error *err)
         goto fail;
     }
     if (fread(hdr, 1, TR_HEADER, f) != TR_HEADER || memcmp(hdr, TR_MAGIC, 8) != 0 ||
-        get_u64(hdr + 8) != lo || get_u64(hdr + 16) != d.points) {
+        tr_get_u64(hdr + 8) != lo || tr_get_u64(hdr + 16) != d.points) {
         st = gdt_error_set(err, GDT_EJOB, 6801, "%s: not the tile file this run wrote", path);
         goto fail;
     }
     size = (uint64_t)sb.st_size;
-    nf = get_u64(hdr + 24);
-    nv = get_u64(hdr + 32);
-    ne = get_u64(hdr + 40);
+    nf = tr_get_u64(hdr + 24);
+    nv = tr_get_u64(hdr + 32);
+    ne = tr_get_u64(hdr + 40);
     if (nf > size / 12 || nv > size / 24 || ne > size / 16 ||
         TR_HEADER + 12 * nf + 24 * nv + 16 * ne != size || nv > d.points) {
         st = gdt_error_set(err, GDT_EJOB, 6802,
@@ -722,9 +609,9 @@ static gdt_status read_seam(tr_ctx *c, uint64_t k, gdt_error *err)
         }
         for (size_t i = 0; i < m; i++) {
             gdt_seam_vertex *v = &s->v[s->nv];
-            v->id = get_u64(c->fbuf + 24 * i);
-            v->x = (int64_t)get_u64(c->fbuf + 24 * i + 8);
-            v->y = (int64_t)get_u64(c->fbuf + 24 * i + 16);
+            v->id = tr_get_u64(c->fbuf + 24 * i);
+            v->x = (int64_t)tr_get_u64(c->fbuf + 24 * i + 8);
+            v->y = (int64_t)tr_get_u64(c->fbuf + 24 * i + 16);
             if (v->id < lo || v->id >= hi || v->x < 0 || v->y < 0 || v->x > GDT_COORD_MAX ||
                 v->y > GDT_COORD_MAX) {
                 st = gdt_error_set(err, GDT_EJOB, 6802,
@@ -745,8 +632,8 @@ static gdt_status read_seam(tr_ctx *c, uint64_t k, gdt_error *err)
         }
         for (size_t i = 0; i < m; i++) {
             gdt_seam_edge *e = &s->e[s->ne];
-            e->a = get_u64(c->fbuf + 16 * i);
-            e->b = get_u64(c->fbuf + 16 * i + 8);
+            e->a = tr_get_u64(c->fbuf + 16 * i);
+            e->b = tr_get_u64(c->fbuf + 16 * i + 8);
             if (e->a < lo || e->a >= hi || e->b < lo || e->b >= hi) {
                 st = gdt_error_set(err, GDT_EJOB, 6802,
                                    "%s: barrier edge %" PRIu64 " names another tile's vertex",
@@ -775,7 +662,7 @@ static gdt_status merge_rows(tr_ctx *c, gdt_error *err)
     const gdt_tile_plan *pl = c->plan;
     uint64_t ntiles = gdt_tiler_tile_count(c->tiler), k = 0, nmf = 0, done_v = 0;
     gdt_merger *m = NULL;
-    char *path = path_join(c->job, MF_NAME), *tmp = path_join(c->job, MF_NAME ".tmp");
+    char *path = tr_path_join(c->job, MF_NAME), *tmp = tr_path_join(c->job, MF_NAME ".tmp");
     unsigned char *buf = malloc(12 * (size_t)TR_CHUNK);
     size_t nbuf = 0;
     int fd = -1;
@@ -808,7 +695,7 @@ static gdt_status merge_rows(tr_ctx *c, gdt_error *err)
         int64_t row, y_next = 0;
         uint64_t k1 = k;
         if (stopped(c)) {
-            st = interrupted_in(c->job, "the seam merge", err);
+            st = tr_interrupted(c->job, "the seam merge", err);
             goto fail;
         }
         st = gdt_tiler_tile_info(c->tiler, k, &d, err);
@@ -842,7 +729,7 @@ static gdt_status merge_rows(tr_ctx *c, gdt_error *err)
                 nbuf = 0;
             }
             for (int q = 0; q < 3; q++)
-                put_u32(buf + nbuf + 4 * q, (uint32_t)f[3 * i + q]);
+                tr_put_u32(buf + nbuf + 4 * q, (uint32_t)f[3 * i + q]);
             nbuf += 12;
         }
         nmf += nf;
@@ -853,7 +740,7 @@ static gdt_status merge_rows(tr_ctx *c, gdt_error *err)
     st = write_all(fd, buf, nbuf, tmp, err);
     if (st != GDT_OK)
         goto fail;
-    put_u64(buf, nmf);
+    tr_put_u64(buf, nmf);
     if (pwrite(fd, buf, 8, 8) != 8) {
         st = gdt_error_set(err, GDT_EIO, 4803, "%s: write failed: %s", tmp, strerror(errno));
         goto fail;
@@ -878,161 +765,6 @@ fail:
 
 /* Appends the faces of <job>/merge.faces to the PLY; the file must hold
  * exactly the c->s.merge_faces faces the merge counted. */
-static gdt_status copy_merge_faces(tr_ctx *c, gdt_ply_writer *w, int32_t *tri,
-                                   unsigned char *raw, gdt_error *err)
-{
-    char *path = path_join(c->job, MF_NAME);
-    unsigned char hdr[MF_HEADER];
-    FILE *f = NULL;
-    struct stat sb;
-    uint64_t nf;
-    gdt_status st = GDT_OK;
-
-    if (path == NULL)
-        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-    f = fopen(path, "rb");
-    if (f == NULL || fstat(fileno(f), &sb) != 0) {
-        st = gdt_error_set(err, GDT_EIO, 4805, "%s: cannot open: %s", path, strerror(errno));
-        goto fail;
-    }
-    nf = c->s.merge_faces;
-    if (fread(hdr, 1, MF_HEADER, f) != MF_HEADER || memcmp(hdr, MF_MAGIC, 8) != 0 ||
-        get_u64(hdr + 8) != nf || (uint64_t)sb.st_size != MF_HEADER + 12 * nf) {
-        st = gdt_error_set(err, GDT_EJOB, 6801, "%s: not the merge file this run wrote", path);
-        goto fail;
-    }
-    st = copy_face_records(f, path, nf, w, tri, raw, err);
-fail:
-    if (f != NULL)
-        fclose(f);
-    free(path);
-    return st;
-}
-
-static gdt_status write_vertices(tr_ctx *c, uint64_t k, gdt_ply_writer *w, double *xyz,
-                                 gdt_point *buf, gdt_error *err)
-{
-    const gdt_lattice *L = &gdt_cloud_get_info(c->cloud)->lattice;
-    gdt_tile_desc d;
-    tl_rfile rf;
-    char *path = NULL;
-    gdt_status st = gdt_tiler_tile_info(c->tiler, k, &d, err);
-
-    memset(&rf, 0, sizeof rf);
-    rf.fd = -1;
-    if (st == GDT_OK)
-        st = tile_path(c, &d, "pts", &path, err);
-    if (st == GDT_OK)
-        st = tl_rfile_open(&rf, path, d.points, TR_CHUNK, err);
-    free(path);
-    if (st != GDT_OK)
-        return st;
-    for (;;) {
-        size_t m = 0;
-        st = tl_rfile_read(&rf, buf, TR_CHUNK, &m, err);
-        if (st != GDT_OK || m == 0)
-            break;
-        for (size_t i = 0; i < m; i++) {
-            xyz[3 * i + 0] = L->ox + L->sx * (double)buf[i].x;
-            xyz[3 * i + 1] = L->oy + L->sy * (double)buf[i].y;
-            xyz[3 * i + 2] = buf[i].z;
-        }
-        st = gdt_ply_write_vertices(w, xyz, m, err);
-        if (st != GDT_OK)
-            break;
-    }
-    tl_rfile_close(&rf);
-    return st;
-}
-
-/* Removes what a killed writer left beside the output: "<name>.tmp-<pid>"
- * files (gdt_ply.h) whose process no longer exists. */
-static void remove_stale_temps(const char *output)
-{
-    const char *slash = strrchr(output, '/');
-    const char *base = slash != NULL ? slash + 1 : output;
-    size_t dl = slash != NULL ? (size_t)(slash - output) : 0, bl = strlen(base);
-    char *dir = malloc(dl + 2);
-    DIR *d;
-    struct dirent *e;
-    if (dir == NULL)
-        return;
-    if (slash != NULL) {
-        memcpy(dir, output, dl);
-        dir[dl] = '\0';
-        if (dl == 0)
-            strcpy(dir, "/");
-    } else {
-        strcpy(dir, ".");
-    }
-    d = opendir(dir);
-    while (d != NULL && (e = readdir(d)) != NULL) {
-        const char *nm = e->d_name, *q;
-        long pid;
-        char *end;
-        if (strncmp(nm, base, bl) != 0 || strncmp(nm + bl, ".tmp-", 5) != 0)
-            continue;
-        q = nm + bl + 5;
-        errno = 0;
-        pid = strtol(q, &end, 10);
-        if (*q == '\0' || *end != '\0' || errno != 0 || pid <= 0 || (pid_t)pid == getpid())
-            continue;
-        if (kill((pid_t)pid, 0) != 0 && errno == ESRCH)
-            unlinkat(dirfd(d), nm, 0);
-    }
-    if (d != NULL)
-        closedir(d);
-    free(dir);
-}
-
-/* Stage 4: the PLY. */
-static gdt_status write_ply(tr_ctx *c, gdt_error *err)
-{
-    const gdt_cloud_info *ci = gdt_cloud_get_info(c->cloud);
-    uint64_t ntiles = gdt_tiler_tile_count(c->tiler);
-    gdt_ply_writer *w = NULL;
-    gdt_ply_meta meta;
-    double *xyz = malloc(3 * TR_CHUNK * sizeof *xyz);
-    gdt_point *buf = malloc(TR_CHUNK * sizeof *buf);
-    int32_t *tri = malloc(3 * TR_CHUNK * sizeof *tri);
-    unsigned char *raw = malloc(12 * TR_CHUNK);
-    gdt_status st;
-
-    memset(&meta, 0, sizeof meta);
-    meta.lattice = ci->lattice;
-    meta.epsg = ci->epsg;
-    meta.crs_wkt = ci->crs_wkt;
-    if (xyz == NULL || buf == NULL || tri == NULL || raw == NULL) {
-        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-        goto fail;
-    }
-    remove_stale_temps(c->opts->output);
-    st = gdt_ply_create(&w, c->opts->output, &meta, err);
-    gdt_progress_stage(&c->prog, "write", 2 * ntiles, "tiles");
-    for (uint64_t k = 0; st == GDT_OK && k < ntiles; k++) {
-        st = stopped(c) ? interrupted_in(c->job, "the output", err) : write_vertices(c, k, w, xyz, buf, err);
-        gdt_progress_update(&c->prog, k + 1);
-    }
-    for (uint64_t k = 0; st == GDT_OK && k < ntiles; k++) {
-        st = stopped(c) ? interrupted_in(c->job, "the output", err)
-                        : copy_faces(c, k, w, tri, raw, err);
-        gdt_progress_update(&c->prog, ntiles + k + 1);
-    }
-    if (st == GDT_OK)
-        st = copy_merge_faces(c, w, tri, raw, err);
-    if (st == GDT_OK) {
-        st = gdt_ply_finish(w, err);
-        w = NULL;
-    }
-fail:
-    gdt_ply_abort(w);
-    free(raw);
-    free(tri);
-    free(buf);
-    free(xyz);
-    return st;
-}
-
 /* --check: the exact streaming validator on the written PLY (bounded
  * memory, temporary files in the job directory).  A mesh that fails is
  * renamed to OUT.ply.rejected, so no invalid file stays at the output path. */
@@ -1278,11 +1010,11 @@ static void remove_job_files(const char *job)
     static const char *const names[] = {"job.db", "job.db-wal", "job.db-shm", "job.db-journal",
                                         "index.vdb", "index.vdb.tmp", MF_NAME,
                                         MF_NAME ".tmp"};
-    char *tiles = path_join(job, "tiles");
+    char *tiles = tr_path_join(job, "tiles");
     /* the journal first: a removal cut short by a crash must not leave a
      * journal that vouches for files already gone */
     for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
-        char *p = path_join(job, names[i]);
+        char *p = tr_path_join(job, names[i]);
         if (p != NULL)
             unlink(p);
         free(p);
@@ -1375,18 +1107,66 @@ done:
     return st;
 }
 
+/* The core is created (OpenCL context, kernels from the cache: about 0.2 s
+ * on a CPU device) on a thread of its own while pass 1 reads the input, and
+ * joined after it.  When pass 1 fails first, its error is the one reported:
+ * the device's may be a consequence (the compiler inside the OpenCL
+ * runtime removes its temporary files on SIGXFSZ, which a write beyond
+ * the file size limit raises on the thread that made it). */
+typedef struct core_start {
+    gdt_core_opts opts;
+    gdt_core *core;
+    gdt_error err;
+    gdt_status st;
+    pthread_t thread;
+    int running;
+} core_start;
+
+static void *core_start_main(void *arg)
+{
+    core_start *cs = arg;
+    cs->st = gdt_core_create(&cs->core, &cs->opts, &cs->err);
+    return NULL;
+}
+
+static void core_start_begin(core_start *cs)
+{
+    gdt_error_clear(&cs->err);
+    cs->running = pthread_create(&cs->thread, NULL, core_start_main, cs) == 0;
+    if (!cs->running)
+        core_start_main(cs);
+}
+
+/* Joins the creation (if it runs) and hands the core to *core.  Returns the
+ * creation's status; on failure its error replaces *err. */
+static gdt_status core_start_join(core_start *cs, gdt_core **core, gdt_error *err)
+{
+    if (cs->running) {
+        pthread_join(cs->thread, NULL);
+        cs->running = 0;
+    }
+    if (cs->core != NULL) {
+        *core = cs->core;
+        cs->core = NULL;
+    }
+    if (cs->st != GDT_OK && err != NULL)
+        *err = cs->err;
+    return cs->st;
+}
+
 gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
 {
     tr_ctx c;
     gdt_cloud_opts co;
     gdt_tiler_opts to;
-    gdt_core_opts copt;
+    core_start cstart;
     uint64_t ntiles, hull;
     int done = 0;
     double t_start = gdt_now(), t0;
     gdt_status st;
 
     memset(&c, 0, sizeof c);
+    memset(&cstart, 0, sizeof cstart);
     c.opts = opts;
     c.t_flushed = gdt_now();
     gdt_mesh_init(&c.slot[0].mesh);
@@ -1394,22 +1174,19 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     gdt_log_init(&c.log, opts->verbosity);
     gdt_progress_init(&c.prog, opts->verbosity);
     c.job = opts->job != NULL ? strdup(opts->job) : default_job(opts->output);
-    c.tiles_dir = c.job != NULL ? path_join(c.job, "tiles") : NULL;
+    c.tiles_dir = c.job != NULL ? tr_path_join(c.job, "tiles") : NULL;
     if (c.job == NULL || c.tiles_dir == NULL) {
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         goto fail;
     }
 
-    /* the device first: a missing or broken device fails before any work */
-    memset(&copt, 0, sizeof copt);
-    copt.device = opts->device;
-    copt.log = &c.log;
-    st = gdt_core_create(&c.core, &copt, err);
-    if (st == GDT_OK)
-        st = gdt_certifier_create(&c.certifier, host_threads(opts->threads), err);
+    /* the device while pass 1 runs */
+    cstart.opts.device = opts->device;
+    cstart.opts.log = &c.log;
+    core_start_begin(&cstart);
+    st = gdt_certifier_create(&c.certifier, host_threads(opts->threads), err);
     if (st != GDT_OK)
         goto fail;
-    snprintf(c.s.device, sizeof c.s.device, "%s", gdt_core_device_name(c.core));
     if (opts->restart)
         remove_job_files(c.job);
     st = make_dir(c.job, err);
@@ -1439,9 +1216,15 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     if (st == GDT_OK)
         st = gdt_tiler_pass1(c.tiler, err);
     if (st == GDT_EINTERRUPTED)
-        st = interrupted_in(c.job, "pass 1", err);
+        st = tr_interrupted(c.job, "pass 1", err);
     if (st != GDT_OK)
         goto fail;
+    st = core_start_join(&cstart, &c.core, err);
+    if (st != GDT_OK && stopped(&c))
+        st = tr_interrupted(c.job, "pass 1", err); /* the same signal, as above */
+    if (st != GDT_OK)
+        goto fail;
+    snprintf(c.s.device, sizeof c.s.device, "%s", gdt_core_device_name(c.core));
     c.plan = gdt_tiler_get_plan(c.tiler);
     c.s.t_pass1 = gdt_tiler_get_stats(c.tiler)->t_pass1;
     t0 = gdt_now();
@@ -1465,7 +1248,7 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
         if (st == GDT_OK)
             st = gdt_tiler_pass2(c.tiler, err);
         if (st == GDT_EINTERRUPTED)
-            st = interrupted_in(c.job, "pass 2", err);
+            st = tr_interrupted(c.job, "pass 2", err);
         if (st == GDT_OK)
             st = gdt_job_set_stage(c.jobdb, "pass2", 1, err);
         if (st != GDT_OK)
@@ -1498,6 +1281,25 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
         goto fail;
     }
 
+    {
+        const gdt_cloud_info *ci = gdt_cloud_get_info(c.cloud);
+        tr_out_src os;
+        memset(&os, 0, sizeof os);
+        os.output = opts->output;
+        os.meta.lattice = ci->lattice;
+        os.meta.epsg = ci->epsg;
+        os.meta.crs_wkt = ci->crs_wkt;
+        os.tiler = c.tiler;
+        os.tiles_dir = c.tiles_dir;
+        os.job = c.job;
+        os.base = c.base;
+        os.ntiles = ntiles;
+        os.stop = opts->stop;
+        st = tr_out_start(&c.out, &os, err);
+        if (st != GDT_OK)
+            goto fail;
+    }
+
     t0 = gdt_now();
     gdt_progress_stage(&c.prog, "tiles", c.s.vertices, "points");
     for (uint64_t k = 0; k < ntiles; k++) {
@@ -1509,7 +1311,7 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
             gdt_error_clear(&e2);
             if (post_join(&c, &e2) == GDT_OK)
                 flush_pending(&c, &e2);
-            st = interrupted_in(c.job, "the tile stage", err);
+            st = tr_interrupted(c.job, "the tile stage", err);
             goto fail;
         }
         st = gdt_job_get_tile(c.jobdb, k, &found, &size, &sum, err);
@@ -1521,6 +1323,11 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
             st = core_tile(&c, k, &c.slot[k & 1], err);
         if (st == GDT_OK)
             st = post_join(&c, err);
+        /* tiles before k have their .tri files, and tile k if reused; a
+         * failed output is reported after the merge, once the tiles are
+         * safe in the job for a rerun */
+        if (st == GDT_OK)
+            tr_out_ready(c.out, k + (ok ? 1 : 0));
         /* no post stage runs: pending holds every finished tile before k */
         if (st == GDT_OK &&
             (c.npending >= 256 || (c.npending > 0 && gdt_now() - c.t_flushed > 1.0)))
@@ -1570,7 +1377,18 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     }
 
     t0 = gdt_now();
-    st = write_ply(&c, err);
+    gdt_progress_stage(&c.prog, "write", 1, "files");
+    {
+        char *mf = tr_path_join(c.job, MF_NAME);
+        st = mf == NULL ? gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory")
+                        : tr_out_finish(c.out, mf, c.s.merge_faces, err);
+        if (mf == NULL)
+            tr_out_abort(c.out);
+        c.out = NULL;
+        free(mf);
+    }
+    if (st == GDT_OK)
+        gdt_progress_update(&c.prog, 1);
     if (st == GDT_OK)
         st = gdt_job_set_stage(c.jobdb, "ply", 1, err);
     if (st != GDT_OK)
@@ -1617,7 +1435,9 @@ fail:
         /* the first error stands */
         gdt_error e2;
         gdt_error_clear(&e2);
+        core_start_join(&cstart, &c.core, &e2);
         post_join(&c, &e2);
+        tr_out_abort(c.out);
     }
     if (st == GDT_OK)
         gdt_progress_end(&c.prog);

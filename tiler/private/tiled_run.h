@@ -14,7 +14,8 @@
  *      written under a temporary name, fsync'd, renamed; a resumed run
  *      redoes the merge).  Memory: one row of seams and the merger's band,
  *      never all seams;
- *   4. the PLY: vertices tile by tile (each tile's points by lowest input
+ *   4. the PLY (tiled_out.h, written by a thread from the start of stage 2
+ *      on): vertices tile by tile (each tile's points by lowest input
  *      ordinal), then every tile's certified faces, then the merge's faces
  *      round by round (each round's sorted).
  * Output bytes depend only on the inputs and the options --tile, --cell,

@@ -1,0 +1,60 @@
+/* tiled_out.h — the PLY of a tiled run, written beside the tile stage.
+ *
+ * A writer thread creates the PLY under its temporary name (gdt_ply.h) and
+ * writes every vertex (tile by tile, from the .pts files); then, in tile
+ * order, the certified faces of each tile (from its .tri file) as soon as
+ * the tile stage reports the file written (tr_out_ready).  tr_out_finish
+ * waits for the thread, appends the merge's faces (merge.faces) and
+ * completes the file.  The bytes are those of writing everything after the
+ * merge; the tile stage gives the writer a share of the CPU (all of it
+ * that a GPU leaves idle) instead of the run spending a stage on it.  A
+ * failed write stops the writer and is reported by tr_out_finish: the
+ * tiles go on and stay in the job, so a rerun only redoes the output.
+ *
+ * Threads: the caller's thread calls every function; the writer thread
+ * only reads the tiler (tile descriptions), the files and src. */
+#ifndef GDT_TILED_OUT_H
+#define GDT_TILED_OUT_H
+
+#include <signal.h>
+#include <stdint.h>
+
+#include "gdt_error.h"
+#include "gdt_ply.h"
+#include "gdt_tiler.h"
+
+typedef struct tr_out tr_out;
+
+typedef struct tr_out_src {
+    const char *output;          /* the PLY path */
+    gdt_ply_meta meta;           /* its strings outlive the writer */
+    const gdt_tiler *tiler;      /* the tiles (read only while the writer runs) */
+    const char *tiles_dir;
+    const char *job;             /* for messages */
+    const uint64_t *base;        /* ntiles + 1: output index of each tile's first vertex */
+    uint64_t ntiles;
+    volatile sig_atomic_t *stop; /* nonzero: stop (may be NULL) */
+} tr_out_src;
+
+/* Starts the writer (src is copied; the arrays and strings it points to
+ * must outlive it).  Stale temporaries of killed writers beside the output
+ * are removed first.  Without a thread the work is done in tr_out_finish.
+ * returns: GDT_OK; GDT_EINTERNAL 7001. */
+gdt_status tr_out_start(tr_out **out, const tr_out_src *src, gdt_error *err);
+
+/* Tiles 0..n-1 have their .tri files (n never decreases). */
+void tr_out_ready(tr_out *o, uint64_t n);
+
+/* Waits until every tile's faces are written, then appends the merge's
+ * merge_faces faces from merge_path and completes the PLY.  Consumes o
+ * (also on failure, when the temporary file is removed).
+ * returns: GDT_OK; the PLY writer's errors (GDT_EIO 4xxx); GDT_EIO 4805,
+ * GDT_EJOB 6801-6802 (a job file missing, foreign or short);
+ * GDT_EINTERRUPTED 1302. */
+gdt_status tr_out_finish(tr_out *o, const char *merge_path, uint64_t merge_faces,
+                         gdt_error *err);
+
+/* Stops the writer and removes its temporary file.  o may be NULL. */
+void tr_out_abort(tr_out *o);
+
+#endif

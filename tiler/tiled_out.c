@@ -1,0 +1,324 @@
+/* tiled_out.c — the PLY of a tiled run, written beside the tile stage (see
+ * private/tiled_out.h). */
+#include "private/tiled_out.h"
+#include "private/tiled_files.h"
+#include "private/tiler_io.h"
+
+#include <dirent.h>
+#include <errno.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+/* Invariants: ready only grows; the writer reads .tri files of tiles below
+ * ready only; st/err are the writer's, read by the caller after the join;
+ * quit is set once, by the caller. */
+struct tr_out {
+    tr_out_src src;
+    gdt_ply_writer *w;    /* the writer thread's until it is joined */
+    pthread_t tid;
+    int running;          /* a thread was started and not yet joined */
+    pthread_mutex_t mu;
+    pthread_cond_t cv;
+    uint64_t ready;       /* tiles with their .tri file */
+    int quit;             /* the caller gives up: stop at the next tile */
+    gdt_status st;
+    gdt_error err;
+    double *xyz;          /* 3 TR_CHUNK */
+    gdt_point *pts;       /* TR_CHUNK */
+    int32_t *tri;         /* 3 TR_CHUNK */
+    unsigned char *raw;   /* 12 TR_CHUNK */
+};
+
+static int stopped(const tr_out *o)
+{
+    return o->src.stop != NULL && *o->src.stop != 0;
+}
+
+/* Copies nf face records (3 x u32 output indices, little-endian) from the
+ * current position of f to the PLY, TR_CHUNK at a time.  path names f in
+ * errors. */
+static gdt_status copy_face_records(tr_out *o, FILE *f, const char *path, uint64_t nf,
+                                    gdt_error *err)
+{
+    for (uint64_t done = 0; done < nf;) {
+        size_t m = nf - done < TR_CHUNK ? (size_t)(nf - done) : TR_CHUNK;
+        gdt_status st;
+        if (fread(o->raw, 12, m, f) != m)
+            return gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
+        for (size_t i = 0; i < 3 * m; i++)
+            o->tri[i] = (int32_t)tr_get_u32(o->raw + 4 * i);
+        st = gdt_ply_write_faces(o->w, o->tri, m, err);
+        if (st != GDT_OK)
+            return st;
+        done += m;
+    }
+    return GDT_OK;
+}
+
+/* The certified faces of tile k's .tri file. */
+static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
+{
+    gdt_tile_desc d;
+    unsigned char hdr[TR_HEADER];
+    char *path = NULL;
+    FILE *f = NULL;
+    gdt_status st = gdt_tiler_tile_info(o->src.tiler, k, &d, err);
+
+    if (st == GDT_OK)
+        st = tr_tile_path(o->src.tiles_dir, &d, "tri", &path, err);
+    if (st != GDT_OK)
+        return st;
+    f = fopen(path, "rb");
+    if (f == NULL) {
+        st = gdt_error_set(err, GDT_EIO, 4805, "%s: cannot open: %s", path, strerror(errno));
+        goto fail;
+    }
+    if (fread(hdr, 1, TR_HEADER, f) != TR_HEADER || memcmp(hdr, TR_MAGIC, 8) != 0 ||
+        tr_get_u64(hdr + 8) != o->src.base[k] || tr_get_u64(hdr + 16) != d.points) {
+        st = gdt_error_set(err, GDT_EJOB, 6801, "%s: not the tile file this run wrote", path);
+        goto fail;
+    }
+    st = copy_face_records(o, f, path, tr_get_u64(hdr + 24), err);
+fail:
+    if (f != NULL)
+        fclose(f);
+    free(path);
+    return st;
+}
+
+/* The faces of the seam merge (merge.faces). */
+static gdt_status copy_merge_faces(tr_out *o, const char *path, uint64_t nf, gdt_error *err)
+{
+    unsigned char hdr[MF_HEADER];
+    FILE *f = fopen(path, "rb");
+    struct stat sb;
+    gdt_status st = GDT_OK;
+
+    if (f == NULL || fstat(fileno(f), &sb) != 0) {
+        st = gdt_error_set(err, GDT_EIO, 4805, "%s: cannot open: %s", path, strerror(errno));
+        goto fail;
+    }
+    if (fread(hdr, 1, MF_HEADER, f) != MF_HEADER || memcmp(hdr, MF_MAGIC, 8) != 0 ||
+        tr_get_u64(hdr + 8) != nf || (uint64_t)sb.st_size != MF_HEADER + 12 * nf) {
+        st = gdt_error_set(err, GDT_EJOB, 6801, "%s: not the merge file this run wrote", path);
+        goto fail;
+    }
+    st = copy_face_records(o, f, path, nf, err);
+fail:
+    if (f != NULL)
+        fclose(f);
+    return st;
+}
+
+/* Tile k's points (by lowest input ordinal) as PLY vertices. */
+static gdt_status write_vertices(tr_out *o, uint64_t k, gdt_error *err)
+{
+    const gdt_lattice *L = &o->src.meta.lattice;
+    gdt_tile_desc d;
+    tl_rfile rf;
+    char *path = NULL;
+    gdt_status st = gdt_tiler_tile_info(o->src.tiler, k, &d, err);
+
+    memset(&rf, 0, sizeof rf);
+    rf.fd = -1;
+    if (st == GDT_OK)
+        st = tr_tile_path(o->src.tiles_dir, &d, "pts", &path, err);
+    if (st == GDT_OK)
+        st = tl_rfile_open(&rf, path, d.points, TR_CHUNK, err);
+    free(path);
+    if (st != GDT_OK)
+        return st;
+    for (;;) {
+        size_t m = 0;
+        st = tl_rfile_read(&rf, o->pts, TR_CHUNK, &m, err);
+        if (st != GDT_OK || m == 0)
+            break;
+        for (size_t i = 0; i < m; i++) {
+            o->xyz[3 * i + 0] = L->ox + L->sx * (double)o->pts[i].x;
+            o->xyz[3 * i + 1] = L->oy + L->sy * (double)o->pts[i].y;
+            o->xyz[3 * i + 2] = o->pts[i].z;
+        }
+        st = gdt_ply_write_vertices(o->w, o->xyz, m, err);
+        if (st != GDT_OK)
+            break;
+    }
+    tl_rfile_close(&rf);
+    return st;
+}
+
+/* Removes what a killed writer left beside the output: "<name>.tmp-<pid>"
+ * files (gdt_ply.h) whose process no longer exists. */
+static void remove_stale_temps(const char *output)
+{
+    const char *slash = strrchr(output, '/');
+    const char *base = slash != NULL ? slash + 1 : output;
+    size_t dl = slash != NULL ? (size_t)(slash - output) : 0, bl = strlen(base);
+    char *dir = malloc(dl + 2);
+    DIR *d;
+    struct dirent *e;
+    if (dir == NULL)
+        return;
+    if (slash != NULL) {
+        memcpy(dir, output, dl);
+        dir[dl] = '\0';
+        if (dl == 0)
+            strcpy(dir, "/");
+    } else {
+        strcpy(dir, ".");
+    }
+    d = opendir(dir);
+    while (d != NULL && (e = readdir(d)) != NULL) {
+        const char *nm = e->d_name, *q;
+        long pid;
+        char *end;
+        if (strncmp(nm, base, bl) != 0 || strncmp(nm + bl, ".tmp-", 5) != 0)
+            continue;
+        q = nm + bl + 5;
+        errno = 0;
+        pid = strtol(q, &end, 10);
+        if (*q == '\0' || *end != '\0' || errno != 0 || pid <= 0 || (pid_t)pid == getpid())
+            continue;
+        if (kill((pid_t)pid, 0) != 0 && errno == ESRCH)
+            unlinkat(dirfd(d), nm, 0);
+    }
+    if (d != NULL)
+        closedir(d);
+    free(dir);
+}
+
+/* Waits until tile k has its .tri file; 0 when the caller gives up. */
+static int wait_ready(tr_out *o, uint64_t k)
+{
+    int go;
+    pthread_mutex_lock(&o->mu);
+    while (o->ready <= k && !o->quit)
+        pthread_cond_wait(&o->cv, &o->mu);
+    go = !o->quit;
+    pthread_mutex_unlock(&o->mu);
+    return go;
+}
+
+/* The writer: the PLY's header and vertices, then each tile's faces. */
+static gdt_status write_tiles(tr_out *o, gdt_error *err)
+{
+    uint64_t n = o->src.ntiles;
+    gdt_status st = gdt_ply_create(&o->w, o->src.output, &o->src.meta, err);
+    for (uint64_t k = 0; st == GDT_OK && k < n; k++)
+        st = stopped(o) ? tr_interrupted(o->src.job, "the output", err)
+                        : write_vertices(o, k, err);
+    for (uint64_t k = 0; st == GDT_OK && k < n; k++) {
+        if (!wait_ready(o, k) || stopped(o))
+            st = tr_interrupted(o->src.job, "the output", err);
+        else
+            st = copy_faces(o, k, err);
+    }
+    return st;
+}
+
+static void *out_main(void *arg)
+{
+    tr_out *o = arg;
+    gdt_error e;
+    gdt_status st;
+    gdt_error_clear(&e);
+    st = write_tiles(o, &e);
+    o->st = st;
+    o->err = e;
+    return NULL;
+}
+
+static void out_free(tr_out *o)
+{
+    gdt_ply_abort(o->w);
+    pthread_cond_destroy(&o->cv);
+    pthread_mutex_destroy(&o->mu);
+    free(o->xyz);
+    free(o->pts);
+    free(o->tri);
+    free(o->raw);
+    free(o);
+}
+
+gdt_status tr_out_start(tr_out **out, const tr_out_src *src, gdt_error *err)
+{
+    tr_out *o = calloc(1, sizeof *o);
+    *out = NULL;
+    if (o == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    o->src = *src;
+    pthread_mutex_init(&o->mu, NULL);
+    pthread_cond_init(&o->cv, NULL);
+    o->xyz = malloc(3 * TR_CHUNK * sizeof *o->xyz);
+    o->pts = malloc(TR_CHUNK * sizeof *o->pts);
+    o->tri = malloc(3 * TR_CHUNK * sizeof *o->tri);
+    o->raw = malloc(12 * TR_CHUNK);
+    if (o->xyz == NULL || o->pts == NULL || o->tri == NULL || o->raw == NULL) {
+        out_free(o);
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    }
+    remove_stale_temps(src->output);
+    o->running = pthread_create(&o->tid, NULL, out_main, o) == 0;
+    *out = o;
+    return GDT_OK;
+}
+
+void tr_out_ready(tr_out *o, uint64_t n)
+{
+    pthread_mutex_lock(&o->mu);
+    if (n > o->ready) {
+        o->ready = n;
+        pthread_cond_signal(&o->cv);
+    }
+    pthread_mutex_unlock(&o->mu);
+}
+
+/* Joins the writer (asking it to stop first if quit). */
+static void out_join(tr_out *o, int quit)
+{
+    if (!o->running)
+        return;
+    if (quit) {
+        pthread_mutex_lock(&o->mu);
+        o->quit = 1;
+        pthread_cond_signal(&o->cv);
+        pthread_mutex_unlock(&o->mu);
+    }
+    pthread_join(o->tid, NULL);
+    o->running = 0;
+}
+
+gdt_status tr_out_finish(tr_out *o, const char *merge_path, uint64_t merge_faces,
+                         gdt_error *err)
+{
+    gdt_status st;
+    tr_out_ready(o, o->src.ntiles);
+    if (o->running) {
+        out_join(o, 0);
+        st = o->st;
+        if (st != GDT_OK)
+            *err = o->err;
+    } else {
+        st = write_tiles(o, err); /* no thread could be started */
+    }
+    if (st == GDT_OK)
+        st = stopped(o) ? tr_interrupted(o->src.job, "the output", err)
+                        : copy_merge_faces(o, merge_path, merge_faces, err);
+    if (st == GDT_OK) {
+        st = gdt_ply_finish(o->w, err);
+        o->w = NULL;
+    }
+    out_free(o);
+    return st;
+}
+
+void tr_out_abort(tr_out *o)
+{
+    if (o == NULL)
+        return;
+    out_join(o, 1);
+    out_free(o);
+}
