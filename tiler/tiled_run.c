@@ -1125,7 +1125,14 @@ typedef struct core_start {
 static void *core_start_main(void *arg)
 {
     core_start *cs = arg;
+    stack_t ss;
+    int have = sigaltstack(NULL, &ss) == 0;
     cs->st = gdt_core_create(&cs->core, &cs->opts, &cs->err);
+    /* The compiler inside the OpenCL runtime gives the thread an alternate
+     * signal stack of its own; put back the one the thread had, which
+     * whoever set it up (a sanitizer's runtime) releases at thread exit. */
+    if (have)
+        sigaltstack(&ss, NULL);
     return NULL;
 }
 
