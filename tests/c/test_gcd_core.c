@@ -10,7 +10,8 @@
  * insertion) are forced on some sets; on the smallest grid every set also
  * goes through Phase 5 as the parallel rounds alone (the set-up of non-CPU
  * devices) and with tiny blocks and queues; duplicate points are refused
- * with GDT_EINPUT.
+ * with GDT_EINPUT.  Without full_grid, the texel follows the points (see
+ * texel_case).
  *
  *   test_gcd_core [--quick] [--big N] [--only NAME]
  * Exit 77 without an OpenCL device. */
@@ -150,6 +151,51 @@ done:
     gdt_mesh_free(&out2);
 }
 
+/* The texel a tile's points get without full_grid: never finer than the
+ * tile's grid (at most grid texels per side), at least 64 texels along the
+ * longer side of the points' bounding box, and in between about 4 texels
+ * per point over that box (between 4 and 8 per point after rounding); a
+ * full tile gets (nearly) the whole grid.
+ * The triangulation stays the reference's. */
+static void texel_case(tctx *t, gdt_core *core, const gdt_ipt *pts, size_t n, int grid,
+                       const char *label, int want_full)
+{
+    gdt_mesh ref, out;
+    gdt_error err;
+    gdt_core_stats st;
+    char why[512];
+    double per;
+    uint32_t side;
+
+    memset(&err, 0, sizeof err);
+    gdt_mesh_init(&ref);
+    gdt_mesh_init(&out);
+    if (gdt_reference_triangulate(NULL, pts, n, &ref, &err) != GDT_OK ||
+        gdt_core_triangulate(core, pts, n, grid, &out, &st, &err) != GDT_OK) {
+        CHECK(t, 0, "texel %s: %s", label, err.msg);
+        goto done;
+    }
+    CHECK(t, gen_same_triangles(&out, &ref, why, sizeof why) == 0,
+          "texel %s: differs from the reference: %s", label, why);
+    side = st.grid_w > st.grid_h ? st.grid_w : st.grid_h;
+    per = (double)st.grid_w * (double)st.grid_h / (double)n;
+    fprintf(stderr, "texel %-24s grid %5d %8zu pts: %u x %u texels of %" PRId64 " (%.2f per point)\n",
+            label, grid, n, st.grid_w, st.grid_h, st.cell, per);
+    CHECK(t, st.grid_w <= (uint32_t)grid && st.grid_h <= (uint32_t)grid,
+          "texel %s: %u x %u texels on a grid of %d", label, st.grid_w, st.grid_h, grid);
+    if (want_full)
+        CHECK(t, (uint64_t)side * 100 >= (uint64_t)grid * 95,
+              "texel %s: a full tile got %u texels per side of %d",
+              label, side, grid);
+    else
+        CHECK(t, side >= 64 && (side <= 66 || (per >= 3.9 && per <= 8.0)),
+              "texel %s: %u x %u texels for %zu points (%.2f per point)", label, st.grid_w,
+              st.grid_h, n, per);
+done:
+    gdt_mesh_free(&ref);
+    gdt_mesh_free(&out);
+}
+
 int main(int argc, char **argv)
 {
     tctx t = {0, 0};
@@ -255,6 +301,37 @@ int main(int argc, char **argv)
                 run_all(&t, core, gi == 0 ? core_ins : NULL, &alt, few, k, g, &rng, label, 0);
             }
         }
+    }
+    if (ONLY("texel")) {
+        gdt_core *tc = NULL;
+        gdt_ipt *p;
+        size_t n;
+        o.full_grid = 0;
+        o.path = GDT_CORE_PATH_AUTO;
+        if (gdt_core_create(&tc, &o, &err) != GDT_OK) {
+            gdt_error_print(&err, stderr);
+            return 1;
+        }
+        /* a full tile of 1024 texels: about 1024^2 / 4 points over its square */
+        p = gen_uniform(&rng, 1024 * 1024 / 4, 0, 1024 * 50, &n);
+        texel_case(&t, tc, p, n, 1024, "full tile", 1);
+        free(p);
+        /* a sparse tile: 2000 points over the same square */
+        p = gen_uniform(&rng, 2000, 0, 1024 * 50, &n);
+        texel_case(&t, tc, p, n, 1024, "sparse", 0);
+        free(p);
+        /* very few points: the 64-texel floor */
+        p = gen_uniform(&rng, 100, 0, 1024 * 50, &n);
+        texel_case(&t, tc, p, n, 1024, "100 points", 0);
+        free(p);
+        /* an edge tile, its points in a strip of a sixteenth of the square */
+        p = gen_uniform(&rng, 4000, 0, 1024 * 50, &n);
+        for (size_t i = 0; i < n; i++)
+            p[i].y = p[i].y / 16 + 7;
+        gen_dedup(p, &n);
+        texel_case(&t, tc, p, n, 1024, "strip", 0);
+        free(p);
+        gdt_core_destroy(tc);
     }
     if (ONLY("dup")) {
         gdt_ipt d[4] = {{5, 5}, {100, 7}, {5, 5}, {50, 90}};
