@@ -364,8 +364,6 @@ gdt_status gdt_core_create(gdt_core **out, const gdt_core_opts *opts, gdt_error 
     NAME(d_pos);
     NAME(d_texel);
     NAME(d_seed);
-    NAME(d_near);
-    NAME(d_colour);
     NAME(d_tri);
     NAME(d_opp);
     NAME(d_vt);
@@ -401,8 +399,6 @@ gdt_status gdt_core_create(gdt_core **out, const gdt_core_opts *opts, gdt_error 
     NAME(d_bad);
     NAME(d_vnew);
     NAME(d_list3);
-    NAME(d_tri2);
-    NAME(d_opp2);
     NAME(d_deg);
     NAME(d_off);
     NAME(d_sc);
@@ -727,7 +723,8 @@ static gdt_status fake_fan(gdt_core *c, gcd_run *r, gdt_error *err)
     return gcd_link_all(c, r, 0, err);
 }
 
-/* Real triangles to the output mesh. */
+/* Real triangles to the output mesh, compacted into d_aux2 and d_aux3
+ * (dead after Phase 5). */
 static gdt_status extract(gdt_core *c, gcd_run *r, gdt_mesh *out, gdt_error *err)
 {
     size_t T = r->ntris;
@@ -736,14 +733,14 @@ static gdt_status extract(gdt_core *c, gcd_run *r, gdt_mesh *out, gdt_error *err
 
     if (T > 0 &&
         (gcd_buf_need(c, &c->d_flags, 4 * T, err) != GDT_OK ||
-         gcd_buf_need(c, &c->d_tri2, 12 * T, err) != GDT_OK ||
-         gcd_buf_need(c, &c->d_opp2, 12 * T, err) != GDT_OK ||
+         gcd_buf_need(c, &c->d_aux2, 12 * T, err) != GDT_OK ||
+         gcd_buf_need(c, &c->d_aux3, 12 * T, err) != GDT_OK ||
          gcd_args(c->k.m_real_flags, err, "buib", &c->d_tri, (unsigned)T, (int)r->n,
                   &c->d_flags) != GDT_OK ||
          gcd_launch(c, c->k.m_real_flags, T, err) != GDT_OK ||
          gcd_scan(c, &c->d_flags, T, &nreal, err) != GDT_OK ||
          gcd_args(c->k.m_compact_tris, err, "bbububbb", &c->d_tri, &c->d_opp, (unsigned)T,
-                  &c->d_flags, nreal, &c->d_int2in, &c->d_tri2, &c->d_opp2) != GDT_OK ||
+                  &c->d_flags, nreal, &c->d_int2in, &c->d_aux2, &c->d_aux3) != GDT_OK ||
          gcd_launch(c, c->k.m_compact_tris, T, err) != GDT_OK))
         return err->status;
     st = gdt_mesh_reserve(out, r->n, nreal, out->ids != NULL, err);
@@ -756,8 +753,8 @@ static gdt_status extract(gdt_core *c, gcd_run *r, gdt_mesh *out, gdt_error *err
             out->ids[i] = (int64_t)i;
     out->nverts = r->n;
     out->ntris = nreal;
-    if (gdt_ocl_read(c->ocl, c->d_tri2.b, 0, out->tri, 12 * (size_t)nreal, err) != GDT_OK ||
-        gdt_ocl_read(c->ocl, c->d_opp2.b, 0, out->opp, 12 * (size_t)nreal, err) != GDT_OK)
+    if (gdt_ocl_read(c->ocl, c->d_aux2.b, 0, out->tri, 12 * (size_t)nreal, err) != GDT_OK ||
+        gdt_ocl_read(c->ocl, c->d_aux3.b, 0, out->opp, 12 * (size_t)nreal, err) != GDT_OK)
         return err->status;
     return GDT_OK;
 }

@@ -210,7 +210,7 @@ static gdt_status gather(gdt_core *c, gcd_run *r, dbr_set *s, size_t from, gdt_e
     if (gcd_buf_need(c, &c->d_aux, 4 * m, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_aux2, 36 * m, err) != GDT_OK ||
         gdt_ocl_write(c->ocl, c->d_aux.b, 0, s->pix + from, 4 * m, err) != GDT_OK ||
-        gcd_args(c->k.p1_gather, err, "buubub", &c->d_colour, r->W, r->H, &c->d_aux,
+        gcd_args(c->k.p1_gather, err, "buubub", GCD_COLOUR(c), r->W, r->H, &c->d_aux,
                  (unsigned)m, &c->d_aux2) != GDT_OK ||
         gcd_launch(c, c->k.p1_gather, m, err) != GDT_OK ||
         gdt_ocl_read(c->ocl, c->d_aux2.b, 0, s->nb + 9 * from, 36 * m, err) != GDT_OK)
@@ -295,7 +295,7 @@ static gdt_status recolour(gdt_core *c, gcd_run *r, uint32_t *seeds, size_t nsee
         gcd_buf_need(c, &c->d_aux2, 4 * s.n, err) != GDT_OK ||
         gdt_ocl_write(c->ocl, c->d_aux.b, 0, s.pix, 4 * s.n, err) != GDT_OK ||
         gdt_ocl_write(c->ocl, c->d_aux2.b, 0, s.col, 4 * s.n, err) != GDT_OK ||
-        gcd_args(c->k.p1_scatter, err, "bbbu", &c->d_colour, &c->d_aux, &c->d_aux2,
+        gcd_args(c->k.p1_scatter, err, "bbbu", GCD_COLOUR(c), &c->d_aux, &c->d_aux2,
                  (unsigned)s.n) != GDT_OK ||
         gcd_launch(c, c->k.p1_scatter, s.n, err) != GDT_OK) {
         st = err->status;
@@ -328,8 +328,8 @@ gdt_status gcd_voronoi_from_seeds(gdt_core *c, gcd_run *r, gdt_error *err)
         bands = r->H;
     if (bands < 1)
         bands = 1;
-    if (gcd_buf_need(c, &c->d_near, 4 * npix, err) != GDT_OK ||
-        gcd_buf_need(c, &c->d_colour, 4 * npix, err) != GDT_OK ||
+    if (gcd_buf_need(c, GCD_NEAR(c), 4 * npix, err) != GDT_OK ||
+        gcd_buf_need(c, GCD_COLOUR(c), 4 * npix, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_band_lo, 4 * (size_t)bands * r->W, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_band_hi, 4 * (size_t)bands * r->W, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_band_below, 4 * (size_t)bands * r->W, err) != GDT_OK ||
@@ -349,9 +349,9 @@ gdt_status gcd_voronoi_from_seeds(gdt_core *c, gcd_run *r, gdt_error *err)
             return err->status;
     }
     if (gcd_args(c->k.p1_cols, err, "buuubbb", &c->d_seed, r->W, r->H, bands, &c->d_band_below,
-                 &c->d_band_above, &c->d_near) != GDT_OK ||
+                 &c->d_band_above, GCD_NEAR(c)) != GDT_OK ||
         gcd_launch_wg(c, c->k.p1_cols, nstrips * bands, 16, err) != GDT_OK ||
-        gcd_args(c->k.p1_rows, err, "buub", &c->d_near, r->W, r->H, &c->d_colour) != GDT_OK ||
+        gcd_args(c->k.p1_rows, err, "buub", GCD_NEAR(c), r->W, r->H, GCD_COLOUR(c)) != GDT_OK ||
         gcd_launch_wg(c, c->k.p1_rows, r->H, 16, err) != GDT_OK)
         return err->status;
 
@@ -359,7 +359,7 @@ gdt_status gcd_voronoi_from_seeds(gdt_core *c, gcd_run *r, gdt_error *err)
     for (uint32_t cap = 4096;; cap = ndebris) {
         if (gcd_buf_need(c, &c->d_list2, 4 * (size_t)cap, err) != GDT_OK ||
             gcd_fill(c, &c->d_small, 1, 0, err) != GDT_OK ||
-            gcd_args(c->k.p1_debris, err, "buubub", &c->d_colour, r->W, r->H, &c->d_list2, cap,
+            gcd_args(c->k.p1_debris, err, "buubub", GCD_COLOUR(c), r->W, r->H, &c->d_list2, cap,
                      &c->d_small) != GDT_OK ||
             gcd_launch_wg(c, c->k.p1_debris, r->H, 16, err) != GDT_OK ||
             gcd_read_u32(c, &c->d_small, 0, &ndebris, err) != GDT_OK)
@@ -469,7 +469,7 @@ gdt_status gcd_test_voronoi(gdt_core *c, const uint32_t *sites, size_t nsites, u
         gcd_args(c->k.p1_plant, err, "bub", &c->d_aux3, (unsigned)nsites, &c->d_seed) != GDT_OK ||
         gcd_launch(c, c->k.p1_plant, nsites, err) != GDT_OK ||
         gcd_voronoi_from_seeds(c, &r, err) != GDT_OK ||
-        gdt_ocl_read(c->ocl, c->d_colour.b, 0, colour, 4 * npix, err) != GDT_OK)
+        gdt_ocl_read(c->ocl, GCD_COLOUR(c)->b, 0, colour, 4 * npix, err) != GDT_OK)
         return err->status;
     return GDT_OK;
 }

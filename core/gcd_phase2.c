@@ -83,7 +83,7 @@ gdt_status gcd_phase2(gdt_core *c, gcd_run *r, gdt_error *err)
     /* dual triangles and reserved slots, chunk by chunk */
     if (nchunks > 0) {
         if (gcd_buf_need(c, &c->d_flags, 4 * nchunks, err) != GDT_OK ||
-            gcd_args(c->k.p2_count, err, "buubb", &c->d_colour, r->W, r->H, &c->d_mrange,
+            gcd_args(c->k.p2_count, err, "buubb", GCD_COLOUR(c), r->W, r->H, &c->d_mrange,
                      &c->d_flags) != GDT_OK ||
             gcd_launch(c, c->k.p2_count, nchunks, err) != GDT_OK ||
             gcd_scan(c, &c->d_flags, nchunks, &total, err) != GDT_OK)
@@ -95,7 +95,7 @@ gdt_status gcd_phase2(gdt_core *c, gcd_run *r, gdt_error *err)
                                  r->nv, r->nmissing);
         ndual = nslots - 2 * r->nmissing;
         if (nslots > 0 &&
-            (gcd_args(c->k.p2_write, err, "bbuubbubbbb", &c->d_colour, &c->d_seed, r->W, r->H,
+            (gcd_args(c->k.p2_write, err, "bbuubbubbbb", GCD_COLOUR(c), &c->d_seed, r->W, r->H,
                       &c->d_flags, &c->d_mrange, (unsigned)r->kept, &c->d_tri, &c->d_rslot,
                       &c->d_cnt, &c->d_vt) != GDT_OK ||
              gcd_launch(c, c->k.p2_write, nchunks, err) != GDT_OK))

@@ -135,18 +135,21 @@ gdt_status gcd_flip_run(gdt_core *c, gcd_run *r, size_t na0, int all_active, uin
 
 /* Sorts the triangle list by smallest vertex (kernels/gcd_mesh.cl), dropping
  * dead slots: the flipping rounds then find neighbours and vertices near in
- * memory. */
+ * memory.  Scratch that is dead here: the permutation and its inverse go to
+ * d_fnext and d_active (the flip lists, filled after gcd_flip_prepare), the
+ * sorted triangles to d_aux2 and d_aux3 (Phase 2's), which then swap with
+ * d_tri and d_opp. */
 static gdt_status sort_tris(gdt_core *c, gcd_run *r, gdt_error *err)
 {
     size_t T = r->ntris, nv = r->nv;
     uint32_t live = 0;
-    gcd_buf tmp;
+    gcd_buf *perm = &c->d_fnext, *inv = &c->d_active, tmp;
     if (gcd_buf_need(c, &c->d_cnt, 4 * nv, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_aux, 4 * nv, err) != GDT_OK ||
-        gcd_buf_need(c, &c->d_aux2, 4 * T, err) != GDT_OK ||
-        gcd_buf_need(c, &c->d_aux3, 4 * T, err) != GDT_OK ||
-        gcd_buf_need(c, &c->d_tri2, 12 * r->cap_tris, err) != GDT_OK ||
-        gcd_buf_need(c, &c->d_opp2, 12 * r->cap_tris, err) != GDT_OK ||
+        gcd_buf_need(c, perm, 4 * r->cap_tris, err) != GDT_OK ||
+        gcd_buf_need(c, inv, 4 * r->cap_tris, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_aux2, 12 * r->cap_tris, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_aux3, 12 * r->cap_tris, err) != GDT_OK ||
         gcd_fill(c, &c->d_cnt, nv, 0, err) != GDT_OK ||
         gcd_args(c->k.m_sort_count, err, "bub", &c->d_tri, (unsigned)T, &c->d_cnt) != GDT_OK ||
         gcd_launch(c, c->k.m_sort_count, T, err) != GDT_OK ||
@@ -154,27 +157,27 @@ static gdt_status sort_tris(gdt_core *c, gcd_run *r, gdt_error *err)
         gcd_scan(c, &c->d_aux, nv, &live, err) != GDT_OK ||
         gcd_fill(c, &c->d_cnt, nv, 0, err) != GDT_OK ||
         gcd_args(c->k.m_sort_scatter, err, "bubbb", &c->d_tri, (unsigned)T, &c->d_aux, &c->d_cnt,
-                 &c->d_aux2) != GDT_OK ||
+                 perm) != GDT_OK ||
         gcd_launch(c, c->k.m_sort_scatter, T, err) != GDT_OK ||
-        gcd_args(c->k.m_sort_bucket, err, "bbub", &c->d_aux, &c->d_cnt, (unsigned)nv,
-                 &c->d_aux2) != GDT_OK ||
+        gcd_args(c->k.m_sort_bucket, err, "bbub", &c->d_aux, &c->d_cnt, (unsigned)nv, perm) !=
+            GDT_OK ||
         gcd_launch(c, c->k.m_sort_bucket, nv, err) != GDT_OK ||
-        gcd_args(c->k.m_sort_inverse, err, "bub", &c->d_aux2, live, &c->d_aux3) != GDT_OK ||
+        gcd_args(c->k.m_sort_inverse, err, "bub", perm, live, inv) != GDT_OK ||
         gcd_launch(c, c->k.m_sort_inverse, live, err) != GDT_OK ||
-        gcd_args(c->k.m_sort_apply, err, "bbbbubb", &c->d_tri, &c->d_opp, &c->d_aux2, &c->d_aux3,
-                 live, &c->d_tri2, &c->d_opp2) != GDT_OK ||
+        gcd_args(c->k.m_sort_apply, err, "bbbbubb", &c->d_tri, &c->d_opp, perm, inv, live,
+                 &c->d_aux2, &c->d_aux3) != GDT_OK ||
         gcd_launch(c, c->k.m_sort_apply, live, err) != GDT_OK ||
-        gcd_args(c->k.m_sort_vt, err, "bubu", &c->d_vt, (unsigned)nv, &c->d_aux3,
-                 (unsigned)T) != GDT_OK ||
+        gcd_args(c->k.m_sort_vt, err, "bubu", &c->d_vt, (unsigned)nv, inv, (unsigned)T) !=
+            GDT_OK ||
         gcd_launch(c, c->k.m_sort_vt, nv, err) != GDT_OK)
         return err->status;
     r->ntris = live;
     tmp = c->d_tri;
-    c->d_tri = c->d_tri2;
-    c->d_tri2 = tmp;
+    c->d_tri = c->d_aux2;
+    c->d_aux2 = tmp;
     tmp = c->d_opp;
-    c->d_opp = c->d_opp2;
-    c->d_opp2 = tmp;
+    c->d_opp = c->d_aux3;
+    c->d_aux3 = tmp;
     return GDT_OK;
 }
 

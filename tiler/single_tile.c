@@ -6,7 +6,7 @@
  * inputs they are byte-identical (the triangulation is unique, and the
  * vertex and face orders depend only on the point set and the input order).
  * Memory: about 150 bytes per point on the host, plus the device buffers of
- * the core (about 60 bytes per texel and 250 per point). */
+ * the core (about 400 bytes per point, and up to 16 more per texel). */
 #include "private/single_tile.h"
 #include "private/memcloud.h"
 

@@ -11,8 +11,10 @@
  *            point until phase 3 shifts it; true position after)
  *   d_texel  uint per point: its texel index
  *   d_seed   uint per texel: index of the point owning it, or GCD_EMPTY
- *   d_near   uint per texel: column-nearest site row, then the row stacks
- *   d_colour uint per texel: texel index of its site (the Voronoi colour)
+ *   GCD_NEAR   uint per texel: column-nearest site row, then the row stacks
+ *              (Phase 1; the storage of d_exact)
+ *   GCD_COLOUR uint per texel: texel index of its site (the Voronoi colour;
+ *              Phases 1 and 2; the storage of d_cand)
  *   d_tri    int per triangle slot x3: vertex indices (gdt_mesh layout);
  *            a dead slot has tri[3t] = GCD_NONE
  *   d_opp    int per triangle slot x3: packed opposite pointers (gdt_mesh)
@@ -97,12 +99,12 @@ struct gdt_core {
     gdt_core_opts opts;
     gcd_kernels k;
     /* persistent buffers (grown on demand) */
-    gcd_buf d_pts, d_pos, d_texel, d_seed, d_near, d_colour, d_tri, d_opp, d_vt;
+    gcd_buf d_pts, d_pos, d_texel, d_seed, d_tri, d_opp, d_vt;
     gcd_buf d_cnt, d_flags, d_list, d_list2, d_aux, d_aux2, d_aux3, d_scan, d_small;
     gcd_buf d_band_lo, d_band_hi, d_band_below, d_band_above;
     gcd_buf d_exch, d_mark, d_round, d_small1, d_small2, d_small3;
     gcd_buf d_vote, d_inact, d_flipped, d_stat, d_active, d_next, d_cand, d_exact, d_win;
-    gcd_buf d_chk, d_bad, d_vnew, d_list3, d_tri2, d_opp2, d_deg, d_off, d_sc, d_hint, d_hint2;
+    gcd_buf d_chk, d_bad, d_vnew, d_list3, d_deg, d_off, d_sc, d_hint, d_hint2;
     gcd_buf d_cont, d_oldnb, d_rank, d_fix, d_stat34, d_fnext, d_pts_in, d_texel_in, d_int2in,
         d_inm, d_inm2, d_dropped, d_cont2, d_locep, d_locep2,
         d_rk, d_rv, d_rhist, d_mkeys, d_queue, d_nlist, d_nlist2, d_rslot, d_mrange, d_piv;
@@ -116,6 +118,13 @@ struct gdt_core {
     size_t flip_min_block; /* smallest block (triangle slots) */
     size_t flip_queue;     /* largest queue of a work-item (edges, a power of two) */
 };
+
+/* Buffers whose lives do not overlap share storage: the digital Voronoi
+ * diagram of Phases 1 and 2 lives in the flip lists, which are scratch of
+ * each flipping round (Phases 4 and 5).  Phase 5 keeps its sort's scratch
+ * in the same way (sort_tris in gcd_phase5.c). */
+#define GCD_NEAR(c) (&(c)->d_exact)
+#define GCD_COLOUR(c) (&(c)->d_cand)
 
 /* Geometry of one run (the texel mapping of Phase 1). */
 typedef struct gcd_run {
