@@ -14,6 +14,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#define LOCAL_CHUNK 1024 /* records per read of gdt_tiler_load_tile_local */
+
 static gdt_status reserve(gdt_point_buf *b, size_t n, gdt_error *err)
 {
     gdt_point *g;
@@ -82,19 +84,62 @@ static gdt_status add_neighbour(gdt_tiler *t, uint64_t k, uint64_t u, int64_t bx
     return st;
 }
 
-gdt_status gdt_tiler_load_tile(gdt_tiler *t, uint64_t k, gdt_point_buf *pts,
-                               gdt_point_buf *halo, gdt_error *err)
+/* Tile k's own points from its .pts file (sorted by ordinal): into pts as
+ * records or, when pts is NULL, into xy[0..points) as (x - x0, y - y0),
+ * through a small chunk, so that the records are never held whole.  *n
+ * receives their count. */
+static gdt_status load_own(gdt_tiler *t, uint64_t k, gdt_point_buf *pts, gdt_ipt *xy,
+                           int64_t x0, int64_t y0, size_t *n, gdt_error *err)
+{
+    const tl_tile *tl = &t->tiles[k];
+    gdt_point chunk[LOCAL_CHUNK];
+    tl_rfile rf;
+    char *path;
+    gdt_status st = GDT_OK;
+
+    *n = 0;
+    if (pts != NULL && (st = reserve(pts, (size_t)tl->points, err)) != GDT_OK)
+        return st;
+    path = tl_tile_file(t, k, "pts", 0);
+    if (path == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    st = tl_rfile_open(&rf, path, tl->points, t->sz.halo_read_recs, err);
+    free(path);
+    if (st != GDT_OK)
+        return st;
+    if (pts != NULL) {
+        st = tl_rfile_read(&rf, pts->pts, (size_t)tl->points, n, err);
+    } else {
+        while (st == GDT_OK && *n < tl->points) {
+            size_t m = 0, want = tl->points - *n < LOCAL_CHUNK ? (size_t)(tl->points - *n)
+                                                                : LOCAL_CHUNK;
+            st = tl_rfile_read(&rf, chunk, want, &m, err);
+            if (st != GDT_OK || m == 0)
+                break;
+            for (size_t i = 0; i < m; i++) {
+                xy[*n + i].x = chunk[i].x - x0;
+                xy[*n + i].y = chunk[i].y - y0;
+            }
+            *n += m;
+        }
+    }
+    tl_rfile_close(&rf);
+    return st;
+}
+
+/* Both loaders: the own points (see load_own; *nown their count), then the
+ * halo. */
+static gdt_status load(gdt_tiler *t, uint64_t k, gdt_point_buf *pts, gdt_ipt *xy, int64_t x0,
+                       int64_t y0, size_t *nown, gdt_point_buf *halo, gdt_error *err)
 {
     const int64_t T = t->plan.span, h = t->plan.halo * t->plan.cell;
     const uint64_t limit = t->budget / 2 / sizeof(gdt_point);
     tl_tile *tl;
-    tl_rfile rf;
-    char *path;
     int64_t bx0, bx1, by0, by1, i0, i1, j0, j1;
     size_t n = 0;
     gdt_status st;
 
-    pts->n = 0;
+    *nown = 0;
     halo->n = 0;
     if (t->state != 2 || k >= t->ntiles)
         return gdt_error_set(err, GDT_EUSAGE, 2505,
@@ -104,21 +149,10 @@ gdt_status gdt_tiler_load_tile(gdt_tiler *t, uint64_t k, gdt_point_buf *pts,
     tl = &t->tiles[k];
     if (tl->points > limit)
         return too_large(t, k, limit, err);
-    st = reserve(pts, (size_t)tl->points, err);
+    st = load_own(t, k, pts, xy, x0, y0, &n, err);
     if (st != GDT_OK)
         return st;
-    path = tl_tile_file(t, k, "pts", 0);
-    if (path == NULL)
-        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-    st = tl_rfile_open(&rf, path, tl->points, t->sz.halo_read_recs, err);
-    free(path);
-    if (st != GDT_OK)
-        return st;
-    st = tl_rfile_read(&rf, pts->pts, (size_t)tl->points, &n, err);
-    tl_rfile_close(&rf);
-    if (st != GDT_OK)
-        return st;
-    pts->n = n;
+    *nown = n;
     if (h == 0)
         return GDT_OK;
 
@@ -148,8 +182,26 @@ gdt_status gdt_tiler_load_tile(gdt_tiler *t, uint64_t k, gdt_point_buf *pts,
     if (st == GDT_OK)
         st = tl_sort_by_ord(halo->pts, halo->n, NULL, err);
     if (st != GDT_OK) {
-        pts->n = 0;
+        *nown = 0;
         halo->n = 0;
     }
     return st;
+}
+
+gdt_status gdt_tiler_load_tile(gdt_tiler *t, uint64_t k, gdt_point_buf *pts,
+                               gdt_point_buf *halo, gdt_error *err)
+{
+    size_t n = 0;
+    gdt_status st;
+    pts->n = 0;
+    st = load(t, k, pts, NULL, 0, 0, &n, halo, err);
+    pts->n = n;
+    return st;
+}
+
+gdt_status gdt_tiler_load_tile_local(gdt_tiler *t, uint64_t k, int64_t x0, int64_t y0,
+                                     gdt_ipt *xy, size_t *n, gdt_point_buf *halo,
+                                     gdt_error *err)
+{
+    return load(t, k, NULL, xy, x0, y0, n, halo, err);
 }

@@ -89,7 +89,7 @@ struct tr_ctx {
     gdt_certifier *certifier;
     const gdt_tile_plan *plan;
     uint64_t *base;     /* ntiles + 1 output index of each tile's first vertex */
-    gdt_point_buf pts, halo;
+    gdt_point_buf halo; /* the current tile's halo */
     gdt_ipt *lp;        /* own points of the tile in the core, tile-local */
     size_t cap_lp;
     tr_slot slot[2];    /* tile k uses slot[k & 1] */
@@ -288,39 +288,33 @@ static gdt_status core_tile(tr_ctx *c, uint64_t k, tr_slot *sl, gdt_error *err)
 
     sl->k = k;
     st = gdt_tiler_tile_info(c->tiler, k, d, err);
-    if (st == GDT_OK)
-        st = gdt_tiler_load_tile(c->tiler, k, &c->pts, &c->halo, err);
     if (st != GDT_OK)
         return st;
-    n = sl->n = c->pts.n;
+    /* lp is kept from tile to tile: fresh pages cost more than the memory */
+    if (reserve((void **)&c->lp, &c->cap_lp, (size_t)d->points + 1, sizeof *c->lp) != 0)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    st = gdt_tiler_load_tile_local(c->tiler, k, d->local_x0, d->local_y0, c->lp, &n, &c->halo,
+                                   err);
+    if (st != GDT_OK)
+        return st;
+    sl->n = n;
     nh = sl->nh = c->halo.n;
     if (n > c->s.max_tile_points)
         c->s.max_tile_points = n;
     if (nh > c->s.max_halo_points)
         c->s.max_halo_points = nh;
-    if (reserve((void **)&c->lp, &c->cap_lp, n + 1, sizeof *c->lp) != 0 ||
-        reserve((void **)&sl->lh, &sl->cap_lh, nh + 1, sizeof *sl->lh) != 0)
+    if (reserve((void **)&sl->lh, &sl->cap_lh, nh + 1, sizeof *sl->lh) != 0)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-    for (size_t i = 0; i < n; i++) {
-        c->lp[i].x = c->pts.pts[i].x - d->local_x0;
-        c->lp[i].y = c->pts.pts[i].y - d->local_y0;
-    }
     for (size_t i = 0; i < nh; i++) {
         sl->lh[i].x = c->halo.pts[i].x - d->local_x0;
         sl->lh[i].y = c->halo.pts[i].y - d->local_y0;
     }
 
-    /* the points are on disk and in lp: their buffer is not needed while
-     * the core holds its own copies (peak memory is the core's) */
-    gdt_point_buf_free(&c->pts);
     t0 = gdt_now();
     memset(&cs, 0, sizeof cs);
     st = gdt_core_triangulate(c->core, c->lp, n, c->opts->tile, &sl->mesh, &cs, err);
     if (st != GDT_OK)
         return st;
-    free(c->lp);
-    c->lp = NULL;
-    c->cap_lp = 0;
     if (strcmp(cs.path, "insert") == 0)
         c->s.insert_tiles++;
     else
@@ -1462,7 +1456,6 @@ fail:
     }
     free(c.lp);
     gdt_point_buf_free(&c.halo);
-    gdt_point_buf_free(&c.pts);
     free(c.base);
     gdt_certifier_destroy(c.certifier);
     gdt_core_destroy(c.core);
