@@ -202,14 +202,24 @@ static int wait_ready(tr_out *o, uint64_t k)
     return go;
 }
 
+/* 1 when the caller gave up (tr_out_abort). */
+static int quitting(tr_out *o)
+{
+    int q;
+    pthread_mutex_lock(&o->mu);
+    q = o->quit;
+    pthread_mutex_unlock(&o->mu);
+    return q;
+}
+
 /* The writer: the PLY's header and vertices, then each tile's faces. */
 static gdt_status write_tiles(tr_out *o, gdt_error *err)
 {
     uint64_t n = o->src.ntiles;
     gdt_status st = gdt_ply_create(&o->w, o->src.output, &o->src.meta, err);
     for (uint64_t k = 0; st == GDT_OK && k < n; k++)
-        st = stopped(o) ? tr_interrupted(o->src.job, "the output", err)
-                        : write_vertices(o, k, err);
+        st = stopped(o) || quitting(o) ? tr_interrupted(o->src.job, "the output", err)
+                                       : write_vertices(o, k, err);
     for (uint64_t k = 0; st == GDT_OK && k < n; k++) {
         if (!wait_ready(o, k) || stopped(o))
             st = tr_interrupted(o->src.job, "the output", err);
