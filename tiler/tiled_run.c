@@ -31,7 +31,6 @@
 #include "private/tiled_out.h"
 #include "private/tiler_io.h"
 
-
 typedef struct tr_summary {
     uint64_t points_read, vertices, tiles, faces, certified, merge_faces;
     uint64_t max_tile_points, max_halo_points, gcd_tiles, insert_tiles;
