@@ -12,7 +12,8 @@ points), then
     gdt-tile CLOUD.las --tile N -o OUT.ply --json S.json [--device SPEC]
 runs --repeat times.  The wall time covers the whole process (reading the
 LAS, the tiled pipeline, writing the PLY); the best run counts.  The peak
-RSS is the child's own ru_maxrss (os.wait4), the largest over the repeats.
+RSS is the child's own ru_maxrss (os.wait4), the largest over the repeats;
+its CPU time (user + system, all threads) is printed beside the wall time.
 Mpts/s is input records per second of the best wall time.  The per-stage
 times, the tile count and the certified fraction come from the run's --json
 summary (best run).  The LAS is in the page cache when the timing starts.
@@ -164,7 +165,8 @@ def tail(path, limit=2000):
 def run_measured(cmd, log_prefix):
     """Runs cmd with stdout/stderr in log files.
 
-    returns: (exit status, wall seconds, peak RSS bytes of exactly that child)."""
+    returns: (exit status, wall seconds, peak RSS bytes and CPU seconds (user +
+    system, all its threads) of exactly that child)."""
     cmd = [str(c) for c in cmd]
     with open(f"{log_prefix}.out", "wb") as out, open(f"{log_prefix}.err", "wb") as err:
         t0 = time.perf_counter()
@@ -176,7 +178,7 @@ def run_measured(cmd, log_prefix):
         wall = time.perf_counter() - t0
         p.returncode = os.waitstatus_to_exitcode(status)
     # Linux reports ru_maxrss in KiB.
-    return p.returncode, wall, ru.ru_maxrss * 1024
+    return p.returncode, wall, ru.ru_maxrss * 1024, ru.ru_utime + ru.ru_stime
 
 
 def check_run(rc, cmd, log_prefix, what):
@@ -208,7 +210,7 @@ def ensure_cloud(work, n, a):
           flush=True)
     part = las.with_name(las.name + ".part")
     cmd = [sys.executable, GEN, part, "--points", n, "--seed", a.seed, "--kind", a.kind, "-q"]
-    rc, _, _ = run_measured(cmd, str(part))
+    rc, _, _, _ = run_measured(cmd, str(part))
     check_run(rc, cmd, str(part), "gen_cloud.py")
     os.replace(part, las)
     for ext in (".out", ".err"):
@@ -227,7 +229,7 @@ def ensure_points(work, las, n, gcd_run, a):
     cmd = [gcd_run, "--cloud", las, "--grid", grid_for(n), "--json", "--dump-points", part]
     if a.device:
         cmd += ["--device", a.device]
-    rc, _, _ = run_measured(cmd, str(part))
+    rc, _, _, _ = run_measured(cmd, str(part))
     check_run(rc, cmd, str(part), "gcd_run")
     if pts_count(part) is None:
         raise BenchError(3, f"gcd_run wrote an incomplete points file {part}")
@@ -252,22 +254,22 @@ def bench_gdt(gdt, las, n, run_dir, a):
             cmd += ["--device", a.device]
         cmd += shlex.split(a.gdt_args)
         log = str(run_dir / f"gdt-tile-{k}")
-        rc, wall, rss = run_measured(cmd, log)
+        rc, wall, rss, cpu = run_measured(cmd, log)
         check_run(rc, cmd, log, "gdt-tile")
         try:
             summary = json.loads(summ.read_text())
         except (OSError, ValueError) as e:
             raise BenchError(3, f"gdt-tile wrote no readable --json summary {summ}: {e}")
-        runs.append({"wall_s": wall, "peak_rss_bytes": rss, "summary": summary})
-        print(f"  {size_label(n):>5} run {k + 1}/{a.repeat}: {wall:8.2f} s, peak RSS "
-              f"{rss / 2**20:8.1f} MiB", file=sys.stderr, flush=True)
+        runs.append({"wall_s": wall, "cpu_s": cpu, "peak_rss_bytes": rss, "summary": summary})
+        print(f"  {size_label(n):>5} run {k + 1}/{a.repeat}: {wall:8.2f} s, CPU {cpu:8.2f} s, "
+              f"peak RSS {rss / 2**20:8.1f} MiB", file=sys.stderr, flush=True)
         if best is None or wall < best["wall_s"]:
             best = runs[-1]
     s = best["summary"]
     times = s.get("times") if isinstance(s.get("times"), dict) else {}
     return {
         "size": n, "las": str(las), "las_mb": las.stat().st_size / 1e6,
-        "wall_s": best["wall_s"], "mpts_s": n / best["wall_s"] / 1e6,
+        "wall_s": best["wall_s"], "cpu_s": best["cpu_s"], "mpts_s": n / best["wall_s"] / 1e6,
         "peak_rss_bytes": max(r["peak_rss_bytes"] for r in runs),
         "peak_rss_mb": max(r["peak_rss_bytes"] for r in runs) / 2**20,
         "times": times, "tiles": s.get("tiles"), "vertices": s.get("vertices"),
@@ -282,7 +284,7 @@ def bench_cgal(cgal, pts, run_dir, a):
     for k in range(a.repeat):
         cmd = [cgal, pts]
         log = str(run_dir / f"cgal-{k}")
-        rc, wall, rss = run_measured(cmd, log)
+        rc, wall, rss, cpu = run_measured(cmd, log)
         check_run(rc, cmd, log, "cgal_bench")
         try:
             r = json.loads(pathlib.Path(f"{log}.out").read_text())
@@ -291,13 +293,14 @@ def bench_cgal(cgal, pts, run_dir, a):
                 raise ValueError("missing points, vertices, faces or seconds")
         except (OSError, ValueError, AttributeError) as e:
             raise BenchError(3, f"cgal_bench printed no usable JSON object: {e}")
-        r.update(process_s=wall, peak_rss_bytes=rss)
+        r.update(process_s=wall, process_cpu_s=cpu, peak_rss_bytes=rss)
         runs.append(r)
         print(f"  CGAL run {k + 1}/{a.repeat}: triangulation {r['seconds']:.2f} s, process "
               f"{wall:.2f} s, peak RSS {rss / 2**20:.1f} MiB", file=sys.stderr, flush=True)
     return {"points": runs[0]["points"], "vertices": runs[0]["vertices"],
             "faces": runs[0]["faces"], "seconds": min(r["seconds"] for r in runs),
             "process_s": min(r["process_s"] for r in runs),
+            "process_cpu_s": min(r["process_cpu_s"] for r in runs),
             "peak_rss_mb": max(r["peak_rss_bytes"] for r in runs) / 2**20, "runs": runs}
 
 
@@ -323,22 +326,25 @@ def print_table(a, rows, cgal, targets, val):
     dev = next((r["device"] for r in rows if r.get("device")), None)
     print(f"\ngdt-tile end to end: --tile {a.tile}, kind {a.kind}, seed {a.seed}, best of "
           f"{a.repeat}, device {dev or a.device or 'default'}")
-    print("stage times (s) from the --json summary; cert = certified fraction")
-    hdr = (f"{'size':>6} {'vertices':>10} {'wall s':>8} {'Mpts/s':>7} {'RSS MiB':>8} "
+    print("stage times (s) from the --json summary; CPU s = user + system time of the best "
+          "run, all threads (steadier than wall time on a shared machine); cert = certified "
+          "fraction")
+    hdr = (f"{'size':>6} {'vertices':>10} {'wall s':>8} {'CPU s':>7} {'Mpts/s':>7} {'RSS MiB':>8} "
            + " ".join(f"{s:>7}" for s in STAGES) + f" {'cert':>6} {'#tiles':>6}")
     print(hdr)
     print("-" * len(hdr))
     for r in rows:
         t = r["times"]
         print(f"{size_label(r['size']):>6} {fmt(r['vertices'], 'd', 10)} {r['wall_s']:8.2f} "
-              f"{r['mpts_s']:7.2f} {r['peak_rss_mb']:8.1f} "
+              f"{r['cpu_s']:7.2f} {r['mpts_s']:7.2f} {r['peak_rss_mb']:8.1f} "
               + " ".join(fmt(t.get(s), '.2f', 7) for s in STAGES)
               + f" {fmt(r['certified_fraction'], '.4f', 6)} {fmt(r['tiles'], 'd', 6)}")
     if cgal is not None:
         print(f"\nCGAL Delaunay_triangulation_2 (Epick) at {size_label(cgal['size'])}: "
               f"{cgal['points']} distinct points, triangulation {cgal['seconds']:.2f} s, "
-              f"process (reading included) {cgal['process_s']:.2f} s, peak RSS "
-              f"{cgal['peak_rss_mb']:.1f} MiB, faces {cgal['faces']}")
+              f"process (reading included) {cgal['process_s']:.2f} s (CPU "
+              f"{cgal['process_cpu_s']:.2f} s), peak RSS {cgal['peak_rss_mb']:.1f} MiB, faces "
+              f"{cgal['faces']}")
         print(f"CGAL process time / gdt-tile wall time: {cgal['speedup_process']:.3f}")
     for t in targets:
         print(f"{t['name']}: {t['text']} = {t['value']:.3f} (target {t['op']} {t['target']}) "
