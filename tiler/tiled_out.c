@@ -66,24 +66,13 @@ static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
     unsigned char hdr[TR_HEADER];
     char *path = NULL;
     FILE *f = NULL;
+    uint64_t size;
     gdt_status st = gdt_tiler_tile_info(o->src.tiler, k, &d, err);
 
     if (st == GDT_OK)
-        st = tr_tile_path(o->src.tiles_dir, &d, "tri", &path, err);
-    if (st != GDT_OK)
-        return st;
-    f = fopen(path, "rb");
-    if (f == NULL) {
-        st = gdt_error_set(err, GDT_EIO, 4805, "%s: cannot open: %s", path, strerror(errno));
-        goto fail;
-    }
-    if (fread(hdr, 1, TR_HEADER, f) != TR_HEADER || memcmp(hdr, TR_MAGIC, 8) != 0 ||
-        tr_get_u64(hdr + 8) != o->src.base[k] || tr_get_u64(hdr + 16) != d.points) {
-        st = gdt_error_set(err, GDT_EJOB, 6801, "%s: not the tile file this run wrote", path);
-        goto fail;
-    }
-    st = copy_face_records(o, f, path, tr_get_u64(hdr + 24), err);
-fail:
+        st = tr_open_tri(o->src.tiles_dir, &d, o->src.base[k], &f, hdr, &size, &path, err);
+    if (st == GDT_OK)
+        st = copy_face_records(o, f, path, tr_get_u64(hdr + 24), err);
     if (f != NULL)
         fclose(f);
     free(path);

@@ -549,27 +549,15 @@ static gdt_status read_seam(tr_ctx *c, uint64_t k, gdt_error *err)
     unsigned char hdr[TR_HEADER];
     char *path = NULL;
     FILE *f = NULL;
-    struct stat sb;
-    uint64_t nf, nv, ne, size, lo = c->base[k], hi;
+    uint64_t nf, nv, ne, size = 0, lo = c->base[k], hi;
     gdt_seam *s = &c->seam;
     gdt_status st = gdt_tiler_tile_info(c->tiler, k, &d, err);
 
     if (st == GDT_OK)
-        st = tr_tile_path(c->tiles_dir, &d, "tri", &path, err);
+        st = tr_open_tri(c->tiles_dir, &d, lo, &f, hdr, &size, &path, err);
     if (st != GDT_OK)
-        return st;
+        goto fail;
     hi = lo + d.points;
-    f = fopen(path, "rb");
-    if (f == NULL || fstat(fileno(f), &sb) != 0) {
-        st = gdt_error_set(err, GDT_EIO, 4805, "%s: cannot open: %s", path, strerror(errno));
-        goto fail;
-    }
-    if (fread(hdr, 1, TR_HEADER, f) != TR_HEADER || memcmp(hdr, TR_MAGIC, 8) != 0 ||
-        tr_get_u64(hdr + 8) != lo || tr_get_u64(hdr + 16) != d.points) {
-        st = gdt_error_set(err, GDT_EJOB, 6801, "%s: not the tile file this run wrote", path);
-        goto fail;
-    }
-    size = (uint64_t)sb.st_size;
     nf = tr_get_u64(hdr + 24);
     nv = tr_get_u64(hdr + 32);
     ne = tr_get_u64(hdr + 40);

@@ -5,6 +5,7 @@
 #define GDT_TILED_FILES_H
 
 #include <stdint.h>
+#include <stdio.h>
 
 #include "gdt_error.h"
 #include "gdt_tiler.h"
@@ -48,6 +49,17 @@ char *tr_path_join(const char *a, const char *b);
  * returns: GDT_OK; GDT_EINTERNAL 7001. */
 gdt_status tr_tile_path(const char *tiles_dir, const gdt_tile_desc *d, const char *ext,
                         char **out, gdt_error *err);
+
+/* Opens tile k's .tri file (tiles_dir, d from gdt_tiler_tile_info) and
+ * checks its header against the tile: magic, vertex base `base`, d's point
+ * count.  On success *f is positioned after the header (close it with
+ * fclose), hdr holds the header, *size the file's size and *path its name
+ * (free it; also set on failure, NULL if out of memory).
+ * returns: GDT_EIO 4805 (cannot open), GDT_EJOB 6801 (not the file this run
+ * wrote), GDT_EINTERNAL 7001. */
+gdt_status tr_open_tri(const char *tiles_dir, const gdt_tile_desc *d, uint64_t base, FILE **f,
+                       unsigned char hdr[TR_HEADER], uint64_t *size, char **path,
+                       gdt_error *err);
 
 /* The error of a run stopped by a signal during `where` (GDT_EINTERRUPTED
  * 1302), telling how to continue the job. */
