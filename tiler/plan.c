@@ -363,7 +363,9 @@ void gdt_tile_plan_print(FILE *out, const gdt_tile_plan *p)
             (double)p->span * L->sy);
     fprintf(out, "  texel        : %" PRId64 " lattice steps = %.17g x %.17g CRS units (%s)\n",
             p->cell, (double)p->cell * L->sx, (double)p->cell * L->sy,
-            p->cell_auto ? "auto: about N^2/4 points per tile, densest at most that" : "--cell");
+            p->cell_auto ? "auto: about N^2/4 points per tile, finer while the densest holds "
+                           "more, down to 1/sqrt 2 of that texel"
+                         : "--cell");
     fprintf(out, "  halo         : %" PRId64 " texels = %" PRId64 " lattice steps (%s)\n",
             p->halo, p->halo * p->cell, p->halo_auto ? "auto, from the density" : "--halo");
     fprintf(out, "  grid         : %" PRId64 " x %" PRId64 " tiles", p->nx, p->ny);
