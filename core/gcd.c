@@ -380,7 +380,6 @@ gdt_status gdt_core_create(gdt_core **out, const gdt_core_opts *opts, gdt_error 
     NAME(d_band_hi);
     NAME(d_band_below);
     NAME(d_band_above);
-    NAME(d_exch);
     NAME(d_mark);
     NAME(d_round);
     NAME(d_small1);
@@ -394,7 +393,6 @@ gdt_status gdt_core_create(gdt_core **out, const gdt_core_opts *opts, gdt_error 
     NAME(d_next);
     NAME(d_cand);
     NAME(d_exact);
-    NAME(d_win);
     NAME(d_chk);
     NAME(d_bad);
     NAME(d_vnew);

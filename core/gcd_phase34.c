@@ -137,7 +137,7 @@ gdt_status gcd_phase3(gdt_core *c, gcd_run *r, gdt_error *err)
         gcd_buf_need(c, &c->d_next, 4 * (nd + 1), err) != GDT_OK ||
         gcd_buf_need(c, &c->d_deg, 4 * (nd + 1), err) != GDT_OK ||
         gcd_buf_need(c, &c->d_off, 4 * (nd + 1), err) != GDT_OK ||
-        gcd_buf_need(c, &c->d_win, 4 * (nd + 1), err) != GDT_OK ||
+        gcd_buf_need(c, GCD_WIN(c), 4 * (nd + 1), err) != GDT_OK ||
         gcd_buf_need(c, &c->d_list3, 4 * r->cap_tris, err) != GDT_OK)
         return err->status;
     rounds = 0;
@@ -157,22 +157,22 @@ gdt_status gcd_phase3(gdt_core *c, gcd_run *r, gdt_error *err)
                      &c->d_list2, (unsigned)nd, &c->d_off, &c->d_sc, &c->d_mark) != GDT_OK ||
             gcd_launch(c, c->k.p3_del_mark, nd, err) != GDT_OK ||
             gcd_args(c->k.p3_del_win, err, "bubbbbb", &c->d_list2, (unsigned)nd, &c->d_off,
-                     &c->d_deg, &c->d_sc, &c->d_mark, &c->d_win) != GDT_OK ||
+                     &c->d_deg, &c->d_sc, &c->d_mark, GCD_WIN(c)) != GDT_OK ||
             gcd_launch(c, c->k.p3_del_win, nd, err) != GDT_OK ||
             gcd_fill(c, &c->d_small1, 1, 0, err) != GDT_OK ||
             gcd_args(c->k.p3_del_apply, err, "bbbillbubbbbbbubbbbb", &c->d_tri, &c->d_opp,
                      &c->d_pos, (int)r->n, r->cx, r->cy, &c->d_list2, (unsigned)nd, &c->d_off,
-                     &c->d_deg, &c->d_win, &c->d_sc, &c->d_exch, &c->d_flipped, round,
+                     &c->d_deg, GCD_WIN(c), &c->d_sc, GCD_EXCH(c), &c->d_flipped, round,
                      &c->d_vt, &c->d_rslot, &c->d_list3, &c->d_small1, &c->d_stat34) != GDT_OK ||
             gcd_launch(c, c->k.p3_del_apply, nd, err) != GDT_OK ||
-            gcd_args(c->k.p3_del_link, err, "bbbuubbbb", &c->d_opp, &c->d_exch, &c->d_flipped,
-                     round, (unsigned)nd, &c->d_off, &c->d_deg, &c->d_win, &c->d_sc) != GDT_OK ||
+            gcd_args(c->k.p3_del_link, err, "bbbuubbbb", &c->d_opp, GCD_EXCH(c), &c->d_flipped,
+                     round, (unsigned)nd, &c->d_off, &c->d_deg, GCD_WIN(c), &c->d_sc) != GDT_OK ||
             gcd_launch(c, c->k.p3_del_link, nd, err) != GDT_OK ||
             gcd_read_u32(c, &c->d_small1, 0, &nnew, err) != GDT_OK ||
             fix_vt(c, r, nnew, err) != GDT_OK ||
             gcd_fill(c, &c->d_small2, 1, 0, err) != GDT_OK ||
             gcd_args(c->k.p3_del_next, err, "bubbbbbbb", &c->d_list2, (unsigned)nd, &c->d_off,
-                     &c->d_deg, &c->d_win, &c->d_sc, &c->d_mark, &c->d_next,
+                     &c->d_deg, GCD_WIN(c), &c->d_sc, &c->d_mark, &c->d_next,
                      &c->d_small2) != GDT_OK ||
             gcd_launch(c, c->k.p3_del_next, nd, err) != GDT_OK ||
             gcd_read_u32(c, &c->d_small2, 0, &nnext, err) != GDT_OK)
@@ -230,7 +230,7 @@ gdt_status gcd_phase4(gdt_core *c, gcd_run *r, int flip_between, gdt_error *err)
         gcd_buf_need(c, &c->d_locep2, 4 * nl, err) != GDT_OK ||
         gcd_fill(c, &c->d_locep, nl, 0, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_oldnb, 4 * nl, err) != GDT_OK ||
-        gcd_buf_need(c, &c->d_win, 4 * nl, err) != GDT_OK ||
+        gcd_buf_need(c, GCD_WIN(c), 4 * nl, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_rank, 4 * nl, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_fix, 16 * nl, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_list3, 4 * r->cap_tris, err) != GDT_OK ||
@@ -279,16 +279,16 @@ gdt_status gcd_phase4(gdt_core *c, gcd_run *r, int flip_between, gdt_error *err)
                      &c->d_cont, &c->d_mark) != GDT_OK ||
             gcd_launch(c, c->k.p4_mark, nl, err) != GDT_OK ||
             gcd_args(c->k.p4_win, err, "bbubbb", &c->d_opp, &c->d_list2, (unsigned)nl,
-                     &c->d_cont, &c->d_mark, &c->d_win) != GDT_OK ||
+                     &c->d_cont, &c->d_mark, GCD_WIN(c)) != GDT_OK ||
             gcd_launch(c, c->k.p4_win, nl, err) != GDT_OK ||
             gcd_fill(c, &c->d_small1, 1, 0, err) != GDT_OK ||
             gcd_args(c->k.p4_apply, err, "bbbbbubbbbbubbbb", &c->d_tri, &c->d_opp, &c->d_pos,
-                     &c->d_pts, &c->d_list2, (unsigned)nl, &c->d_cont, &c->d_win,
-                     &c->d_rslot, &c->d_exch, &c->d_flipped, round, &c->d_vt, &c->d_fix,
+                     &c->d_pts, &c->d_list2, (unsigned)nl, &c->d_cont, GCD_WIN(c),
+                     &c->d_rslot, GCD_EXCH(c), &c->d_flipped, round, &c->d_vt, &c->d_fix,
                      &c->d_list3, &c->d_small1) != GDT_OK ||
             gcd_launch(c, c->k.p4_apply, nl, err) != GDT_OK ||
-            gcd_args(c->k.p4_link, err, "bbbuubb", &c->d_opp, &c->d_exch, &c->d_flipped, round,
-                     (unsigned)nl, &c->d_win, &c->d_fix) != GDT_OK ||
+            gcd_args(c->k.p4_link, err, "bbbuubb", &c->d_opp, GCD_EXCH(c), &c->d_flipped, round,
+                     (unsigned)nl, GCD_WIN(c), &c->d_fix) != GDT_OK ||
             gcd_launch(c, c->k.p4_link, nl, err) != GDT_OK ||
             gcd_read_u32(c, &c->d_small1, 0, &nnew, err) != GDT_OK)
             return err->status;
@@ -299,7 +299,7 @@ gdt_status gcd_phase4(gdt_core *c, gcd_run *r, int flip_between, gdt_error *err)
          * around new triangles are repaired only for the phase check */
         if ((c->opts.check_phases && !flip_between && fix_vt(c, r, nnew, err) != GDT_OK) ||
             gcd_args(c->k.p4_unmark, err, "bubbbbb", &c->d_list2, (unsigned)nl, &c->d_cont,
-                     &c->d_oldnb, &c->d_mark, &c->d_win, &c->d_rank) != GDT_OK ||
+                     &c->d_oldnb, &c->d_mark, GCD_WIN(c), &c->d_rank) != GDT_OK ||
             gcd_launch(c, c->k.p4_unmark, nl, err) != GDT_OK ||
             gcd_scan(c, &c->d_rank, nl, &left, err) != GDT_OK ||
             gcd_args(c->k.p4_compact, err, "bbbbububbbb", &c->d_list2, &c->d_hint, &c->d_cont,

@@ -28,7 +28,7 @@ gdt_status gcd_run_buffers(gdt_core *c, gcd_run *r, gdt_error *err)
     size_t T = r->cap_tris;
     if (gcd_buf_need(c, &c->d_inact, 4 * T, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_flipped, 4 * T, err) != GDT_OK ||
-        gcd_buf_need(c, &c->d_exch, 12 * T, err) != GDT_OK ||
+        gcd_buf_need(c, GCD_EXCH(c), 12 * T, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_mark, 4 * T, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_stat, 64, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_bad, 4 * r->nv + 4, err) != GDT_OK ||
@@ -50,7 +50,7 @@ gdt_status gcd_flip_prepare(gdt_core *c, size_t T, gdt_error *err)
         gcd_buf_need(c, &c->d_fnext, 4 * T, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_cand, 24 * T, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_exact, 12 * T, err) != GDT_OK ||
-        gcd_buf_need(c, &c->d_win, 12 * T, err) != GDT_OK ||
+        gcd_buf_need(c, GCD_WIN(c), 12 * T, err) != GDT_OK ||
         gcd_fill(c, &c->d_vote, T, GCD_EMPTY, err) != GDT_OK ||
         gcd_fill(c, &c->d_stat, 16, 0, err) != GDT_OK)
         return err->status;
@@ -97,11 +97,11 @@ gdt_status gcd_flip_run(gdt_core *c, gcd_run *r, size_t na0, int all_active, uin
         if (cnt[S_NCAND] == 0)
             break;
         if (gcd_args(c->k.p5_flip, err, "bbbubbbubb", &c->d_tri, &c->d_opp, &c->d_cand,
-                     cnt[S_NCAND], &c->d_vote, &c->d_exch, &c->d_flipped, round, &c->d_win,
+                     cnt[S_NCAND], &c->d_vote, GCD_EXCH(c), &c->d_flipped, round, GCD_WIN(c),
                      &c->d_stat) != GDT_OK ||
             gcd_launch(c, c->k.p5_flip, cnt[S_NCAND], err) != GDT_OK ||
             gcd_args(c->k.p5_link, err, "bbubbbu", &c->d_opp, &c->d_cand, cnt[S_NCAND],
-                     &c->d_win, &c->d_exch, &c->d_flipped, round) != GDT_OK ||
+                     GCD_WIN(c), GCD_EXCH(c), &c->d_flipped, round) != GDT_OK ||
             gcd_launch(c, c->k.p5_link, cnt[S_NCAND], err) != GDT_OK ||
             gcd_fill(c, &c->d_small3, 1, 0, err) != GDT_OK ||
             gcd_args(c->k.p5_next, err, "bubbubb", &c->d_cand, cnt[S_NCAND], &c->d_vote,

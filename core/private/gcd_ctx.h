@@ -102,8 +102,8 @@ struct gdt_core {
     gcd_buf d_pts, d_pos, d_texel, d_seed, d_tri, d_opp, d_vt;
     gcd_buf d_cnt, d_flags, d_list, d_list2, d_aux, d_aux2, d_aux3, d_scan, d_small;
     gcd_buf d_band_lo, d_band_hi, d_band_below, d_band_above;
-    gcd_buf d_exch, d_mark, d_round, d_small1, d_small2, d_small3;
-    gcd_buf d_vote, d_inact, d_flipped, d_stat, d_active, d_next, d_cand, d_exact, d_win;
+    gcd_buf d_mark, d_round, d_small1, d_small2, d_small3;
+    gcd_buf d_vote, d_inact, d_flipped, d_stat, d_active, d_next, d_cand, d_exact;
     gcd_buf d_chk, d_bad, d_vnew, d_list3, d_deg, d_off, d_sc, d_hint, d_hint2;
     gcd_buf d_cont, d_oldnb, d_rank, d_fix, d_stat34, d_fnext, d_pts_in, d_texel_in, d_int2in,
         d_inm, d_inm2, d_dropped, d_cont2, d_locep, d_locep2,
@@ -125,6 +125,13 @@ struct gdt_core {
  * in the same way (sort_tris in gcd_phase5.c). */
 #define GCD_NEAR(c) (&(c)->d_exact)
 #define GCD_COLOUR(c) (&(c)->d_cand)
+/* The per-round scratch of Phases 3-5 (exch: where each outer edge of a
+ * modified triangle went; win: the winners among a round's candidates; both
+ * are read only where the same round wrote them) lives in Phase 2's vertex
+ * arrays, dead from the end of Phase 2 until sort_tris, and then in the
+ * triangle storage sort_tris swaps out, dead until extract. */
+#define GCD_EXCH(c) (&(c)->d_aux2)
+#define GCD_WIN(c) (&(c)->d_aux3)
 
 /* Geometry of one run (the texel mapping of Phase 1). */
 typedef struct gcd_run {
