@@ -39,6 +39,7 @@
 #include <unistd.h>
 
 #define MAX_MERGE_LEVEL 16
+#define COLLAPSE_BATCH 16
 #define MERGE_CAP_MAX (UINT32_C(1) << 31) /* records held at once */
 
 typedef struct sink {
@@ -149,17 +150,28 @@ static gdt_status collapse(mctx *m, size_t *used, gdt_error *err)
     }
     tab = m->scr->tab;
     memset(tab, 0, cap * sizeof *tab);
-    for (size_t i = 0; i < n; i++) {
-        size_t s = hash_xy(&b[i], cap - 1);
-        for (;; s = (s + 1) & (cap - 1)) {
-            if (tab[s] == 0) {
-                b[out] = b[i];
-                tab[s] = (uint32_t)++out;
-                break;
-            }
-            if (b[tab[s] - 1].x == b[i].x && b[tab[s] - 1].y == b[i].y) {
-                fold(&b[tab[s] - 1], &b[i], m->t->opts.dup);
-                break;
+    /* Blocks of COLLAPSE_BATCH records: their slots are computed and
+     * prefetched first, so the table's cache misses overlap.  Hashing
+     * record i + k before i is placed is safe: placement writes b[out],
+     * out <= i. */
+    for (size_t i0 = 0; i0 < n; i0 += COLLAPSE_BATCH) {
+        size_t slot[COLLAPSE_BATCH], nb = n - i0 < COLLAPSE_BATCH ? n - i0 : COLLAPSE_BATCH;
+        for (size_t k = 0; k < nb; k++) {
+            slot[k] = hash_xy(&b[i0 + k], cap - 1);
+            __builtin_prefetch(&tab[slot[k]], 1);
+        }
+        for (size_t k = 0; k < nb; k++) {
+            size_t i = i0 + k;
+            for (size_t s = slot[k];; s = (s + 1) & (cap - 1)) {
+                if (tab[s] == 0) {
+                    b[out] = b[i];
+                    tab[s] = (uint32_t)++out;
+                    break;
+                }
+                if (b[tab[s] - 1].x == b[i].x && b[tab[s] - 1].y == b[i].y) {
+                    fold(&b[tab[s] - 1], &b[i], m->t->opts.dup);
+                    break;
+                }
             }
         }
     }
