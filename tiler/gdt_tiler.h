@@ -47,7 +47,9 @@
  * int64 y, IEEE double z, uint64 ord; no header):
  *   tile_<i>_<j>.raw   pass 2: every point of the tile, in input order
  *                      (kept only with opts.keep_spill; otherwise it is
- *                      tile_<i>_<j>.raw.tmp, removed after the merge)
+ *                      tile_<i>_<j>.raw.tmp, removed after the merge; not
+ *                      written at all when half the memory budget holds
+ *                      every record and the merge's hash tables)
  *   tile_<i>_<j>.pts   the tile's points after the --dup merge, sorted by
  *                      ordinal (the lowest ordinal of each (x, y) group)
  *   tile_<i>_<j>.edge  the subset of .pts within h of the tile's border
@@ -190,6 +192,8 @@ typedef struct gdt_tiler_stats {
     uint64_t points;              /* points streamed per pass */
     uint64_t bucket_records;      /* records written to intermediate bucket files */
     unsigned spill_levels;        /* bucket levels used by pass 2 (0: direct) */
+    unsigned spill_in_memory;     /* 1: pass 2 held every record in memory (no .raw
+                                     files; the budget allowed it) */
     uint64_t merged_duplicates;   /* points removed by the --dup merge */
     uint64_t external_merges;     /* tiles merged out of core */
     unsigned merge_levels;        /* deepest partition level of those */

@@ -40,7 +40,6 @@
 
 #define MAX_MERGE_LEVEL 16
 #define COLLAPSE_BATCH 16
-#define MERGE_CAP_MAX (UINT32_C(1) << 31) /* records held at once */
 
 typedef struct sink {
     tl_wfile *pts;      /* every record */
@@ -130,15 +129,14 @@ static size_t hash_xy(const gdt_point *p, size_t mask)
  * one pass, O(used).  Scratch: a table of at most 4 used words. */
 static gdt_status collapse(mctx *m, size_t *used, gdt_error *err)
 {
-    size_t n = *used, cap = 16, out = 0;
+    size_t n = *used, cap, out = 0;
     gdt_point *b = m->buf;
     uint32_t *tab;
 
     if (n < 2)
         return GDT_OK;
-    while (cap < 2 * n)
-        cap *= 2;
-    /* n <= MERGE_CAP_MAX < 2^32: indices + 1 fit 32 bits */
+    cap = (size_t)(tl_collapse_table_bytes(n) / sizeof *tab);
+    /* n <= TL_MERGE_CAP_MAX < 2^32: indices + 1 fit 32 bits */
     if (cap > m->scr->tab_cap) {
         free(m->scr->tab);
         m->scr->tab_cap = 0;
@@ -177,6 +175,14 @@ static gdt_status collapse(mctx *m, size_t *used, gdt_error *err)
     }
     *used = out;
     return GDT_OK;
+}
+
+uint64_t tl_collapse_table_bytes(uint64_t n)
+{
+    uint64_t cap = 16;
+    while (cap < 2 * n)
+        cap *= 2;
+    return cap * sizeof(uint32_t);
 }
 
 static int sorted_by_ord(const gdt_point *p, size_t n)
@@ -255,6 +261,19 @@ fail:
     return st;
 }
 
+/* Merges the used records of m->buf, all of their (x, y) groups, into out
+ * sorted by ord.  A whole tile in memory arrives in input order and stays
+ * sorted. */
+static gdt_status merge_memory(mctx *m, size_t used, sink *out, gdt_error *err)
+{
+    gdt_status st = collapse(m, &used, err);
+    if (st == GDT_OK && !sorted_by_ord(m->buf, used))
+        st = tl_sort_by_ord(m->buf, used, NULL, err);
+    for (size_t i = 0; i < used && st == GDT_OK; i++)
+        st = sink_put(out, &m->buf[i], err);
+    return st;
+}
+
 /* Merges the nrec records of path (a partition of `level`) into out. */
 static gdt_status merge_file(mctx *m, const char *path, uint64_t nrec, unsigned level, sink *out,
                              gdt_error *err)
@@ -321,18 +340,11 @@ static gdt_status merge_file(mctx *m, const char *path, uint64_t nrec, unsigned 
             goto fail;
     }
     tl_rfile_close(&rf);
+    if (parts == NULL)
+        return merge_memory(m, used, out, err);
     st = collapse(m, &used, err);
     if (st != GDT_OK)
         goto fail;
-    if (parts == NULL) {
-        /* A whole tile in memory arrives in input order and stays sorted. */
-        if (!sorted_by_ord(m->buf, used))
-            st = tl_sort_by_ord(m->buf, used, NULL, err);
-        for (size_t i = 0; i < used && st == GDT_OK; i++)
-            st = sink_put(out, &m->buf[i], err);
-        used = 0;
-        return st;
-    }
     st = distribute(m, parts, level + 1, &used, err);
     for (unsigned p = 0; p < K && st == GDT_OK; p++) {
         counts[p] = parts[p].nrec;
@@ -409,14 +421,20 @@ static gdt_status merge_tile(gdt_tiler *t, uint64_t k, scratch *scr, size_t cap,
     }
     m.t = t;
     m.k = k;
+    m.scr = scr;
     m.cap = cap;
     if ((uint64_t)m.cap > tl->count)
         m.cap = (size_t)tl->count; /* a small tile needs no more */
-    if (m.cap > MERGE_CAP_MAX)
-        m.cap = MERGE_CAP_MAX; /* the result does not depend on cap */
+    if (m.cap > TL_MERGE_CAP_MAX)
+        m.cap = TL_MERGE_CAP_MAX; /* the result does not depend on cap */
     if (m.cap < 2)
         m.cap = 2;
-    if (m.cap > scr->cap) {
+    if (t->resident != NULL) {
+        /* the tile's records, in input order, where pass 2 left them
+         * (resident_workers in spill.c: fewer than TL_MERGE_CAP_MAX) */
+        m.buf = t->resident + t->res_off[k];
+        m.cap = (size_t)tl->count;
+    } else if (m.cap > scr->cap) {
         free(scr->buf);
         scr->cap = 0;
         scr->buf = malloc(m.cap * sizeof *scr->buf);
@@ -427,8 +445,8 @@ static gdt_status merge_tile(gdt_tiler *t, uint64_t k, scratch *scr, size_t cap,
         }
         scr->cap = m.cap;
     }
-    m.buf = scr->buf;
-    m.scr = scr;
+    if (t->resident == NULL)
+        m.buf = scr->buf;
     st = tl_wfile_init(&wp, pts_tmp, pts, t->sz.part_recs, !t->opts.test_nosync, err);
     if (st == GDT_OK)
         st = tl_wfile_init(&we, edge_tmp, edge, t->sz.part_recs, !t->opts.test_nosync, err);
@@ -440,7 +458,10 @@ static gdt_status merge_tile(gdt_tiler *t, uint64_t k, scratch *scr, size_t cap,
     out.y0 = tl->j * t->plan.span;
     out.span = t->plan.span;
     out.h = t->plan.halo * t->plan.cell;
-    st = merge_file(&m, raw, tl->count, 0, &out, err);
+    if (t->resident != NULL)
+        st = merge_memory(&m, (size_t)tl->count, &out, err);
+    else
+        st = merge_file(&m, raw, tl->count, 0, &out, err);
     if (st != GDT_OK)
         goto fail;
     tl->points = wp.nrec;
@@ -450,7 +471,7 @@ static gdt_status merge_tile(gdt_tiler *t, uint64_t k, scratch *scr, size_t cap,
         st = tl_wfile_commit(&we, err);
     if (st != GDT_OK)
         goto fail;
-    if (!t->opts.keep_spill)
+    if (!t->opts.keep_spill && t->resident == NULL)
         unlink(raw);
     *deepest = m.deepest;
 fail:
@@ -548,6 +569,8 @@ static unsigned worker_count(const gdt_tiler *t)
     uint64_t largest = 0;
     unsigned w = t->opts.threads > 1 ? (unsigned)t->opts.threads : 1;
     unsigned fd_per = t->sz.merge_k + 5;
+    if (t->resident != NULL)
+        return t->res_workers > 0 ? t->res_workers : 1;
     for (uint64_t k = 0; k < t->ntiles; k++)
         if (t->tiles[k].count > largest)
             largest = t->tiles[k].count;
@@ -614,6 +637,7 @@ gdt_status tl_merge_tiles(gdt_tiler *t, gdt_error *err)
         free(ws[i].scr.buf);
         free(ws[i].scr.tab);
     }
+    tl_free_resident(t);
     pthread_mutex_destroy(&p.mu);
     free(p.deepest);
     return st;

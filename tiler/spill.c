@@ -10,7 +10,11 @@
  *   pass 2 = level(the cloud, all tiles)
  * Appending preserves order at every level, so each tile file holds its
  * points in input order whatever the budgets: the bytes do not depend on
- * them.  Only one level's write buffers and descriptors exist at a time
+ * them.
+ * In memory: when half the budget holds every record (pass 1 counted them)
+ * and the merge workers' hash tables, each record goes straight to its
+ * tile's range of one array, in input order: the records the merge would
+ * read back from the .raw files, without writing them.  Only one level's write buffers and descriptors exist at a time
  * (a level's buckets are closed before its children run), so memory is at
  * most read buffer + write_bytes (one pool, split evenly between the
  * level's files), and descriptors at most writers + 1.
@@ -245,6 +249,86 @@ static gdt_status run_bucket(gdt_tiler *t, bucket *bk, unsigned level, gdt_point
     return st;
 }
 
+/* Merge workers that can run on resident records: up to the tiler's
+ * threads, as long as the records and every worker's hash table for the
+ * largest tile fit in half the budget; 0 when not even one does (or the
+ * .raw files are wanted, or the test knobs force the file paths). */
+static unsigned resident_workers(const gdt_tiler *t)
+{
+    uint64_t total = 0, largest = 0, half = t->budget / 2;
+    unsigned w = t->opts.threads > 1 ? (unsigned)t->opts.threads : 1;
+    if (t->opts.keep_spill || t->opts.test_tiny || t->ntiles == 0)
+        return 0;
+    for (uint64_t k = 0; k < t->ntiles; k++) {
+        total += t->tiles[k].count;
+        if (t->tiles[k].count > largest)
+            largest = t->tiles[k].count;
+    }
+    if (total > half / sizeof(gdt_point) || total > SIZE_MAX / sizeof(gdt_point) ||
+        largest >= TL_MERGE_CAP_MAX)
+        return 0;
+    if ((uint64_t)w > t->ntiles)
+        w = (unsigned)t->ntiles;
+    while (w > 0 && total * sizeof(gdt_point) + w * tl_collapse_table_bytes(largest) > half)
+        w--;
+    return w;
+}
+
+/* Pass 2 into t->resident (see the design note). */
+static gdt_status spill_resident(gdt_tiler *t, gdt_point *buf, gdt_error *err)
+{
+    tile_cache cache = {0, 0, UINT64_MAX};
+    uint64_t *fill, done = 0;
+    gdt_status st = GDT_OK;
+
+    t->res_off = malloc((t->ntiles + 1) * sizeof *t->res_off);
+    fill = malloc(t->ntiles * sizeof *fill);
+    if (t->res_off == NULL || fill == NULL) {
+        free(fill);
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    }
+    t->res_off[0] = 0;
+    for (uint64_t k = 0; k < t->ntiles; k++) {
+        fill[k] = t->res_off[k];
+        t->res_off[k + 1] = t->res_off[k] + t->tiles[k].count;
+    }
+    t->resident = malloc((size_t)t->res_off[t->ntiles] * sizeof *t->resident);
+    if (t->resident == NULL) {
+        free(fill);
+        return gdt_error_set(err, GDT_EINTERNAL, 7001,
+                             "out of memory (pass 2 in memory, %" PRIu64 " points)",
+                             t->res_off[t->ntiles]);
+    }
+    for (;;) {
+        size_t n = 0;
+        st = gdt_cloud_read(t->cloud, buf, t->sz.read_cap, &n, err);
+        if (st != GDT_OK || n == 0)
+            break;
+        for (size_t i = 0; i < n; i++) {
+            uint64_t k = find_tile(t, &cache, &buf[i]);
+            if (k == UINT64_MAX || fill[k] == t->res_off[k + 1]) {
+                st = gdt_error_set(err, GDT_EINPUT, 3501,
+                                   "the input changed between the two passes: point %" PRIu64
+                                   " at lattice (%" PRId64 ", %" PRId64 ") is %s",
+                                   buf[i].ord, buf[i].x, buf[i].y,
+                                   k == UINT64_MAX ? "in no tile counted by pass 1"
+                                                   : "one more than pass 1 counted in its tile");
+                break;
+            }
+            t->resident[fill[k]++] = buf[i];
+        }
+        done += n;
+        if (st == GDT_OK)
+            st = tl_progress(t, 2, done, t->plan.points, err);
+        if (st != GDT_OK)
+            break;
+    }
+    for (uint64_t k = 0; k < t->ntiles; k++)
+        t->tiles[k].written = fill[k] - t->res_off[k];
+    free(fill);
+    return st;
+}
+
 gdt_status tl_spill(gdt_tiler *t, gdt_error *err)
 {
     spill_src s = {t->cloud, NULL};
@@ -262,6 +346,13 @@ gdt_status tl_spill(gdt_tiler *t, gdt_error *err)
         if (st == GDT_OK && n > 0)
             st = gdt_error_set(err, GDT_EINPUT, 3501,
                                "the input changed between the two passes: it now has points");
+        free(buf);
+        return st;
+    }
+    t->res_workers = resident_workers(t);
+    if (t->res_workers > 0) {
+        t->stats.spill_in_memory = 1;
+        st = spill_resident(t, buf, err);
         free(buf);
         return st;
     }

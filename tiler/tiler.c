@@ -206,12 +206,21 @@ fail:
     return st;
 }
 
+void tl_free_resident(gdt_tiler *t)
+{
+    free(t->resident);
+    free(t->res_off);
+    t->resident = NULL;
+    t->res_off = NULL;
+}
+
 void gdt_tiler_destroy(gdt_tiler *t)
 {
     if (t == NULL)
         return;
     tl_density_free(&t->density);
     tl_map_free(&t->map);
+    tl_free_resident(t);
     free(t->tiles);
     free(t->job_dir);
     free(t->tiles_dir);

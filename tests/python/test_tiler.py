@@ -217,6 +217,47 @@ def test_tiny_budget_gives_identical_files(runner, tiler_run, cloud_las, tmp_pat
     check_run(rb, str(jb), cloud, "min-z")
 
 
+def collapse_table_bytes(n):
+    """The --dup merge's hash table for a tile of n records."""
+    cap = 16
+    while cap < 2 * n:
+        cap *= 2
+    return 4 * cap
+
+
+@pytest.mark.sanitize
+def test_pass2_in_memory_when_the_budget_holds_it(runner, tiler_run, tmp_path):
+    """Pass 2 keeps the records in memory (no .raw files) exactly when half the
+    budget holds them and the merge's hash table; either way, and with the
+    tiny out-of-core budget, the tile files are the same bytes."""
+    X, Y, Z = make_cloud(11, n_background=300000)
+    las = tmp_path / "big.las"
+    write_las(las, X, Y, Z)
+    cloud = read_input([las])
+    args = ["--tile", "64", "--cell", "2.5", "--halo", "4", "--dup", "max-z", "--no-sync"]
+    runs = {}
+    for name, extra, tiny in (("mem", ["--mem-budget", str(64 << 20)], False),
+                              ("file", ["--mem-budget", str(16 << 20)], False),
+                              ("tiny", ["--keep-spill"], True)):
+        job = tmp_path / name
+        runs[name] = (job, run_tiler(runner, tiler_run, job, [las], *args, *extra, tiny=tiny))
+    largest = max(t["raw"] for t in runs["mem"][1]["tiles"])
+    need = 32 * len(cloud) + collapse_table_bytes(largest)
+    assert need <= (64 << 20) // 2 and need > (16 << 20) // 2, "the cloud does not split the budgets"
+    assert runs["mem"][1]["stats"]["spill_in_memory"] == 1
+    assert runs["file"][1]["stats"]["spill_in_memory"] == 0
+    assert runs["tiny"][1]["stats"]["spill_in_memory"] == 0
+    names = {k: sorted(os.listdir(job / "tiles")) for k, (job, _) in runs.items()}
+    assert not [n for n in names["mem"] if ".raw" in n or n.endswith(".tmp")]
+    assert names["mem"] == names["file"]
+    assert names["mem"] == [n for n in names["tiny"] if not n.endswith(".raw")]
+    for n in names["mem"]:
+        data = (runs["mem"][0] / "tiles" / n).read_bytes()
+        assert data == (runs["file"][0] / "tiles" / n).read_bytes(), n
+        assert data == (runs["tiny"][0] / "tiles" / n).read_bytes(), n
+    check_run(runs["tiny"][1], str(runs["tiny"][0]), cloud, "max-z")
+
+
 def parse_dump(text):
     tiles, density, meta = {}, {}, {}
     for line in text.splitlines():

@@ -193,11 +193,12 @@ int main(int argc, char **argv)
                s->t_merge, t_load);
         printf("rss pass1=%.1f pass2=%.1f load=%.1f\n", rss1, rss2, peak_mb());
         printf("stats points=%" PRIu64 " bucket_records=%" PRIu64 " spill_levels=%u "
-               "merged_duplicates=%" PRIu64 " external_merges=%" PRIu64 " merge_levels=%u "
-               "max_tile_points=%" PRIu64 " fd_budget=%u mem_budget=%" PRIu64 "\n",
-               s->points, s->bucket_records, s->spill_levels, s->merged_duplicates,
-               s->external_merges, s->merge_levels, s->max_tile_points, s->fd_budget,
-               s->mem_budget);
+               "spill_in_memory=%u merged_duplicates=%" PRIu64 " external_merges=%" PRIu64
+               " merge_levels=%u max_tile_points=%" PRIu64 " fd_budget=%u mem_budget=%" PRIu64
+               "\n",
+               s->points, s->bucket_records, s->spill_levels, s->spill_in_memory,
+               s->merged_duplicates, s->external_merges, s->merge_levels, s->max_tile_points,
+               s->fd_budget, s->mem_budget);
     }
 done:
     if (st != GDT_OK)

@@ -91,6 +91,13 @@ struct gdt_tiler {
     tl_map map;             /* (i, j) -> index in tiles (after pass 1) */
     tl_density density;     /* pass 1 */
     gdt_tiler_stats stats;
+    /* Pass 2 in memory (spill.c): when set, the records of tile k are
+     * resident[res_off[k] .. res_off[k + 1]) in input order, there are no
+     * .raw files, and the --dup merge runs res_workers workers.  Owned;
+     * freed by the merge. */
+    gdt_point *resident;
+    uint64_t *res_off;
+    unsigned res_workers;
 };
 
 /* plan.c: turns the pass-1 results into the plan and the tile table.
@@ -100,12 +107,14 @@ struct gdt_tiler {
 gdt_status tl_plan_finish(gdt_tiler *t, gdt_error *err);
 
 /* spill.c: pass 2 proper (after the rewind): every point to its tile's
- * .raw file; counts in tiles[].written. */
+ * .raw file, or to its tile's range of t->resident when the budget holds
+ * them all; counts in tiles[].written. */
 gdt_status tl_spill(gdt_tiler *t, gdt_error *err);
 
-/* merge_dup.c: the --dup merge of every tile (.raw -> .pts + .edge), on
- * up to opts.threads workers; fills tiles[].points/.edge and the merge
- * counters of t->stats. */
+/* merge_dup.c: the --dup merge of every tile (.raw or its resident
+ * records -> .pts + .edge), on up to opts.threads workers; fills
+ * tiles[].points/.edge and the merge counters of t->stats, and frees the
+ * resident records. */
 gdt_status tl_merge_tiles(gdt_tiler *t, gdt_error *err);
 
 /* Paths of tile k's files; malloc'd, NULL when out of memory.  kind is
@@ -117,5 +126,16 @@ gdt_status tl_progress(gdt_tiler *t, int stage, uint64_t done, uint64_t total, g
 
 /* Tile index of lattice point (x, y) or UINT64_MAX if no such tile. */
 uint64_t tl_tile_of(const gdt_tiler *t, int64_t x, int64_t y);
+
+/* Frees the resident records of pass 2 (if any). */
+void tl_free_resident(gdt_tiler *t);
+
+/* Records the --dup merge holds at once: its hash table stores index + 1 in
+ * 32 bits. */
+#define TL_MERGE_CAP_MAX (UINT64_C(1) << 31)
+
+/* Bytes of the --dup merge's hash table for a tile of n records (collapse
+ * in merge_dup.c: a power of two of at least 2n 32-bit slots). */
+uint64_t tl_collapse_table_bytes(uint64_t n);
 
 #endif
