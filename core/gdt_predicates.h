@@ -89,6 +89,20 @@ int gdt_edge_needs_flip(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c, gdt
  * + 8u (|a| + |centre offset| + r) per side, several times that bound. */
 int gdt_circumdisk_bounds(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c, double bounds[4]);
 
+/* Whether the circumcircle of the strictly counter-clockwise triangle
+ * (a, b, c) has a diameter below m (> 0): returns 1 only if it is proven
+ * that 2R < m, so that every point of the closed disk lies at a distance
+ * below m from a (and from b and c); 0 otherwise, and when (a, b, c) is
+ * not strictly counter-clockwise.  Division- and root-free: with b' = b - a,
+ * c' = c - a and D = b' x c' > 0, (2R)^2 = |b'|^2 |c'|^2 |b' - c'|^2 / D^2,
+ * so 2R < m iff m^2 D^2 > |b'|^2 |c'|^2 |b' - c'|^2.  Both sides are
+ * evaluated in double, within a relative (1 + u)^5 and (1 + u)^8 of the
+ * true values (u = 2^-53: the differences and D are exact integers, every
+ * operand positive); the right side is raised by 64u before the strict
+ * comparison, more than covers both, so the answer 1 is exact.  m must be
+ * below 2^53. */
+int gdt_circumdiameter_below(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c, int64_t m);
+
 /* Whether the closed circumdisk of the triangle (a, b, c) (either
  * orientation) misses the closed quadrant strip
  *   Q = [x0, x1] x [y, +inf):

@@ -119,6 +119,33 @@ int gdt_circumdisk_bounds(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c, d
     return 1;
 }
 
+int gdt_circumdiameter_below(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c, int64_t m)
+{
+    const double u = DBL_EPSILON / 2.0;
+    int64_t bx = b.x - a.x, by = b.y - a.y, cx = c.x - a.x, cy = c.y - a.y;
+    int64_t det;
+    double ex, ey, bb, cc, ee, dd, mm;
+
+    assert(PRED_IN_RANGE(a) && PRED_IN_RANGE(b) && PRED_IN_RANGE(c));
+    if (st != NULL)
+        st->orient_calls++;
+    if (m <= 0 || m >= (INT64_C(1) << 53))
+        return 0;
+    /* |b'|, |c'| < 2^31: the products are < 2^62, their difference exact */
+    det = bx * cy - by * cx;
+    if (det <= 0)
+        return 0;
+    /* differences below 2^32 in magnitude: exact in double */
+    ex = (double)(bx - cx);
+    ey = (double)(by - cy);
+    bb = (double)bx * (double)bx + (double)by * (double)by;
+    cc = (double)cx * (double)cx + (double)cy * (double)cy;
+    ee = ex * ex + ey * ey;
+    dd = (double)det;
+    mm = (double)m;
+    return (mm * mm) * (dd * dd) > ((bb * cc) * ee) * (1.0 + 64.0 * u);
+}
+
 /* design: Q = [x0, x1] x [y, +inf) is closed and convex, so the closed disk
  * of centre o and radius r misses it iff |o - p| > r for the point p of Q
  * nearest to o (o clamped into Q).

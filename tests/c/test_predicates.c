@@ -897,10 +897,107 @@ static void test_strip(gdt_pred_stats *st)
           "strip: a small disk far below Q");
 }
 
+/* ---------------------------------------------------------------------
+ * gdt_circumdiameter_below against an exact oracle.
+ * ------------------------------------------------------------------- */
+
+/* Exact: 2R < m for the triangle (a, b, c), i.e. m^2 D^2 > |b'|^2 |c'|^2
+ * |b' - c'|^2 with D = b' x c' > 0; 0 when D <= 0. */
+static int oracle_diameter_below(gdt_ipt a, gdt_ipt b, gdt_ipt c, int64_t m)
+{
+    i128 bx = b.x - a.x, by = b.y - a.y, cx = c.x - a.x, cy = c.y - a.y;
+    i128 det = bx * cy - by * cx;
+    u128 bb, cc, ee, p;
+    uint64_t l[4] = {0, 0, 0, 0}, r[4] = {0, 0, 0, 0};
+    if (det <= 0 || m <= 0)
+        return 0;
+    bb = (u128)(bx * bx + by * by);
+    cc = (u128)(cx * cx + cy * cy);
+    ee = (u128)((bx - cx) * (bx - cx) + (by - cy) * (by - cy));
+    p = bb * cc; /* < 2^126 */
+    acc_square(l, (i128)m * det);
+    acc128(r, (u128)(uint64_t)p * (uint64_t)ee, 0);
+    acc128(r, (u128)(uint64_t)p * (uint64_t)(ee >> 64), 1);
+    acc128(r, (u128)(uint64_t)(p >> 64) * (uint64_t)ee, 1);
+    acc128(r, (u128)(uint64_t)(p >> 64) * (uint64_t)(ee >> 64), 2);
+    return cmp256(l, r) > 0;
+}
+
+/* The filter never answers 1 where the oracle says 2R >= m (soundness), and
+ * answers 1 wherever m exceeds 2R by a relative 1e-9 (it is not a filter that
+ * gives up). */
+static void test_circumdiameter(gdt_pred_stats *st)
+{
+    rng r = {UINT64_C(0x5eed0c1fc1e)};
+    long sound = 0, decided = 0, boundary = 0;
+    for (int i = 0; i < 400000; i++) {
+        int64_t span = (int64_t)1 << rng_range(&r, 1, 31);
+        int64_t x0 = rng_range(&r, 0, L), y0 = rng_range(&r, 0, L);
+        gdt_ipt v[3];
+        long double bx, by, cx, cy, d, dia;
+        int64_t m0;
+        for (int k = 0; k < 3; k++) {
+            v[k].x = clamp_coord(x0 + rng_range(&r, -span, span));
+            v[k].y = clamp_coord(y0 + rng_range(&r, -span, span));
+        }
+        if (i % 7 == 0)
+            v[2] = v[1]; /* degenerate */
+        bx = (long double)(v[1].x - v[0].x);
+        by = (long double)(v[1].y - v[0].y);
+        cx = (long double)(v[2].x - v[0].x);
+        cy = (long double)(v[2].y - v[0].y);
+        d = bx * cy - by * cx;
+        if (d <= 0) {
+            CHECK(gdt_circumdiameter_below(st, v[0], v[1], v[2], L) == 0,
+                  "not counter-clockwise: answered 1");
+            continue;
+        }
+        dia = sqrtl((bx * bx + by * by) * (cx * cx + cy * cy) *
+                    ((bx - cx) * (bx - cx) + (by - cy) * (by - cy))) /
+              d;
+        if (dia > 4e15L)
+            continue;
+        m0 = (int64_t)dia;
+        for (int64_t dm = -2; dm <= 3; dm++) {
+            int64_t m = m0 + dm;
+            int got = gdt_circumdiameter_below(st, v[0], v[1], v[2], m);
+            int want = oracle_diameter_below(v[0], v[1], v[2], m);
+            CHECK(!got || want, "(%lld,%lld) (%lld,%lld) (%lld,%lld) m %lld: 1, oracle 0",
+                  (long long)v[0].x, (long long)v[0].y, (long long)v[1].x, (long long)v[1].y,
+                  (long long)v[2].x, (long long)v[2].y, (long long)m);
+            sound += want;
+            if (m > 0 && (long double)m > dia * (1.0L + 1e-9L)) {
+                CHECK(got, "m %lld, diameter %.6Lf: undecided", (long long)m, dia);
+                decided += got;
+            }
+        }
+    }
+    /* Right triangles: the hypotenuse is the diameter, 10 s exactly. */
+    for (int64_t s = 1; s <= (INT64_C(1) << 27); s = s * 3 + 1) {
+        gdt_ipt a = pt(7, 11), b = pt(7 + 6 * s, 11), c = pt(7, 11 + 8 * s);
+        CHECK(gdt_circumdiameter_below(st, a, b, c, 10 * s) == 0 &&
+                  oracle_diameter_below(a, b, c, 10 * s) == 0,
+              "right triangle, scale %lld: the diameter itself is not below", (long long)s);
+        CHECK(gdt_circumdiameter_below(st, a, b, c, 10 * s + 1) == 1,
+              "right triangle, scale %lld: 10 s + 1 is above", (long long)s);
+        boundary++;
+    }
+    CHECK(gdt_circumdiameter_below(st, pt(0, 0), pt(10, 0), pt(0, 10), 0) == 0 &&
+              gdt_circumdiameter_below(st, pt(0, 0), pt(10, 0), pt(0, 10), -5) == 0 &&
+              gdt_circumdiameter_below(st, pt(0, 0), pt(10, 0), pt(0, 10), INT64_C(1) << 53) ==
+                  0,
+          "m out of range answered 1");
+    printf("circumdiameter: %ld below by the oracle, %ld decided with margin, %ld boundary "
+           "scales\n",
+           sound, decided, boundary);
+    CHECK(decided > 100000, "only %ld cases decided", decided);
+}
+
 int main(void)
 {
     gdt_pred_stats st;
     memset(&st, 0, sizeof st);
+    test_circumdiameter(&st);
     test_selftest();
     test_int128();
     test_orient_incircle(&st);
