@@ -270,6 +270,7 @@ static const kdef KERNELS[] = {
     KD("gcd_dual.cl", p2_kept_flags),
     KD("gcd_mesh.cl", m_vcount),
     KD("gcd_mesh.cl", m_vfill),
+    KD("gcd_mesh.cl", m_vt_min),
     KD("gcd_mesh.cl", m_link),
     KD("gcd_mesh.cl", m_snap),
     KD("gcd_mesh.cl", m_frame_pos),

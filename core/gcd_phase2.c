@@ -23,8 +23,7 @@ gdt_status gcd_link_start(gdt_core *c, gcd_run *r, gdt_error *err)
 {
     if (gcd_buf_need(c, &c->d_cnt, 4 * r->nv, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_vt, 4 * r->nv, err) != GDT_OK ||
-        gcd_fill(c, &c->d_cnt, r->nv, 0, err) != GDT_OK ||
-        gcd_fill(c, &c->d_vt, r->nv, GCD_EMPTY, err) != GDT_OK)
+        gcd_fill(c, &c->d_cnt, r->nv, 0, err) != GDT_OK)
         return err->status;
     return GDT_OK;
 }
@@ -36,13 +35,16 @@ gdt_status gcd_link_all(gdt_core *c, gcd_run *r, size_t counted, gdt_error *err)
 
     if (gcd_buf_need(c, &c->d_aux2, 12 * T, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_aux3, 12 * T, err) != GDT_OK ||
-        gcd_args(c->k.m_vcount, err, "buubb", &c->d_tri, (unsigned)counted, (unsigned)T,
-                 &c->d_cnt, &c->d_vt) != GDT_OK ||
+        gcd_args(c->k.m_vcount, err, "buub", &c->d_tri, (unsigned)counted, (unsigned)T,
+                 &c->d_cnt) != GDT_OK ||
         gcd_launch(c, c->k.m_vcount, T - counted, err) != GDT_OK ||
         gcd_scan(c, &c->d_cnt, nv, &total, err) != GDT_OK ||
         gcd_args(c->k.m_vfill, err, "bubbb", &c->d_tri, (unsigned)T, &c->d_cnt, &c->d_aux2,
                  &c->d_aux3) != GDT_OK ||
         gcd_launch(c, c->k.m_vfill, T, err) != GDT_OK ||
+        gcd_args(c->k.m_vt_min, err, "bbub", &c->d_cnt, &c->d_aux2, (unsigned)nv, &c->d_vt) !=
+            GDT_OK ||
+        gcd_launch(c, c->k.m_vt_min, nv, err) != GDT_OK ||
         gcd_fill(c, &c->d_opp, 3 * T, GCD_EMPTY, err) != GDT_OK ||
         gcd_args(c->k.m_link, err, "bubbbb", &c->d_tri, (unsigned)T, &c->d_cnt, &c->d_aux2,
                  &c->d_aux3, &c->d_opp) != GDT_OK ||
@@ -95,9 +97,9 @@ gdt_status gcd_phase2(gdt_core *c, gcd_run *r, gdt_error *err)
                                  r->nv, r->nmissing);
         ndual = nslots - 2 * r->nmissing;
         if (nslots > 0 &&
-            (gcd_args(c->k.p2_write, err, "bbuubbubbbb", GCD_COLOUR(c), &c->d_seed, r->W, r->H,
+            (gcd_args(c->k.p2_write, err, "bbuubbubbb", GCD_COLOUR(c), &c->d_seed, r->W, r->H,
                       &c->d_flags, &c->d_mrange, (unsigned)r->kept, &c->d_tri, &c->d_rslot,
-                      &c->d_cnt, &c->d_vt) != GDT_OK ||
+                      &c->d_cnt) != GDT_OK ||
              gcd_launch(c, c->k.p2_write, nchunks, err) != GDT_OK))
             return err->status;
     }

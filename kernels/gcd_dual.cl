@@ -61,13 +61,11 @@ __kernel void p2_count(__global const uint *colour, uint W, uint H, __global con
 
 /* Vertices are point indices: seed[site texel].  The reserved slots are
  * written dead (tri[3s] = -1) and handed to their points: internal missing
- * point kept + j gets rslot[2p], rslot[2p+1].  The vertex counts and the
- * smallest incident triangles of m_vcount are done here for these slots
- * (cnt preset to 0, vt to 0xffffffff). */
+ * point kept + j gets rslot[2p], rslot[2p+1].  The vertex counts of
+ * m_vcount are done here for these slots (cnt preset to 0). */
 __kernel void p2_write(__global const uint *colour, __global const uint *seed, uint W, uint H,
                        __global const uint *offsets, __global const uint *range, uint kept,
-                       __global int *tri, __global int *rslot, __global uint *cnt,
-                       __global uint *vt)
+                       __global int *tri, __global int *rslot, __global uint *cnt)
 {
     size_t g = get_global_id(0);
     size_t ncorner = (size_t)(W - 1) * (H - 1);
@@ -84,7 +82,6 @@ __kernel void p2_write(__global const uint *colour, __global const uint *seed, u
             uint v = seed[t[j]];
             tri[3 * o + j] = (int)v;
             atomic_inc(&cnt[v]);
-            atomic_min(&vt[v], (uint)(o + (size_t)(j / 3)));
         }
         o += (size_t)k;
         if (++x == W - 1)

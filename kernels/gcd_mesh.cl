@@ -9,18 +9,14 @@
 #include "gcd_geom.clh"
 
 /* Over the slots [from, T): cnt[v] += number of live triangles incident to
- * v; vt[v] = the smallest of them (cnt preset to 0, vt to 0xffffffff, or
- * already counted for the slots before from). */
-__kernel void m_vcount(__global const int *tri, uint from, uint T, __global uint *cnt,
-                       __global uint *vt)
+ * v (cnt preset to 0, or already counted for the slots before from). */
+__kernel void m_vcount(__global const int *tri, uint from, uint T, __global uint *cnt)
 {
     uint t = from + get_global_id(0);
     if (t >= T || tri[3 * t] < 0)
         return;
-    for (int i = 0; i < 3; i++) {
+    for (int i = 0; i < 3; i++)
         atomic_inc(&cnt[tri[3 * t + i]]);
-        atomic_min(&vt[tri[3 * t + i]], t);
-    }
 }
 
 /* Vertex arrays: off[v] is the exclusive scan of the counts; v's corners
@@ -39,6 +35,21 @@ __kernel void m_vfill(__global const int *tri, uint T, __global uint *off, __glo
         list[k] = ((int)t << 2) | i;
         pred[k] = tri[3 * t + (i + 2) % 3];
     }
+}
+
+/* vt[v] = the smallest live triangle incident to v, 0xffffffff for none,
+ * from the vertex arrays (end[v] as for m_link): one sequential read of
+ * v's entries instead of an atomic per corner while counting. */
+__kernel void m_vt_min(__global const uint *end, __global const int *list, uint nv,
+                       __global uint *vt)
+{
+    uint v = get_global_id(0);
+    if (v >= nv)
+        return;
+    uint lo = v > 0 ? end[v - 1] : 0, hi = end[v], m = 0xffffffffu;
+    for (uint k = lo; k < hi; k++)
+        m = min(m, (uint)list[k] >> 2);
+    vt[v] = m;
 }
 
 /* Neighbour links from the vertex arrays (end[v]: off after m_vfill, so

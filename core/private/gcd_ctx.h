@@ -78,7 +78,7 @@ typedef struct gcd_kernels {
     /* gcd_dual.cl */
     gdt_ocl_kernel *p2_count, *p2_write, *p2_kept_flags;
     /* gcd_mesh.cl */
-    gdt_ocl_kernel *m_vcount, *m_vfill, *m_link, *m_snap, *m_frame_pos,
+    gdt_ocl_kernel *m_vcount, *m_vfill, *m_vt_min, *m_link, *m_snap, *m_frame_pos,
         *m_real_flags, *m_compact_tris, *m_fix_vt_collect, *m_fix_vt_apply,
         *m_sort_count, *m_sort_scatter, *m_sort_bucket, *m_sort_inverse,
         *m_sort_apply, *m_sort_vt, *m_slots_seq;
