@@ -65,7 +65,7 @@ typedef struct tr_ctx tr_ctx;
 /* The post stage of a tile (certification, seam, sorted faces, .tri file,
  * pending record) runs on its own thread while the main thread loads the
  * next tile and runs the core on it.  While it runs it alone touches cert,
- * faces, count, fbuf, seam, seam_total, pending/npending and s.cert,
+ * count, fbuf, seam, seam_total, pending/npending and s.cert,
  * s.certified, s.t_certify; the main thread reads them only after
  * post_join. */
 typedef struct tr_post {
@@ -96,8 +96,6 @@ struct tr_ctx {
     tr_out *out;        /* the PLY writer, from the tile stage on */
     uint8_t *cert;
     size_t cap_cert;
-    uint32_t *faces;    /* certified faces of the current tile, 3 per face */
-    size_t cap_faces;
     uint32_t *count;    /* bucket counts for the face sort */
     size_t cap_count;
     unsigned char *fbuf; /* the .tri file image */
@@ -213,20 +211,21 @@ fail:
  * start at its smallest index, in sorted order: a counting sort on the first
  * index, then insertion sort inside each (short) bucket.  The order depends
  * only on the face set, not on the order the core produced them in.
- * scratch holds 3 * nf values (the unsorted faces); the result is in
- * c->faces. */
-static gdt_status sort_faces(tr_ctx *c, const gdt_mesh *m, size_t nf, uint32_t base,
-                             uint32_t *scratch, gdt_error *err)
+ * The mesh's triangle array is the sort's scratch: the certified faces are
+ * compacted into its front, rotated (face k is written after triangle t >= k
+ * is read), so the slot's triangles are consumed.  The 3 * nf sorted values
+ * go to out as little-endian 32-bit words (the .tri file image). */
+static gdt_status sort_faces(tr_ctx *c, gdt_mesh *m, size_t nf, uint32_t base,
+                             unsigned char *out, gdt_error *err)
 {
     size_t nv = m->nverts, k = 0;
-    uint32_t *tmp = scratch;
+    uint32_t *tmp = (uint32_t *)(void *)m->tri, *sorted = (uint32_t *)(void *)out;
 
-    if (reserve((void **)&c->count, &c->cap_count, nv + 1, sizeof *c->count) != 0 ||
-        reserve((void **)&c->faces, &c->cap_faces, 3 * nf + 3, sizeof *c->faces) != 0)
+    if (reserve((void **)&c->count, &c->cap_count, nv + 1, sizeof *c->count) != 0)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     memset(c->count, 0, (nv + 1) * sizeof *c->count);
     for (size_t t = 0; t < m->ntris; t++) {
-        const int32_t *v = &m->tri[3 * t];
+        const int32_t v[3] = {m->tri[3 * t], m->tri[3 * t + 1], m->tri[3 * t + 2]};
         int r = 0;
         if (!c->cert[t])
             continue;
@@ -244,25 +243,27 @@ static gdt_status sort_faces(tr_ctx *c, const gdt_mesh *m, size_t nf, uint32_t b
         c->count[i + 1] += c->count[i];
     for (size_t f = 0; f < nf; f++) {
         uint32_t d = c->count[tmp[3 * f]]++;
-        memcpy(&c->faces[3 * (size_t)d], &tmp[3 * f], 3 * sizeof *tmp);
+        memcpy(&sorted[3 * (size_t)d], &tmp[3 * f], 3 * sizeof *tmp);
     }
     /* count[i] is now the end of bucket i; insertion sort on (b, c) */
     for (size_t i = 0, lo = 0; i < nv; lo = c->count[i], i++) {
         for (size_t a = lo + 1; a < c->count[i]; a++) {
             uint32_t f[3];
             size_t b = a;
-            memcpy(f, &c->faces[3 * a], sizeof f);
-            while (b > lo && (c->faces[3 * (b - 1) + 1] > f[1] ||
-                              (c->faces[3 * (b - 1) + 1] == f[1] &&
-                               c->faces[3 * (b - 1) + 2] > f[2]))) {
-                memcpy(&c->faces[3 * b], &c->faces[3 * (b - 1)], sizeof f);
+            memcpy(f, &sorted[3 * a], sizeof f);
+            while (b > lo && (sorted[3 * (b - 1) + 1] > f[1] ||
+                              (sorted[3 * (b - 1) + 1] == f[1] &&
+                               sorted[3 * (b - 1) + 2] > f[2]))) {
+                memcpy(&sorted[3 * b], &sorted[3 * (b - 1)], sizeof f);
                 b--;
             }
-            memcpy(&c->faces[3 * b], f, sizeof f);
+            memcpy(&sorted[3 * b], f, sizeof f);
         }
     }
-    for (size_t i = 0; i < 3 * nf; i++)
-        c->faces[i] += base;
+    for (size_t i = 0; i < 3 * nf; i++) {
+        uint32_t v = sorted[i] + base;
+        tr_put_u32(out + 4 * i, v);
+    }
     return GDT_OK;
 }
 
@@ -323,7 +324,9 @@ static gdt_status core_tile(tr_ctx *c, uint64_t k, tr_slot *sl, gdt_error *err)
 }
 
 /* The second half of a tile (the post stage): certification, seam, the
- * .tri file and its pending record. */
+ * .tri file and its pending record.  The slot's triangle array is the face
+ * sort's scratch: the slot holds no mesh afterwards (the next core run
+ * into it refills it). */
 static gdt_status post_tile(tr_ctx *c, tr_slot *sl, gdt_error *err)
 {
     const gdt_tile_plan *pl = c->plan;
@@ -368,10 +371,9 @@ static gdt_status post_tile(tr_ctx *c, tr_slot *sl, gdt_error *err)
     len = TR_HEADER + 12 * nf + 24 * c->seam.nv + 16 * c->seam.ne;
     if (reserve((void **)&c->fbuf, &c->cap_fbuf, len, 1) != 0)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-    /* the face area of the file image (64-byte aligned offset) is the
-     * sort's scratch before it receives the sorted faces */
-    st = sort_faces(c, m, nf, (uint32_t)c->base[k], (uint32_t *)(void *)(c->fbuf + TR_HEADER),
-                    err);
+    /* the sorted faces go straight into the file image (64-byte aligned
+     * offset); the slot's triangles are not needed after this */
+    st = sort_faces(c, &sl->mesh, nf, (uint32_t)c->base[k], c->fbuf + TR_HEADER, err);
     if (st != GDT_OK)
         return st;
     c->s.certified += nf;
@@ -385,9 +387,7 @@ static gdt_status post_tile(tr_ctx *c, tr_slot *sl, gdt_error *err)
     tr_put_u64(p + 24, nf);
     tr_put_u64(p + 32, c->seam.nv);
     tr_put_u64(p + 40, c->seam.ne);
-    p += TR_HEADER;
-    for (size_t i = 0; i < 3 * nf; i++, p += 4)
-        tr_put_u32(p, c->faces[i]);
+    p += TR_HEADER + 12 * nf;
     for (size_t i = 0; i < c->seam.nv; i++, p += 24) {
         tr_put_u64(p, c->seam.v[i].id);
         tr_put_u64(p + 8, (uint64_t)c->seam.v[i].x);
@@ -1435,7 +1435,6 @@ fail:
     gdt_seam_free(&c.seam);
     free(c.fbuf);
     free(c.count);
-    free(c.faces);
     free(c.cert);
     for (int i = 0; i < 2; i++) {
         gdt_mesh_free(&c.slot[i].mesh);
