@@ -409,8 +409,6 @@ gdt_status gdt_core_create(gdt_core **out, const gdt_core_opts *opts, gdt_error 
     NAME(d_fix);
     NAME(d_stat34);
     NAME(d_fnext);
-    NAME(d_pts_in);
-    NAME(d_texel_in);
     NAME(d_int2in);
     NAME(d_inm);
     NAME(d_inm2);
@@ -539,8 +537,8 @@ static gdt_status setup_run(gdt_core *c, gcd_run *r, const gdt_ipt *pts, size_t 
         tmp[2 * i] = (int32_t)pts[i].x;
         tmp[2 * i + 1] = (int32_t)pts[i].y;
     }
-    if (gcd_buf_need(c, &c->d_pts_in, 8 * n, err) == GDT_OK)
-        gdt_ocl_write(c->ocl, c->d_pts_in.b, 0, tmp, 8 * n, err);
+    if (gcd_buf_need(c, GCD_PTS_IN(c), 8 * n, err) == GDT_OK)
+        gdt_ocl_write(c->ocl, GCD_PTS_IN(c)->b, 0, tmp, 8 * n, err);
     free(tmp);
     return err->status == GDT_OK ? GDT_OK : err->status;
 }

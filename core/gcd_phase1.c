@@ -388,19 +388,19 @@ gdt_status gcd_phase1(gdt_core *c, gcd_run *r, gdt_error *err)
     /* texels of the input points; the lowest index owns a shared texel;
      * border texels belong to the frame */
     if (gcd_buf_need(c, &c->d_seed, 4 * npix, err) != GDT_OK ||
-        gcd_buf_need(c, &c->d_texel_in, 4 * r->n, err) != GDT_OK ||
+        gcd_buf_need(c, GCD_TEXEL_IN(c), 4 * r->n, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_texel, 4 * r->n, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_pts, 8 * r->n, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_int2in, 4 * r->n, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_flags, 4 * (r->n > npix ? r->n : npix), err) != GDT_OK ||
         gcd_fill(c, &c->d_seed, npix, GCD_EMPTY, err) != GDT_OK ||
-        gcd_args(c->k.p1_splat, err, "buiiiubb", &c->d_pts_in, (unsigned)r->n, (int)r->xmin,
-                 (int)r->ymin, (int)r->cell, r->W, &c->d_texel_in, &c->d_seed) != GDT_OK ||
+        gcd_args(c->k.p1_splat, err, "buiiiubb", GCD_PTS_IN(c), (unsigned)r->n, (int)r->xmin,
+                 (int)r->ymin, (int)r->cell, r->W, GCD_TEXEL_IN(c), &c->d_seed) != GDT_OK ||
         gcd_launch(c, c->k.p1_splat, r->n, err) != GDT_OK ||
         gcd_args(c->k.p1_frame, err, "buuu", &c->d_seed, r->W, r->H,
                  (unsigned)r->frame_base) != GDT_OK ||
         gcd_launch(c, c->k.p1_frame, r->nframe, err) != GDT_OK ||
-        gcd_args(c->k.p1_missing_flags, err, "bbub", &c->d_texel_in, &c->d_seed, (unsigned)r->n,
+        gcd_args(c->k.p1_missing_flags, err, "bbub", GCD_TEXEL_IN(c), &c->d_seed, (unsigned)r->n,
                  &c->d_flags) != GDT_OK ||
         gcd_launch(c, c->k.p1_missing_flags, r->n, err) != GDT_OK ||
         gcd_compact(c, &c->d_flags, r->n, &c->d_list, &nmiss, err) != GDT_OK)
@@ -421,7 +421,7 @@ gdt_status gcd_phase1(gdt_core *c, gcd_run *r, gdt_error *err)
         gcd_launch(c, c->k.p1_number_kept, npix, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_mkeys, 4 * nmiss + 4, err) != GDT_OK ||
         gcd_args(c->k.p1_missing_keys, err, "bubuub", &c->d_list, (unsigned)nmiss,
-                 &c->d_texel_in, r->W, r->H, &c->d_mkeys) != GDT_OK ||
+                 GCD_TEXEL_IN(c), r->W, r->H, &c->d_mkeys) != GDT_OK ||
         gcd_launch(c, c->k.p1_missing_keys, nmiss, err) != GDT_OK ||
         gcd_radix_sort(c, &c->d_mkeys, &c->d_list, nmiss, bits, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_mrange, 8 * (nchunks + 1), err) != GDT_OK ||
@@ -432,8 +432,8 @@ gdt_status gcd_phase1(gdt_core *c, gcd_run *r, gdt_error *err)
         gcd_args(c->k.p1_number_missing, err, "buub", &c->d_list, (unsigned)nmiss, kept,
                  &c->d_int2in) != GDT_OK ||
         gcd_launch(c, c->k.p1_number_missing, nmiss, err) != GDT_OK ||
-        gcd_args(c->k.p1_permute, err, "bubbbb", &c->d_int2in, (unsigned)r->n, &c->d_pts_in,
-                 &c->d_texel_in, &c->d_pts, &c->d_texel) != GDT_OK ||
+        gcd_args(c->k.p1_permute, err, "bubbbb", &c->d_int2in, (unsigned)r->n, GCD_PTS_IN(c),
+                 GCD_TEXEL_IN(c), &c->d_pts, &c->d_texel) != GDT_OK ||
         gcd_launch(c, c->k.p1_permute, r->n, err) != GDT_OK)
         return err->status;
     if ((size_t)kept + nmiss != r->n)

@@ -1,7 +1,9 @@
 /* gcd_ctx.h — internals of the gCD core shared by core/gcd*.c.
  *
  * Device buffers (names say where they live: d_ = device):
- *   d_pts_in int2 per point: true tile-local coordinates, input order
+ *   GCD_PTS_IN   int2 per point: true tile-local coordinates, input order
+ *   GCD_TEXEL_IN uint per point: its texel, input order (both Phase 1 only;
+ *                the storage of d_vote and d_fnext)
  *   d_int2in uint per point: input index of internal point k; internally
  *            the kept points come first in texel order, then the missing
  *            ones by the corner chunk of their texel (locality, and the
@@ -105,7 +107,7 @@ struct gdt_core {
     gcd_buf d_mark, d_round, d_small1, d_small2, d_small3;
     gcd_buf d_vote, d_inact, d_flipped, d_stat, d_active, d_next, d_cand, d_exact;
     gcd_buf d_chk, d_bad, d_vnew, d_list3, d_deg, d_off, d_sc, d_hint, d_hint2;
-    gcd_buf d_cont, d_oldnb, d_rank, d_fix, d_stat34, d_fnext, d_pts_in, d_texel_in, d_int2in,
+    gcd_buf d_cont, d_oldnb, d_rank, d_fix, d_stat34, d_fnext, d_int2in,
         d_inm, d_inm2, d_dropped, d_cont2, d_locep, d_locep2,
         d_rk, d_rv, d_rhist, d_mkeys, d_queue, d_nlist, d_nlist2, d_rslot, d_mrange, d_piv;
     size_t scan_levels_cap;
@@ -130,6 +132,10 @@ struct gdt_core {
  * are read only where the same round wrote them) lives in Phase 2's vertex
  * arrays, dead from the end of Phase 2 until sort_tris, and then in the
  * triangle storage sort_tris swaps out, dead until extract. */
+/* The input-order points and texels of Phase 1 (read last by p1_permute)
+ * live in two flip buffers, dead until the flips of Phase 4 or 5. */
+#define GCD_PTS_IN(c) (&(c)->d_vote)
+#define GCD_TEXEL_IN(c) (&(c)->d_fnext)
 #define GCD_EXCH(c) (&(c)->d_aux2)
 #define GCD_WIN(c) (&(c)->d_aux3)
 
