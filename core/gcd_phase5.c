@@ -43,12 +43,20 @@ gdt_status gcd_run_buffers(gdt_core *c, gcd_run *r, gdt_error *err)
     return GDT_OK;
 }
 
+/* The candidate lists of a round hold one entry per tested edge: each
+ * edge is tested once, so T slots give at most 3T/2 entries (8 bytes in
+ * cand, 4 in exact).  p5_check and p5_exact only count what would not fit,
+ * and gcd_flip_run reports it.  exact asks for 12 bytes per slot all the
+ * same: on a CPU device only touched pages cost memory, and the larger
+ * request makes the first flips reallocate it past Phase 1's texel array
+ * (GCD_NEAR, every page touched), which lowers the peak RSS by that array
+ * (65 MB for a 3.85M-point tile) where 6T would keep it. */
 gdt_status gcd_flip_prepare(gdt_core *c, size_t T, gdt_error *err)
 {
     if (gcd_buf_need(c, &c->d_vote, 4 * T, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_active, 4 * T, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_fnext, 4 * T, err) != GDT_OK ||
-        gcd_buf_need(c, &c->d_cand, 24 * T, err) != GDT_OK ||
+        gcd_buf_need(c, &c->d_cand, 12 * T + 8, err) != GDT_OK ||
         gcd_buf_need(c, &c->d_exact, 12 * T, err) != GDT_OK ||
         gcd_buf_need(c, GCD_WIN(c), 12 * T, err) != GDT_OK ||
         gcd_fill(c, &c->d_vote, T, GCD_EMPTY, err) != GDT_OK ||
@@ -63,6 +71,11 @@ gdt_status gcd_flip_run(gdt_core *c, gcd_run *r, size_t na0, int all_active, uin
     size_t T = r->ntris, na = na0;
     uint32_t cnt[3];
     uint64_t nr = 0;
+    size_t ccap = c->d_cand.cap / 8, xcap = c->d_exact.cap / 4;
+    if (ccap > UINT32_MAX)
+        ccap = UINT32_MAX;
+    if (xcap > UINT32_MAX)
+        xcap = UINT32_MAX;
 
     if (all_active) {
         na = T;
@@ -78,21 +91,30 @@ gdt_status gcd_flip_run(gdt_core *c, gcd_run *r, size_t na0, int all_active, uin
                                  P5_MAX_ROUNDS);
         if (gcd_fill(c, &c->d_small1, 1, 0, err) != GDT_OK ||
             gcd_fill(c, &c->d_small2, 1, 0, err) != GDT_OK ||
-            gcd_args(c->k.p5_check, err, "bbbillbubuubbbbbb", &c->d_tri, &c->d_opp, &c->d_pos,
-                     (int)r->n, r->cx, r->cy, &c->d_active, (unsigned)na, &c->d_inact, round,
-                     (unsigned)(all_active && nr == 1), &c->d_vote, &c->d_cand, &c->d_small1, &c->d_exact, &c->d_small2,
-                     &c->d_stat) != GDT_OK ||
+            gcd_args(c->k.p5_check, err, "bbbillbubuubbbbbbuu", &c->d_tri, &c->d_opp,
+                     &c->d_pos, (int)r->n, r->cx, r->cy, &c->d_active, (unsigned)na,
+                     &c->d_inact, round, (unsigned)(all_active && nr == 1), &c->d_vote,
+                     &c->d_cand, &c->d_small1, &c->d_exact, &c->d_small2, &c->d_stat,
+                     (unsigned)ccap, (unsigned)xcap) != GDT_OK ||
             gcd_launch(c, c->k.p5_check, na, err) != GDT_OK ||
             gcd_read_u32(c, &c->d_small2, 0, &cnt[S_NEXACT], err) != GDT_OK)
             return err->status;
+        if (cnt[S_NEXACT] > xcap)
+            return gdt_error_set(err, GDT_EINTERNAL, 7654,
+                                 "%u edges for the exact test in a flipping round, room for %zu",
+                                 cnt[S_NEXACT], xcap);
         if (cnt[S_NEXACT] > 0 &&
-            (gcd_args(c->k.p5_exact, err, "bbbillbubbbb", &c->d_tri, &c->d_opp, &c->d_pos,
+            (gcd_args(c->k.p5_exact, err, "bbbillbubbbbu", &c->d_tri, &c->d_opp, &c->d_pos,
                       (int)r->n, r->cx, r->cy, &c->d_exact, cnt[S_NEXACT], &c->d_vote,
-                      &c->d_cand, &c->d_small1, &c->d_stat) != GDT_OK ||
+                      &c->d_cand, &c->d_small1, &c->d_stat, (unsigned)ccap) != GDT_OK ||
              gcd_launch(c, c->k.p5_exact, cnt[S_NEXACT], err) != GDT_OK))
             return err->status;
         if (gcd_read_u32(c, &c->d_small1, 0, &cnt[S_NCAND], err) != GDT_OK)
             return err->status;
+        if (cnt[S_NCAND] > ccap)
+            return gdt_error_set(err, GDT_EINTERNAL, 7654,
+                                 "%u flip candidates in a round, room for %zu", cnt[S_NCAND],
+                                 ccap);
         r->epoch++;
         if (cnt[S_NCAND] == 0)
             break;

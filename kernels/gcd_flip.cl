@@ -49,13 +49,17 @@ inline void p5_vote(__global uint *vote, int t, int u, uint prio)
     atomic_min(&vote[u], prio);
 }
 
-inline void p5_candidate(__global uint *vote, __global int *cand, __global uint *ncand, int t,
-                         int i, int u, int j)
+/* Appends a candidate; past ccap entries it is only counted (the host
+ * reports the overflow). */
+inline void p5_candidate(__global uint *vote, __global int *cand, __global uint *ncand,
+                         uint ccap, int t, int i, int u, int j)
 {
     int e = (t << 2) | i, f = (u << 2) | j;
     uint prio = gcd_prio((uint)(e < f ? e : f));
     p5_vote(vote, t, u, prio);
     uint k = atomic_inc(ncand);
+    if (k >= ccap)
+        return;
     cand[2 * k] = e;
     cand[2 * k + 1] = f;
 }
@@ -63,13 +67,16 @@ inline void p5_candidate(__global uint *vote, __global int *cand, __global uint 
 /* active[0..na): triangles to check; inact[t] == round marks them.
  * List appends and counters are aggregated per work-group in local memory
  * (one global atomic per group and list), so the lists' order depends on
- * scheduling but their content does not. */
+ * scheduling but their content does not.  Each edge is tested once (from
+ * its smaller slot when both are active), so a list of distinct triangles
+ * gives at most 3 na / 2 entries in all; entries past ccap (cand) or xcap
+ * (exact) are only counted, for the host to report. */
 __kernel void p5_check(__global const int *tri, __global const int *opp,
                        __global const int *pos, int nreal, long cx, long cy,
                        __global const int *active, uint na, __global const uint *inact,
                        uint round, uint all_active, __global uint *vote, __global int *cand,
                        __global uint *ncand, __global int *exact, __global uint *nexact,
-                       __global uint *stat)
+                       __global uint *stat, uint ccap, uint xcap)
 {
     __local uint l_tested, l_tie, l_nc, l_nx, l_bc, l_bx;
     uint g = get_global_id(0), lid = get_local_id(0);
@@ -148,11 +155,11 @@ __kernel void p5_check(__global const int *tri, __global const int *opp,
             atomic_add(&stat[P5_TIEBREAK], l_tie);
     }
     barrier(CLK_LOCAL_MEM_FENCE);
-    for (uint k = 0; k < nc; k++) {
+    for (uint k = 0; k < nc && l_bc + myc + k < ccap; k++) {
         cand[2 * (l_bc + myc + k)] = ce[k];
         cand[2 * (l_bc + myc + k) + 1] = cf[k];
     }
-    for (uint k = 0; k < nx; k++)
+    for (uint k = 0; k < nx && l_bx + myx + k < xcap; k++)
         exact[l_bx + myx + k] = xe[k];
 }
 
@@ -160,7 +167,8 @@ __kernel void p5_check(__global const int *tri, __global const int *opp,
 __kernel void p5_exact(__global const int *tri, __global const int *opp,
                        __global const int *pos, int nreal, long cx, long cy,
                        __global const int *exact, uint nx, __global uint *vote,
-                       __global int *cand, __global uint *ncand, __global uint *stat)
+                       __global int *cand, __global uint *ncand, __global uint *stat,
+                       uint ccap)
 {
     uint g = get_global_id(0);
     if (g >= nx)
@@ -177,7 +185,7 @@ __kernel void p5_exact(__global const int *tri, __global const int *opp,
     if (code & GDT_X_USED_TIEBREAK)
         atomic_inc(&stat[P5_TIEBREAK]);
     if (code & GDT_X_FLIP)
-        p5_candidate(vote, cand, ncand, t, i, u, j);
+        p5_candidate(vote, cand, ncand, ccap, t, i, u, j);
 }
 
 /* Phase A of the two-phase flip: winners rewrite their two slots; the new
