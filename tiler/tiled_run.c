@@ -65,7 +65,7 @@ typedef struct tr_ctx tr_ctx;
 /* The post stage of a tile (certification, seam, sorted faces, .tri file,
  * pending record) runs on its own thread while the main thread loads the
  * next tile and runs the core on it.  While it runs it alone touches cert,
- * count, fbuf, seam, seam_total, pending/npending and s.cert,
+ * count, fbuf, seam, seam_total, pending/npending/nsynced, t_flushed and s.cert,
  * s.certified, s.t_certify; the main thread reads them only after
  * post_join. */
 typedef struct tr_post {
@@ -105,6 +105,7 @@ struct tr_ctx {
     gdt_job *jobdb;
     tr_pending *pending;  /* finished tiles not yet recorded */
     size_t npending, cap_pending;
+    size_t nsynced;       /* pending[0, nsynced) are on disk, to be recorded */
     double t_flushed;
     gdt_progress prog;
     tr_summary s;
@@ -323,6 +324,28 @@ static gdt_status core_tile(tr_ctx *c, uint64_t k, tr_slot *sl, gdt_error *err)
     return GDT_OK;
 }
 
+/* Makes every pending tile file durable: one syncfs of the job's file
+ * system (tiles come in batches), then the directory; pending[0, npending)
+ * are then synced.  Run by the post stage, or where none runs. */
+static gdt_status sync_tiles(tr_ctx *c, gdt_error *err)
+{
+    int fd = open(c->tiles_dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    gdt_status st;
+    if (fd < 0 || syncfs(fd) != 0) {
+        st = gdt_error_set(err, GDT_EIO, 4804, "%s: cannot sync the tile files: %s",
+                           c->tiles_dir, strerror(errno));
+        if (fd >= 0)
+            close(fd);
+        return st;
+    }
+    close(fd);
+    st = tl_sync_dir(c->tiles_dir, err);
+    if (st == GDT_OK)
+        c->nsynced = c->npending;
+    c->t_flushed = gdt_now();
+    return st;
+}
+
 /* The second half of a tile (the post stage): certification, seam, the
  * .tri file and its pending record.  The slot's triangle array is the face
  * sort's scratch: the slot holds no mesh afterwards (the next core run
@@ -398,7 +421,7 @@ static gdt_status post_tile(tr_ctx *c, tr_slot *sl, gdt_error *err)
         tr_put_u64(p + 8, c->seam.e[i].b);
     }
     st = tr_tile_path(c->tiles_dir, d, "tri", &path, err);
-    /* durability comes in batches: see flush_pending */
+    /* durability comes in batches: see sync_tiles */
     if (st == GDT_OK)
         st = write_atomic(path, c->fbuf, len, 1, err);
     free(path);
@@ -411,6 +434,10 @@ static gdt_status post_tile(tr_ctx *c, tr_slot *sl, gdt_error *err)
     c->pending[c->npending].size = len;
     c->pending[c->npending].checksum = gdt_hash64(c->fbuf, len, k);
     c->npending++;
+    /* the wait for the disk is taken here, beside the next tile's core,
+     * not on the thread that drives the core */
+    if (c->npending - c->nsynced >= 256 || gdt_now() - c->t_flushed > 1.0)
+        return sync_tiles(c, err);
     return GDT_OK;
 }
 
@@ -450,28 +477,16 @@ static gdt_status post_start(tr_ctx *c, tr_slot *sl, gdt_error *err)
     return GDT_OK;
 }
 
-/* Makes the finished tile files durable (one syncfs of the job's file
- * system, then the directory) and records them in one transaction.  Until
- * then a crash only costs redoing them. */
-static gdt_status flush_pending(tr_ctx *c, gdt_error *err)
+/* Record the synced tiles (pending[0, nsynced)) in one transaction and
+ * drop them from pending.  Only where no post stage runs. */
+static gdt_status record_synced(tr_ctx *c, gdt_error *err)
 {
     gdt_status st = GDT_OK;
-    int fd;
-    if (c->npending == 0)
+    size_t n = c->nsynced;
+    if (n == 0)
         return GDT_OK;
-    fd = open(c->tiles_dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-    if (fd < 0 || syncfs(fd) != 0) {
-        st = gdt_error_set(err, GDT_EIO, 4804, "%s: cannot sync the tile files: %s",
-                           c->tiles_dir, strerror(errno));
-        if (fd >= 0)
-            close(fd);
-        return st;
-    }
-    close(fd);
-    st = tl_sync_dir(c->tiles_dir, err);
-    if (st == GDT_OK)
-        st = gdt_job_begin(c->jobdb, err);
-    for (size_t i = 0; st == GDT_OK && i < c->npending; i++) {
+    st = gdt_job_begin(c->jobdb, err);
+    for (size_t i = 0; st == GDT_OK && i < n; i++) {
         gdt_tile_desc d;
         char *path = NULL;
         st = gdt_tiler_tile_info(c->tiler, c->pending[i].k, &d, err);
@@ -484,8 +499,19 @@ static gdt_status flush_pending(tr_ctx *c, gdt_error *err)
     }
     if (st == GDT_OK)
         st = gdt_job_commit(c->jobdb, err);
-    c->npending = 0;
-    c->t_flushed = gdt_now();
+    memmove(c->pending, c->pending + n, (c->npending - n) * sizeof *c->pending);
+    c->npending -= n;
+    c->nsynced = 0;
+    return st;
+}
+
+/* Makes the finished tile files durable and records them: until then a
+ * crash only costs redoing them.  Only where no post stage runs. */
+static gdt_status flush_pending(tr_ctx *c, gdt_error *err)
+{
+    gdt_status st = c->npending > c->nsynced ? sync_tiles(c, err) : GDT_OK;
+    if (st == GDT_OK)
+        st = record_synced(c, err);
     return st;
 }
 
@@ -1316,10 +1342,10 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
          * safe in the job for a rerun */
         if (st == GDT_OK)
             tr_out_ready(c.out, k + (ok ? 1 : 0));
-        /* no post stage runs: pending holds every finished tile before k */
-        if (st == GDT_OK &&
-            (c.npending >= 256 || (c.npending > 0 && gdt_now() - c.t_flushed > 1.0)))
-            st = flush_pending(&c, err);
+        /* no post stage runs: the tiles the post stages synced go to the
+         * journal (a short transaction) */
+        if (st == GDT_OK)
+            st = record_synced(&c, err);
         if (st == GDT_OK && !ok)
             st = post_start(&c, &c.slot[k & 1], err);
         if (st != GDT_OK)
