@@ -743,7 +743,8 @@ static gdt_status extract(gdt_core *c, gcd_run *r, gdt_mesh *out, gdt_error *err
     st = gdt_mesh_reserve(out, r->n, nreal, out->ids != NULL, err);
     if (st != GDT_OK)
         return st;
-    if (r->n > 0)
+    /* out->pts had room for n (see gdt_core_triangulate) when it is the input */
+    if (r->n > 0 && out->pts != r->pts)
         memcpy(out->pts, r->pts, r->n * sizeof *out->pts);
     if (out->ids != NULL)
         for (size_t i = 0; i < r->n; i++)

@@ -143,7 +143,9 @@ const char *gdt_core_device_name(const gdt_core *core);
  * pts[i] (out->ids, if allocated, 0..n-1) and the triangles of T_{d1,d2}
  * with their opposite pointers; fewer than 3 points or all collinear give
  * no triangle.  out must have been initialised (gdt_mesh_init); its content
- * is replaced.  stats may be NULL.
+ * is replaced.  pts may be out->pts itself when out holds room for n
+ * vertices (gdt_mesh_reserve): the points then stay where they are, with no
+ * copy.  stats may be NULL.
  * Errors: GDT_EINPUT 3601 (bad grid_n, coordinate out of range, too many
  * points), 3602 (duplicate points, naming two input indices);
  * GDT_EDEVICE 51xx; GDT_EINTERNAL 7601-7699 (an internal consistency check

@@ -89,8 +89,6 @@ struct tr_ctx {
     const gdt_tile_plan *plan;
     uint64_t *base;     /* ntiles + 1 output index of each tile's first vertex */
     gdt_point_buf halo; /* the current tile's halo */
-    gdt_ipt *lp;        /* own points of the tile in the core, tile-local */
-    size_t cap_lp;
     tr_slot slot[2];    /* tile k uses slot[k & 1] */
     tr_post post;
     tr_out *out;        /* the PLY writer, from the tile stage on */
@@ -291,11 +289,13 @@ static gdt_status core_tile(tr_ctx *c, uint64_t k, tr_slot *sl, gdt_error *err)
     st = gdt_tiler_tile_info(c->tiler, k, d, err);
     if (st != GDT_OK)
         return st;
-    /* lp is kept from tile to tile: fresh pages cost more than the memory */
-    if (reserve((void **)&c->lp, &c->cap_lp, (size_t)d->points + 1, sizeof *c->lp) != 0)
-        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-    st = gdt_tiler_load_tile_local(c->tiler, k, d->local_x0, d->local_y0, c->lp, &n, &c->halo,
-                                   err);
+    /* the own points go straight into the slot's mesh, which the core
+     * leaves them in (kept from tile to tile: fresh pages cost more than
+     * the memory) */
+    st = gdt_mesh_reserve(&sl->mesh, (size_t)d->points + 1, 0, 0, err);
+    if (st == GDT_OK)
+        st = gdt_tiler_load_tile_local(c->tiler, k, d->local_x0, d->local_y0, sl->mesh.pts, &n,
+                                       &c->halo, err);
     if (st != GDT_OK)
         return st;
     sl->n = n;
@@ -313,7 +313,7 @@ static gdt_status core_tile(tr_ctx *c, uint64_t k, tr_slot *sl, gdt_error *err)
 
     t0 = gdt_now();
     memset(&cs, 0, sizeof cs);
-    st = gdt_core_triangulate(c->core, c->lp, n, c->opts->tile, &sl->mesh, &cs, err);
+    st = gdt_core_triangulate(c->core, sl->mesh.pts, n, c->opts->tile, &sl->mesh, &cs, err);
     if (st != GDT_OK)
         return st;
     if (strcmp(cs.path, "insert") == 0)
@@ -1466,7 +1466,6 @@ fail:
         gdt_mesh_free(&c.slot[i].mesh);
         free(c.slot[i].lh);
     }
-    free(c.lp);
     gdt_point_buf_free(&c.halo);
     free(c.base);
     gdt_certifier_destroy(c.certifier);
