@@ -26,8 +26,11 @@
  * counter, each with its own scratch of merge_cap / W records.  W is the
  * largest count up to the tiler's threads whose share still holds the
  * largest tile in memory (the one-tile path), within the descriptor budget.
- * Each tile's files depend only on its .raw file, so the bytes do not
- * depend on W; only the caller's thread reports progress.
+ * When pass 2 left the records in memory (spill.c), each tile is collapsed
+ * where it lies, on the workers pass 2 sized for that (resident_workers).
+ * Each tile's files depend only on its records in input order, so the
+ * bytes do not depend on W or the path; only the caller's thread reports
+ * progress.
  */
 #include "private/tiler_impl.h"
 #include "private/tiler_io.h"
@@ -570,7 +573,9 @@ static unsigned worker_count(const gdt_tiler *t)
     unsigned w = t->opts.threads > 1 ? (unsigned)t->opts.threads : 1;
     unsigned fd_per = t->sz.merge_k + 5;
     if (t->resident != NULL)
-        return t->res_workers > 0 ? t->res_workers : 1;
+        /* fewer than resident_workers allowed only saves hash tables */
+        return t->res_workers < 1 ? 1 : t->res_workers > MAX_WORKERS ? MAX_WORKERS
+                                                                     : t->res_workers;
     for (uint64_t k = 0; k < t->ntiles; k++)
         if (t->tiles[k].count > largest)
             largest = t->tiles[k].count;

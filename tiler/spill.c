@@ -10,14 +10,14 @@
  *   pass 2 = level(the cloud, all tiles)
  * Appending preserves order at every level, so each tile file holds its
  * points in input order whatever the budgets: the bytes do not depend on
- * them.
- * In memory: when half the budget holds every record (pass 1 counted them)
- * and the merge workers' hash tables, each record goes straight to its
- * tile's range of one array, in input order: the records the merge would
- * read back from the .raw files, without writing them.  Only one level's write buffers and descriptors exist at a time
+ * them.  Only one level's write buffers and descriptors exist at a time
  * (a level's buckets are closed before its children run), so memory is at
  * most read buffer + write_bytes (one pool, split evenly between the
  * level's files), and descriptors at most writers + 1.
+ * In memory: when half the budget holds every record (pass 1 counted them)
+ * and the merge workers' hash tables, each record goes straight to its
+ * tile's range of one array, in input order: the records the merge would
+ * read back from the .raw files, without writing them.
  */
 #include "private/tiler_impl.h"
 #include "private/tiler_io.h"
@@ -250,7 +250,8 @@ static gdt_status run_bucket(gdt_tiler *t, bucket *bk, unsigned level, gdt_point
 }
 
 /* Merge workers that can run on resident records: up to the tiler's
- * threads, as long as the records and every worker's hash table for the
+ * threads and half the descriptor budget (a worker writes two files at a
+ * time), as long as the records and every worker's hash table for the
  * largest tile fit in half the budget; 0 when not even one does (or the
  * .raw files are wanted, or the test knobs force the file paths). */
 static unsigned resident_workers(const gdt_tiler *t)
@@ -269,6 +270,8 @@ static unsigned resident_workers(const gdt_tiler *t)
         return 0;
     if ((uint64_t)w > t->ntiles)
         w = (unsigned)t->ntiles;
+    if (w > t->fd_budget / 2)
+        w = t->fd_budget / 2; /* fd_budget >= 4 */
     while (w > 0 && total * sizeof(gdt_point) + w * tl_collapse_table_bytes(largest) > half)
         w--;
     return w;

@@ -39,3 +39,16 @@ def test_certification_independent_of_threads(gdt_bin, cloud, tmp_path):
         assert sums[k]["certification"] == sums[1]["certification"], k
     ref = tu.run_reference(gdt_bin, cloud, tmp_path / "ref.ply")
     tu.assert_equal_meshes(outs[7], ref, "--threads 7 vs the reference")
+
+
+@pytest.mark.sanitize
+def test_more_threads_than_merge_workers(gdt_bin, cloud, tmp_path):
+    """--threads 40 on dozens of tiles: the --dup merge (in memory here, the
+    budget holds the cloud) runs at most its 16 workers; the PLY is the same
+    bytes as with one thread."""
+    outs = {}
+    for k in (1, 40):
+        outs[k] = tmp_path / f"m{k}.ply"
+        s, _ = tu.run_tiled(gdt_bin, cloud, outs[k], "--tile", "64", "--threads", str(k))
+        assert s["tiles"] > 40, s["tiles"]
+    assert filecmp.cmp(outs[1], outs[40], shallow=False), "--threads 40 changed the PLY"
