@@ -15,6 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/mman.h>
+#include <sys/prctl.h>
 #include <sys/stat.h>
 
 #ifndef GDT_KERNEL_DIR
@@ -989,4 +990,16 @@ void gdt_ocl_profile_dump(gdt_ocl *ocl, FILE *f)
                 all[i]->launches, all[i]->seconds, total > 0 ? 100 * all[i]->seconds / total : 0);
     fprintf(f, "%-22s %8s          %9.4f s\n", "(all kernels)", "", total);
     free(all);
+}
+
+int gdt_ocl_small_pages(void)
+{
+    const char *e = getenv("GDT_THP");
+    if (e != NULL && strcmp(e, "1") == 0)
+        return 0;
+#ifdef PR_SET_THP_DISABLE
+    return prctl(PR_SET_THP_DISABLE, 1, 0, 0, 0) == 0;
+#else
+    return 0;
+#endif
 }

@@ -79,11 +79,19 @@ gdt_add_test_exe(test_gcd_kernels ${CMAKE_CURRENT_SOURCE_DIR}/c/test_gcd_kernels
 add_test(NAME gcd_kernels COMMAND test_gcd_kernels)
 set_tests_properties(gcd_kernels PROPERTIES LABELS "gcd" SKIP_RETURN_CODE 77)
 
+# The OpenCL CPU device's buffers on 4 KiB pages (gdt_ocl_small_pages), and
+# left alone with GDT_THP=1.
+gdt_add_test_exe(test_ocl_pages ${CMAKE_CURRENT_SOURCE_DIR}/c/test_ocl_pages.c)
+add_test(NAME ocl_pages COMMAND test_ocl_pages)
+add_test(NAME ocl_pages_thp_kept COMMAND test_ocl_pages)
+set_tests_properties(ocl_pages ocl_pages_thp_kept PROPERTIES LABELS "gcd" SKIP_RETURN_CODE 77)
+
 # The symbolic predicates of kernels/gcd_geom.clh, evaluated on the host for
 # tests/python/test_gcd.py (compared with big integers at a huge R).
 gdt_add_test_exe(gcd_geom_eval ${CMAKE_CURRENT_SOURCE_DIR}/tools/gcd_geom_eval.c)
 
 # Every OpenCL test gets the leak suppressions above.
-foreach(t kernels_compile gcd_voronoi gcd_phase2 gcd_flip gcd_core gcd_kernels)
+foreach(t kernels_compile gcd_voronoi gcd_phase2 gcd_flip gcd_core gcd_kernels ocl_pages)
   set_tests_properties(${t} PROPERTIES ENVIRONMENT "${GDT_GCD_LSAN}")
 endforeach()
+set_tests_properties(ocl_pages_thp_kept PROPERTIES ENVIRONMENT "${GDT_GCD_LSAN};GDT_THP=1")
