@@ -26,6 +26,12 @@
  * gdt_ply_finish.  The numbers in the lattice line do not depend on the
  * C locale.
  *
+ * The file is written once and never read back by the writer, so it goes
+ * to the disk with direct I/O (O_DIRECT, whole 4 KiB blocks from an aligned
+ * buffer) where the file system accepts it, and through the page cache
+ * otherwise and for the last partial block: a large output does not fill the
+ * page cache with fresh pages, which costs more system time than the write.
+ *
  * File safety: the file is written as "<path>.tmp-<pid>" in the directory of
  * <path> (an existing file of that name, left by a killed process whose pid
  * is reused, is overwritten).  gdt_ply_finish flushes, patches the counts,

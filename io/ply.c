@@ -1,4 +1,5 @@
 /* Streaming binary little-endian PLY writer (see gdt_ply.h). */
+#define _GNU_SOURCE 1 /* O_DIRECT */
 #include "gdt_ply.h"
 #include "private/bytes.h"
 #include "private/fd_io.h"
@@ -19,13 +20,22 @@
 
 #define PLY_VERTEX_BYTES 24u
 #define PLY_FACE_BYTES 13u
+/* Direct writes go in whole blocks of this many bytes, from buffers and at
+ * file offsets aligned to it (a multiple of every logical block size). */
+#define PLY_DIRECT_ALIGN 4096u
 
 /* Invariants:
  *  - the file holds `flushed` bytes, buf holds the next `fill` bytes;
  *  - fd >= 0 and tmp_exists == 1 while the writer is usable;
  *  - fail.status != GDT_OK once anything failed; the temporary is then
  *    already closed and removed, and every call returns fail again;
- *  - vcount_off/fcount_off are file offsets of the fixed-width count fields. */
+ *  - vcount_off/fcount_off are file offsets of the fixed-width count fields;
+ *  - direct: fd was opened with O_DIRECT and flushed is a multiple of
+ *    PLY_DIRECT_ALIGN.  The file is written once and not read back here,
+ *    so the writer bypasses the page cache where the file system allows it:
+ *    a buffered write first fills fresh page-cache pages, which on a large
+ *    output costs more system time than the write itself.  The last partial
+ *    block goes through the page cache (O_DIRECT cleared). */
 struct gdt_ply_writer {
     char *path;
     char *tmp_path;
@@ -40,6 +50,7 @@ struct gdt_ply_writer {
     uint64_t vcount_off;
     uint64_t fcount_off;
     int in_faces;
+    int direct;
     gdt_error fail;
 };
 
@@ -91,15 +102,68 @@ static gdt_status ply_refail(const gdt_ply_writer *w, gdt_error *err)
     return gdt_error_set(err, w->fail.status, w->fail.code, "%s", w->fail.msg);
 }
 
-static gdt_status ply_flush(gdt_ply_writer *w, gdt_error *err)
+/* Leaves direct I/O: the rest of the file goes through the page cache. */
+static int ply_end_direct(gdt_ply_writer *w)
 {
-    int e = gdt_fd_write_all(w->fd, w->buf, w->fill, -1);
+    int fl = fcntl(w->fd, F_GETFL);
+    w->direct = 0;
+    if (fl < 0 || fcntl(w->fd, F_SETFL, fl & ~O_DIRECT) != 0)
+        return errno;
+    return 0;
+}
+
+/* Writes out the buffer: all of it (all != 0), else at least the whole
+ * blocks of a direct writer, whose partial block stays at the start of buf. */
+static gdt_status ply_write_out(gdt_ply_writer *w, int all, gdt_error *err)
+{
+    size_t head = w->fill;
+    int e = 0;
+
+    if (w->direct) {
+        head = w->fill / PLY_DIRECT_ALIGN * PLY_DIRECT_ALIGN;
+        while (head > 0) {
+            ssize_t k = write(w->fd, w->buf, head);
+            if (k < 0 && errno == EINTR)
+                continue;
+            if (k < 0 && errno == EINVAL) {
+                /* the file system refuses this direct write: buffered from here */
+                e = ply_end_direct(w);
+                break;
+            }
+            if (k <= 0) {
+                e = k < 0 ? errno : EIO;
+                break;
+            }
+            w->flushed += (uint64_t)k;
+            w->fill -= (size_t)k;
+            memmove(w->buf, w->buf + k, w->fill);
+            head -= (size_t)k;
+            if ((size_t)k % PLY_DIRECT_ALIGN != 0)
+                e = ply_end_direct(w); /* a short write: the offset lost its alignment */
+            if (e != 0 || !w->direct)
+                break;
+        }
+        if (e == 0 && w->direct && all)
+            e = ply_end_direct(w); /* the tail, and the counts patched in place */
+        head = w->direct ? 0 : w->fill;
+    }
+    if (e == 0 && head > 0)
+        e = gdt_fd_write_all(w->fd, w->buf, head, -1);
     if (e != 0)
         return ply_fail(w, err, GDT_EIO, 4702, "%s: write failed (temporary %s removed): %s",
                         w->path, w->tmp_path, strerror(e));
-    w->flushed += w->fill;
-    w->fill = 0;
+    if (head > 0) {
+        w->flushed += head;
+        w->fill -= head;
+        memmove(w->buf, w->buf + head, w->fill);
+    }
     return GDT_OK;
+}
+
+/* Makes room in the buffer (at least PLY_DIRECT_ALIGN bytes free after it). */
+static gdt_status ply_flush(gdt_ply_writer *w, gdt_error *err)
+{
+    return ply_write_out(w, 0, err);
 }
 
 /* Appends raw bytes of any length through the buffer. */
@@ -300,14 +364,18 @@ gdt_status gdt_ply_create(gdt_ply_writer **out, const char *path, const gdt_ply_
     w->path = strdup(path);
     w->dir_path = dir_of(path);
     w->tmp_path = malloc(len + 32);
-    w->buf = malloc(GDT_PLY_BUFFER_BYTES);
+    if (posix_memalign((void **)&w->buf, PLY_DIRECT_ALIGN, GDT_PLY_BUFFER_BYTES) != 0)
+        w->buf = NULL;
     if (w->path == NULL || w->dir_path == NULL || w->tmp_path == NULL || w->buf == NULL) {
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         goto fail;
     }
     snprintf(w->tmp_path, len + 32, "%s.tmp-%ld", path, (long)getpid());
 
-    w->fd = open(w->tmp_path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
+    w->fd = open(w->tmp_path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC | O_DIRECT, 0666);
+    w->direct = w->fd >= 0;
+    if (w->fd < 0 && errno == EINVAL) /* no direct I/O on this file system */
+        w->fd = open(w->tmp_path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
     if (w->fd < 0) {
         st = gdt_error_set(err, GDT_EIO, 4701, "%s: cannot create temporary file %s: %s", path,
                            w->tmp_path, strerror(errno));
@@ -453,7 +521,7 @@ gdt_status gdt_ply_finish(gdt_ply_writer *w, gdt_error *err)
         st = ply_refail(w, err);
         goto fail;
     }
-    st = ply_flush(w, err);
+    st = ply_write_out(w, 1, err);
     if (st != GDT_OK)
         goto fail;
     st = patch_count(w, w->vcount_off, w->nvert, err);

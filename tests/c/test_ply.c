@@ -7,6 +7,9 @@
  * file size, the temporary-then-rename protocol, and that every misuse
  * (vertices after faces, bad indices, bad comments, bad lattice, too many
  * vertices) is refused with its message number and leaves no file behind.
+ * The writer bypasses the page cache (O_DIRECT, whole 4 KiB blocks) where
+ * the file system allows it; the large file crosses many block and buffer
+ * boundaries with odd record counts per call.
  */
 #include <dirent.h>
 #include <errno.h>
