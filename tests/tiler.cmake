@@ -7,3 +7,8 @@ gdt_add_test_exe(tiler_vdb_dump ${CMAKE_CURRENT_SOURCE_DIR}/tools/tiler_vdb_dump
 target_link_libraries(tiler_vdb_dump PRIVATE OpenVDB::openvdb)
 gdt_add_test_exe(test_tiler ${CMAKE_CURRENT_SOURCE_DIR}/c/test_tiler.c)
 add_test(NAME tiler COMMAND test_tiler ${CMAKE_CURRENT_BINARY_DIR}/tiler-work)
+
+# Direct I/O of the tile files (tiled_files.c): lengths around the block
+# size, read back in pieces of many sizes.
+gdt_add_test_exe(test_tile_files ${CMAKE_CURRENT_SOURCE_DIR}/c/test_tile_files.c)
+add_test(NAME tile_files COMMAND test_tile_files ${CMAKE_CURRENT_BINARY_DIR})

@@ -1,13 +1,16 @@
-/* tiled_files.c — paths and messages shared by the stages of the tiled run
- * (see private/tiled_files.h). */
+/* tiled_files.c — paths, messages and direct I/O shared by the stages of
+ * the tiled run (see private/tiled_files.h). */
+#define _GNU_SOURCE 1 /* O_DIRECT */
 #include "private/tiled_files.h"
 
 #include <errno.h>
+#include <fcntl.h>
 #include <inttypes.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 char *tr_path_join(const char *a, const char *b)
 {
@@ -62,4 +65,146 @@ gdt_status tr_interrupted(const char *job, const char *where, gdt_error *err)
                          "stopped by a signal during %s; rerun the same command (or "
                          "gdt-tile --resume %s) to continue",
                          where, job);
+}
+
+int tr_create_direct(const char *path, int *direct)
+{
+    int fd = open(path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC | O_DIRECT, 0644);
+    *direct = fd >= 0;
+    if (fd < 0 && errno == EINVAL) /* no direct I/O on this file system */
+        fd = open(path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    return fd;
+}
+
+/* Takes fd out of direct mode. */
+static int end_direct(int fd, int *direct)
+{
+    int fl = fcntl(fd, F_GETFL);
+    *direct = 0;
+    if (fl < 0 || fcntl(fd, F_SETFL, fl & ~O_DIRECT) != 0)
+        return errno;
+    return 0;
+}
+
+gdt_status tr_write_direct(int fd, int *direct, const unsigned char *buf, size_t len,
+                           const char *path, gdt_error *err)
+{
+    size_t done = 0;
+    int e = 0;
+
+    /* invariant: while *direct, done is a multiple of TR_BLOCK */
+    while (done < len && e == 0) {
+        size_t want = len - done;
+        ssize_t w;
+        if (*direct) {
+            want = want / TR_BLOCK * TR_BLOCK;
+            if (want == 0) {
+                e = end_direct(fd, direct);
+                continue;
+            }
+        }
+        w = write(fd, buf + done, want);
+        if (w < 0 && errno == EINTR)
+            continue;
+        if (w < 0 && errno == EINVAL && *direct) {
+            e = end_direct(fd, direct); /* refused: the page cache from here */
+            continue;
+        }
+        if (w <= 0) {
+            e = w < 0 ? errno : EIO;
+            break;
+        }
+        done += (size_t)w;
+        if (*direct && (size_t)w % TR_BLOCK != 0)
+            e = end_direct(fd, direct);
+    }
+    if (e == 0 && *direct)
+        e = end_direct(fd, direct);
+    if (e != 0)
+        return gdt_error_set(err, GDT_EIO, 4803, "%s: write failed: %s", path, strerror(e));
+    return GDT_OK;
+}
+
+gdt_status tr_dread_open(tr_dread *r, const char *path, size_t cap, gdt_error *err)
+{
+    memset(r, 0, sizeof *r);
+    r->fd = -1;
+    r->path = strdup(path);
+    if (r->path == NULL || cap == 0 || cap % TR_BLOCK != 0 ||
+        posix_memalign((void **)&r->buf, TR_BLOCK, cap) != 0) {
+        r->buf = NULL;
+        tr_dread_close(r);
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    }
+    r->cap = cap;
+    r->fd = open(path, O_RDONLY | O_CLOEXEC | O_DIRECT);
+    r->direct = r->fd >= 0;
+    if (r->fd < 0 && errno == EINVAL)
+        r->fd = open(path, O_RDONLY | O_CLOEXEC);
+    if (r->fd < 0) {
+        int e = errno;
+        gdt_status st =
+            gdt_error_set(err, GDT_EIO, 4805, "%s: cannot open: %s", path, strerror(e));
+        tr_dread_close(r);
+        return st;
+    }
+    return GDT_OK;
+}
+
+/* Refills buf from the file (len = 0 at its end).  While direct, off is a
+ * multiple of TR_BLOCK: a read that returns a partial block is the end of
+ * the file, or else the reader leaves direct mode. */
+static gdt_status dread_fill(tr_dread *r, gdt_error *err)
+{
+    r->pos = r->len = 0;
+    for (;;) {
+        ssize_t k = pread(r->fd, r->buf, r->cap, (off_t)r->off);
+        if (k < 0 && errno == EINTR)
+            continue;
+        if (k < 0 && errno == EINVAL && r->direct) {
+            if (end_direct(r->fd, &r->direct) != 0)
+                break;
+            continue;
+        }
+        if (k < 0)
+            break;
+        r->off += (uint64_t)k;
+        r->len = (size_t)k;
+        if (r->direct && (size_t)k % TR_BLOCK != 0 && end_direct(r->fd, &r->direct) != 0)
+            break;
+        return GDT_OK;
+    }
+    return gdt_error_set(err, GDT_EIO, 4806, "%s: read failed: %s", r->path, strerror(errno));
+}
+
+gdt_status tr_dread_bytes(tr_dread *r, void *dst, size_t n, size_t *got, gdt_error *err)
+{
+    unsigned char *d = dst;
+    *got = 0;
+    while (*got < n) {
+        size_t m;
+        if (r->pos == r->len) {
+            gdt_status st = dread_fill(r, err);
+            if (st != GDT_OK)
+                return st;
+            if (r->len == 0)
+                break;
+        }
+        m = n - *got < r->len - r->pos ? n - *got : r->len - r->pos;
+        memcpy(d + *got, r->buf + r->pos, m);
+        r->pos += m;
+        *got += m;
+    }
+    return GDT_OK;
+}
+
+void tr_dread_close(tr_dread *r)
+{
+    if (r->fd >= 0)
+        close(r->fd);
+    r->fd = -1;
+    free(r->buf);
+    free(r->path);
+    r->buf = NULL;
+    r->path = NULL;
 }

@@ -38,9 +38,17 @@ static int stopped(const tr_out *o)
     return o->src.stop != NULL && *o->src.stop != 0;
 }
 
-/* Copies nf face records (3 x u32 output indices, little-endian) from the
- * current position of f to the PLY, TR_CHUNK at a time.  path names f in
- * errors. */
+/* Converts m face records (3 x u32 output indices, little-endian) from
+ * o->raw and appends them to the PLY. */
+static gdt_status put_face_records(tr_out *o, size_t m, gdt_error *err)
+{
+    for (size_t i = 0; i < 3 * m; i++)
+        o->tri[i] = (int32_t)tr_get_u32(o->raw + 4 * i);
+    return gdt_ply_write_faces(o->w, o->tri, m, err);
+}
+
+/* Copies nf face records from the current position of f to the PLY,
+ * TR_CHUNK at a time.  path names f in errors. */
 static gdt_status copy_face_records(tr_out *o, FILE *f, const char *path, uint64_t nf,
                                     gdt_error *err)
 {
@@ -49,9 +57,7 @@ static gdt_status copy_face_records(tr_out *o, FILE *f, const char *path, uint64
         gdt_status st;
         if (fread(o->raw, 12, m, f) != m)
             return gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
-        for (size_t i = 0; i < 3 * m; i++)
-            o->tri[i] = (int32_t)tr_get_u32(o->raw + 4 * i);
-        st = gdt_ply_write_faces(o->w, o->tri, m, err);
+        st = put_face_records(o, m, err);
         if (st != GDT_OK)
             return st;
         done += m;
@@ -59,22 +65,41 @@ static gdt_status copy_face_records(tr_out *o, FILE *f, const char *path, uint64
     return GDT_OK;
 }
 
-/* The certified faces of tile k's .tri file. */
+/* The certified faces of tile k's .tri file, read with direct I/O (the
+ * file is not needed in the page cache: the merge reads only its seam). */
 static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
 {
     gdt_tile_desc d;
     unsigned char hdr[TR_HEADER];
     char *path = NULL;
-    FILE *f = NULL;
-    uint64_t size;
+    tr_dread r;
+    size_t got = 0;
+    uint64_t nf;
     gdt_status st = gdt_tiler_tile_info(o->src.tiler, k, &d, err);
 
+    memset(&r, 0, sizeof r);
+    r.fd = -1;
     if (st == GDT_OK)
-        st = tr_open_tri(o->src.tiles_dir, &d, o->src.base[k], &f, hdr, &size, &path, err);
+        st = tr_tile_path(o->src.tiles_dir, &d, "tri", &path, err);
     if (st == GDT_OK)
-        st = copy_face_records(o, f, path, tr_get_u64(hdr + 24), err);
-    if (f != NULL)
-        fclose(f);
+        st = tr_dread_open(&r, path, TR_DREAD_BYTES, err);
+    if (st == GDT_OK)
+        st = tr_dread_bytes(&r, hdr, TR_HEADER, &got, err);
+    if (st == GDT_OK && (got != TR_HEADER || memcmp(hdr, TR_MAGIC, 8) != 0 ||
+                         tr_get_u64(hdr + 8) != o->src.base[k] ||
+                         tr_get_u64(hdr + 16) != d.points))
+        st = gdt_error_set(err, GDT_EJOB, 6801, "%s: not the tile file this run wrote", path);
+    nf = st == GDT_OK ? tr_get_u64(hdr + 24) : 0;
+    for (uint64_t done = 0; st == GDT_OK && done < nf;) {
+        size_t m = nf - done < TR_CHUNK ? (size_t)(nf - done) : TR_CHUNK;
+        st = tr_dread_bytes(&r, o->raw, 12 * m, &got, err);
+        if (st == GDT_OK && got != 12 * m)
+            st = gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
+        if (st == GDT_OK)
+            st = put_face_records(o, m, err);
+        done += m;
+    }
+    tr_dread_close(&r);
     free(path);
     return st;
 }

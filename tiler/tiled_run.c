@@ -127,6 +127,23 @@ static int reserve(void **p, size_t *cap, size_t need, size_t elem)
     return 0;
 }
 
+/* reserve for a buffer of direct I/O (aligned to TR_BLOCK); the content
+ * is not kept when it grows. */
+static int reserve_blocks(unsigned char **p, size_t *cap, size_t need)
+{
+    void *q;
+    if (need <= *cap)
+        return 0;
+    free(*p);
+    *p = NULL;
+    *cap = 0;
+    if (posix_memalign(&q, TR_BLOCK, need) != 0)
+        return -1;
+    *p = q;
+    *cap = need;
+    return 0;
+}
+
 static gdt_status make_dir(const char *path, gdt_error *err)
 {
     struct stat sb;
@@ -173,9 +190,11 @@ static gdt_status commit_tmp(int *fd, const char *tmp, const char *path, int nos
 }
 
 /* Writes buf to path through path.tmp: write, fsync (unless nosync),
- * rename.  On failure nothing is left at either name. */
+ * rename.  On failure nothing is left at either name.  direct: buf is
+ * aligned to TR_BLOCK and its whole blocks bypass the page cache
+ * (tr_write_direct). */
 static gdt_status write_atomic(const char *path, const unsigned char *buf, size_t len,
-                               int nosync, gdt_error *err)
+                               int nosync, int direct, gdt_error *err)
 {
     size_t lp = strlen(path);
     char *tmp = malloc(lp + 5);
@@ -186,12 +205,14 @@ static gdt_status write_atomic(const char *path, const unsigned char *buf, size_
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     memcpy(tmp, path, lp);
     memcpy(tmp + lp, ".tmp", 5);
-    fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    fd = direct ? tr_create_direct(tmp, &direct)
+                : open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
     if (fd < 0) {
         st = gdt_error_set(err, GDT_EIO, 4802, "%s: cannot create: %s", tmp, strerror(errno));
         goto fail;
     }
-    st = write_all(fd, buf, len, tmp, err);
+    st = direct ? tr_write_direct(fd, &direct, buf, len, tmp, err)
+                : write_all(fd, buf, len, tmp, err);
     if (st == GDT_OK)
         st = commit_tmp(&fd, tmp, path, nosync, err);
     if (st != GDT_OK)
@@ -392,7 +413,7 @@ static gdt_status post_tile(tr_ctx *c, tr_slot *sl, gdt_error *err)
         return st;
     c->seam_total += c->seam.nv;
     len = TR_HEADER + 12 * nf + 24 * c->seam.nv + 16 * c->seam.ne;
-    if (reserve((void **)&c->fbuf, &c->cap_fbuf, len, 1) != 0)
+    if (reserve_blocks(&c->fbuf, &c->cap_fbuf, len) != 0)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     /* the sorted faces go straight into the file image (64-byte aligned
      * offset); the slot's triangles are not needed after this */
@@ -423,7 +444,7 @@ static gdt_status post_tile(tr_ctx *c, tr_slot *sl, gdt_error *err)
     st = tr_tile_path(c->tiles_dir, d, "tri", &path, err);
     /* durability comes in batches: see sync_tiles */
     if (st == GDT_OK)
-        st = write_atomic(path, c->fbuf, len, 1, err);
+        st = write_atomic(path, c->fbuf, len, 1, 1, err);
     free(path);
     if (st != GDT_OK)
         return st;
@@ -535,7 +556,7 @@ static gdt_status reuse_tile(tr_ctx *c, uint64_t k, uint64_t size, uint64_t sum,
     if (st != GDT_OK)
         return st;
     if (size < TR_HEADER || size > SIZE_MAX ||
-        reserve((void **)&c->fbuf, &c->cap_fbuf, (size_t)size, 1) != 0) {
+        reserve_blocks(&c->fbuf, &c->cap_fbuf, (size_t)size) != 0) {
         free(path);
         return size < TR_HEADER ? GDT_OK
                                 : gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");

@@ -1,0 +1,118 @@
+/* test_tile_files — the direct I/O of the tile files (tiler/tiled_files.c).
+ *
+ *   test_tile_files WORKDIR
+ *
+ * Files of lengths around the block size and the reader's buffer are
+ * written with tr_write_direct, starting in direct mode and in buffered
+ * mode, and read back with tr_dread in pieces of many sizes (one byte, a
+ * 12-byte record, odd sizes, more than the buffer); every byte must come
+ * back, the reader must report the end exactly, and the writer must leave
+ * direct mode after the tail.  A reader of a missing file fails with 4805.
+ */
+#include <errno.h>
+#include <fcntl.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "gdt_check.h"
+#include "private/tiled_files.h"
+
+static gdt_checks T = {0, 0};
+
+#define CHECK(cond, ...) GDT_CHECK(&T, cond, __VA_ARGS__)
+
+static void one_file(const char *dir, size_t len, int start_direct, uint64_t *seed)
+{
+    char path[4200];
+    unsigned char *buf = NULL, *back = malloc(len + 1);
+    static const size_t pieces[] = {1, 12, 13, 4095, 4096, 4097, 65536 * 12, 3 << 20};
+    int direct = 0, fd;
+    gdt_error err;
+
+    gdt_error_clear(&err);
+    snprintf(path, sizeof path, "%s/f_%zu_%d", dir, len, start_direct);
+    if (back == NULL || posix_memalign((void **)&buf, TR_BLOCK, len + 1) != 0) {
+        CHECK(0, "%s", "out of memory");
+        free(back);
+        return;
+    }
+    for (size_t i = 0; i < len; i++)
+        buf[i] = (unsigned char)gdt_splitmix64(seed);
+    fd = start_direct ? tr_create_direct(path, &direct) : -1;
+    if (!start_direct)
+        fd = creat(path, 0644);
+    CHECK(fd >= 0, "%s: cannot create: %s", path, strerror(errno));
+    if (fd >= 0) {
+        CHECK(tr_write_direct(fd, &direct, buf, len, path, &err) == GDT_OK, "%s", err.msg);
+        CHECK(direct == 0, "len %zu: the writer is still in direct mode", len);
+        close(fd);
+    }
+    for (size_t p = 0; p < sizeof pieces / sizeof pieces[0]; p++) {
+        tr_dread r;
+        size_t at = 0, got = 0;
+        gdt_status st = tr_dread_open(&r, path, TR_DREAD_BYTES, &err);
+        CHECK(st == GDT_OK, "%s", err.msg);
+        if (st != GDT_OK)
+            continue;
+        if (pieces[p] < 12 && len > 65536) {
+            tr_dread_close(&r);
+            continue; /* byte by byte only on the small files */
+        }
+        do {
+            size_t want = pieces[p] < len + 1 - at ? pieces[p] : len + 1 - at;
+            st = tr_dread_bytes(&r, back + at, want, &got, &err);
+            at += got;
+            if (got < want)
+                break;
+        } while (st == GDT_OK && at <= len);
+        CHECK(st == GDT_OK, "%s", err.msg);
+        CHECK(at == len, "len %zu, pieces of %zu: read %zu bytes", len, pieces[p], at);
+        CHECK(memcmp(back, buf, len) == 0, "len %zu, pieces of %zu: bytes differ", len,
+              pieces[p]);
+        st = tr_dread_bytes(&r, back, 1, &got, &err);
+        CHECK(st == GDT_OK && got == 0, "len %zu: a byte after the end", len);
+        tr_dread_close(&r);
+    }
+    {
+        struct stat sb;
+        CHECK(stat(path, &sb) == 0 && (size_t)sb.st_size == len, "len %zu: file size %lld",
+              len, (long long)sb.st_size);
+    }
+    unlink(path);
+    free(buf);
+    free(back);
+}
+
+int main(int argc, char **argv)
+{
+    static const size_t lens[] = {0,    1,     64,   4095,  4096,          4097,
+                                  8191, 8192,  12289, (1 << 20) - 1, 1 << 20, (1 << 20) + 1,
+                                  (3 << 20) + 4096 + 77};
+    char dir[4096];
+    uint64_t seed = 7;
+    tr_dread r;
+    gdt_error err;
+
+    if (argc != 2) {
+        fprintf(stderr, "usage: test_tile_files WORKDIR\n");
+        return 2;
+    }
+    snprintf(dir, sizeof dir, "%s/tile_files.%ld", argv[1], (long)getpid());
+    if (mkdir(dir, 0755) != 0) {
+        fprintf(stderr, "%s: %s\n", dir, strerror(errno));
+        return 1;
+    }
+    for (size_t i = 0; i < sizeof lens / sizeof lens[0]; i++)
+        for (int d = 0; d < 2; d++)
+            one_file(dir, lens[i], d, &seed);
+    gdt_error_clear(&err);
+    CHECK(tr_dread_open(&r, "/nonexistent/tile.tri", TR_DREAD_BYTES, &err) == GDT_EIO &&
+              err.code == 4805,
+          "missing file: status %d code %d", (int)err.status, err.code);
+    tr_dread_close(&r);
+    rmdir(dir);
+    return gdt_check_finish(&T, "test_tile_files");
+}
