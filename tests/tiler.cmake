@@ -12,3 +12,7 @@ add_test(NAME tiler COMMAND test_tiler ${CMAKE_CURRENT_BINARY_DIR}/tiler-work)
 # size, read back in pieces of many sizes.
 gdt_add_test_exe(test_tile_files ${CMAKE_CURRENT_SOURCE_DIR}/c/test_tile_files.c)
 add_test(NAME tile_files COMMAND test_tile_files ${CMAKE_CURRENT_BINARY_DIR})
+
+# The tile files' checksum and the input fingerprint hash see damage.
+gdt_add_test_exe(test_hash ${CMAKE_CURRENT_SOURCE_DIR}/c/test_hash.c)
+add_test(NAME hash COMMAND test_hash)

@@ -235,6 +235,8 @@ fail:
  * compacted into its front, rotated (face k is written after triangle t >= k
  * is read), so the slot's triangles are consumed.  The 3 * nf sorted values
  * go to out as little-endian 32-bit words (the .tri file image). */
+#define SORT_AHEAD 16
+
 static gdt_status sort_faces(tr_ctx *c, gdt_mesh *m, size_t nf, uint32_t base,
                              unsigned char *out, gdt_error *err)
 {
@@ -261,8 +263,16 @@ static gdt_status sort_faces(tr_ctx *c, gdt_mesh *m, size_t nf, uint32_t base,
     }
     for (size_t i = 0; i < nv; i++)
         c->count[i + 1] += c->count[i];
+    /* the scatter misses the cache twice per face (count[], then the
+     * target row): prefetch the count 2 SORT_AHEAD faces ahead and the row
+     * SORT_AHEAD ahead (its count may still move by a few rows) */
     for (size_t f = 0; f < nf; f++) {
-        uint32_t d = c->count[tmp[3 * f]]++;
+        uint32_t d;
+        if (f + 2 * SORT_AHEAD < nf)
+            __builtin_prefetch(&c->count[tmp[3 * (f + 2 * SORT_AHEAD)]], 1);
+        if (f + SORT_AHEAD < nf)
+            __builtin_prefetch(&sorted[3 * (size_t)c->count[tmp[3 * (f + SORT_AHEAD)]]], 1);
+        d = c->count[tmp[3 * f]]++;
         memcpy(&sorted[3 * (size_t)d], &tmp[3 * f], 3 * sizeof *tmp);
     }
     /* count[i] is now the end of bucket i; insertion sort on (b, c) */
@@ -280,9 +290,14 @@ static gdt_status sort_faces(tr_ctx *c, gdt_mesh *m, size_t nf, uint32_t base,
             memcpy(&sorted[3 * b], f, sizeof f);
         }
     }
+    /* to output indices, little-endian in place (a plain vector add on a
+     * little-endian host) */
     for (size_t i = 0; i < 3 * nf; i++) {
         uint32_t v = sorted[i] + base;
-        tr_put_u32(out + 4 * i, v);
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
+        v = __builtin_bswap32(v);
+#endif
+        sorted[i] = v;
     }
     return GDT_OK;
 }
@@ -453,7 +468,7 @@ static gdt_status post_tile(tr_ctx *c, tr_slot *sl, gdt_error *err)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     c->pending[c->npending].k = k;
     c->pending[c->npending].size = len;
-    c->pending[c->npending].checksum = gdt_hash64(c->fbuf, len, k);
+    c->pending[c->npending].checksum = gdt_hash64_wide(c->fbuf, len, k);
     c->npending++;
     /* the wait for the disk is taken here, beside the next tile's core,
      * not on the thread that drives the core */
@@ -566,7 +581,7 @@ static gdt_status reuse_tile(tr_ctx *c, uint64_t k, uint64_t size, uint64_t sum,
     if (f == NULL)
         return GDT_OK;
     if (fread(c->fbuf, 1, (size_t)size, f) != size || fgetc(f) != EOF ||
-        gdt_hash64(c->fbuf, (size_t)size, k) != sum) {
+        gdt_hash64_wide(c->fbuf, (size_t)size, k) != sum) {
         fclose(f);
         return GDT_OK;
     }

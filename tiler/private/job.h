@@ -57,5 +57,9 @@ gdt_status gdt_job_clear_tiles(gdt_job *j, gdt_error *err);
 
 /* A 64-bit checksum of n bytes (not cryptographic: detects damage). */
 uint64_t gdt_hash64(const void *p, size_t n, uint64_t seed);
+/* The same kind of checksum, about four times faster on long buffers
+ * (independent lanes); a different function: the tile files' records use it,
+ * the input fingerprints keep gdt_hash64. */
+uint64_t gdt_hash64_wide(const void *p, size_t n, uint64_t seed);
 
 #endif
