@@ -89,19 +89,6 @@ uint64_t gdt_ocl_max_alloc(const gdt_ocl *ocl);
 /* The kernel directory programs are read from (owned by ocl). */
 const char *gdt_ocl_kernel_dir(const gdt_ocl *ocl);
 
-/* Process-wide, for executables (call before the first buffer): keeps
- * transparent huge pages away from this process (prctl
- * PR_SET_THP_DISABLE), unless $GDT_THP is "1".  PoCL's CPU devices ask
- * for huge pages on every large buffer (MADV_HUGEPAGE).  With Debian's
- * default "defrag=madvise" such a first touch may compact memory on the
- * spot, and on virtual machines that hand free memory back to the host,
- * huge pages are the ones handed back: measured on a 2-core VM, touching
- * 1 GiB took 0.55-2.3 s on huge pages against 0.41-0.72 s on 4 KiB pages,
- * and a 10M-point run spent 1.3 s less system time without them.
- * Returns 1 when huge pages are now off, 0 when left on ($GDT_THP=1, or
- * the kernel lacks the control). */
-int gdt_ocl_small_pages(void);
-
 /* Lists every platform and device, one line each ("P:D  N  type  name"),
  * into buf (NUL-terminated, truncated to len).  Needs no context. */
 gdt_status gdt_ocl_list_devices(char *buf, size_t len, gdt_error *err);

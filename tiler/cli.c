@@ -1,6 +1,5 @@
 /* Command-line parsing, help text and the top-level dispatch of gdt-tile. */
 #include "gdt_cli.h"
-#include "gdt_ocl.h"
 #include "gdt_predicates.h"
 #include "private/cli_modes.h"
 #include "private/single_tile.h"
@@ -439,8 +438,6 @@ int gdt_cli_main(int argc, char **argv)
     st = refuse_unavailable(&opts, &err);
     if (st != GDT_OK)
         goto done;
-    /* the OpenCL CPU device's buffers on 4 KiB pages (see gdt_ocl.h) */
-    (void)gdt_ocl_small_pages();
     if (opts.mode == GDT_MODE_INFO) {
         st = gdt_cli_info(&opts, &err);
     } else {

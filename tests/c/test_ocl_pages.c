@@ -1,10 +1,8 @@
-/* test_ocl_pages — gdt_ocl_small_pages keeps the CPU device's buffers off
- * transparent huge pages: after the call the process reports THP disabled
- * (THP_enabled: 0 in /proc/self/status), and a 64 MiB device buffer the
- * runtime fills maps no huge page (AnonHugePages of the buffer's mapping
- * in /proc/self/smaps).  With GDT_THP=1 the call must leave huge pages
- * alone.  Exit 77 without an OpenCL device or on a kernel that lacks the
- * status line. */
+/* test_ocl_pages — big buffers of the OpenCL CPU device stay on 4 KiB
+ * pages: a 64 MiB device buffer the runtime fills maps no transparent huge
+ * page (AnonHugePages over /proc/self/smaps does not grow).  With GDT_THP=1
+ * the buffer may use huge pages; the figure is printed, not checked (the
+ * kernel may not find any).  Exit 77 without an OpenCL device. */
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -12,21 +10,6 @@
 
 #include "gdt_check.h"
 #include "gdt_ocl.h"
-
-/* The value of "THP_enabled:" in /proc/self/status, or -1. */
-static int thp_enabled(void)
-{
-    char line[256];
-    int v = -1;
-    FILE *f = fopen("/proc/self/status", "r");
-    if (f == NULL)
-        return -1;
-    while (fgets(line, sizeof line, f) != NULL)
-        if (sscanf(line, "THP_enabled: %d", &v) == 1)
-            break;
-    fclose(f);
-    return v;
-}
 
 /* Sum of AnonHugePages (kB) over every mapping of the process, or -1. */
 static long anon_huge_kb(void)
@@ -53,16 +36,6 @@ int main(void)
     gdt_ocl_buf *b = NULL;
     gdt_error err;
     long before, after;
-    int r;
-
-    if (thp_enabled() < 0) {
-        printf("test_ocl_pages: no THP_enabled line in /proc/self/status: skipped\n");
-        return 77;
-    }
-    r = gdt_ocl_small_pages();
-    GDT_CHECK(&t, r == !keep_thp, "gdt_ocl_small_pages returned %d with GDT_THP %s", r,
-              keep ? keep : "unset");
-    GDT_CHECK(&t, thp_enabled() == keep_thp, "THP_enabled %d after the call", thp_enabled());
 
     memset(&o, 0, sizeof o);
     memset(&err, 0, sizeof err);

@@ -25,7 +25,6 @@
 
 #include "gdt_cloud.h"
 #include "gdt_core.h"
-#include "gdt_ocl.h"
 #include "gdt_reference.h"
 #include "gen_degenerate.h"
 #include "test_gcd_gen.h"
@@ -257,7 +256,6 @@ int main(int argc, char **argv)
     o.force_no_fp64 = nofp64;
     o.check_phases = check_phases;
     o.profile = profile;
-    (void)gdt_ocl_small_pages(); /* as gdt-tile runs the core */
     if (gdt_core_create(&core, &o, &err) != GDT_OK) {
         gdt_error_print(&err, stderr);
         rc = err.status == GDT_EDEVICE && err.code == 5101 ? 77 : 1;
