@@ -166,6 +166,16 @@ static gdt_status ply_flush(gdt_ply_writer *w, gdt_error *err)
     return ply_write_out(w, 0, err);
 }
 
+/* ply_flush for a loop that keeps the buffer's fill in *fill. */
+static gdt_status ply_room(gdt_ply_writer *w, size_t *fill, gdt_error *err)
+{
+    gdt_status st;
+    w->fill = *fill;
+    st = ply_flush(w, err);
+    *fill = w->fill;
+    return st;
+}
+
 /* Appends raw bytes of any length through the buffer. */
 static gdt_status ply_put(gdt_ply_writer *w, const void *data, size_t n, gdt_error *err)
 {
@@ -396,6 +406,8 @@ fail:
 
 gdt_status gdt_ply_write_vertices(gdt_ply_writer *w, const double *xyz, size_t n, gdt_error *err)
 {
+    size_t fill;
+
     if (w == NULL)
         return gdt_error_set(err, GDT_EINTERNAL, 7701, "PLY writer: NULL writer");
     if (w->fail.status != GDT_OK)
@@ -411,6 +423,8 @@ gdt_status gdt_ply_write_vertices(gdt_ply_writer *w, const double *xyz, size_t n
                         w->path, w->nvert, n, GDT_PLY_MAX_VERTICES);
     if (n > 0 && xyz == NULL)
         return ply_fail(w, err, GDT_EINTERNAL, 7701, "%s: NULL vertex array", w->path);
+    /* fill is kept in a local: the byte stores could alias w->fill */
+    fill = w->fill;
     for (size_t i = 0; i < n; i++) {
         const double *v = xyz + 3 * i;
         unsigned char *p;
@@ -418,20 +432,24 @@ gdt_status gdt_ply_write_vertices(gdt_ply_writer *w, const double *xyz, size_t n
             return ply_fail(w, err, GDT_EINTERNAL, 7707,
                             "%s: vertex %" PRIu64 " is not finite (%g %g %g)", w->path,
                             w->nvert + i, v[0], v[1], v[2]);
-        if (GDT_PLY_BUFFER_BYTES - w->fill < PLY_VERTEX_BYTES && ply_flush(w, err) != GDT_OK)
+        if (GDT_PLY_BUFFER_BYTES - fill < PLY_VERTEX_BYTES && ply_room(w, &fill, err) != GDT_OK)
             return w->fail.status;
-        p = w->buf + w->fill;
+        p = w->buf + fill;
         gdt_le_put_f64(p, v[0]);
         gdt_le_put_f64(p + 8, v[1]);
         gdt_le_put_f64(p + 16, v[2]);
-        w->fill += PLY_VERTEX_BYTES;
+        fill += PLY_VERTEX_BYTES;
     }
+    w->fill = fill;
     w->nvert += n;
     return GDT_OK;
 }
 
 gdt_status gdt_ply_write_faces(gdt_ply_writer *w, const int32_t *tri, size_t n, gdt_error *err)
 {
+    size_t fill;
+    uint64_t nvert;
+
     if (w == NULL)
         return gdt_error_set(err, GDT_EINTERNAL, 7701, "PLY writer: NULL writer");
     if (w->fail.status != GDT_OK)
@@ -439,11 +457,14 @@ gdt_status gdt_ply_write_faces(gdt_ply_writer *w, const int32_t *tri, size_t n, 
     if (n > 0 && tri == NULL)
         return ply_fail(w, err, GDT_EINTERNAL, 7701, "%s: NULL face array", w->path);
     w->in_faces = 1;
+    /* fill and nvert are kept in locals: the byte stores could alias w */
+    fill = w->fill;
+    nvert = w->nvert;
     for (size_t i = 0; i < n; i++) {
         const int32_t *t = tri + 3 * i;
         unsigned char *p;
         for (int k = 0; k < 3; k++) {
-            if (t[k] < 0 || (uint64_t)t[k] >= w->nvert)
+            if (t[k] < 0 || (uint64_t)t[k] >= nvert)
                 return ply_fail(w, err, GDT_EINTERNAL, 7705,
                                 "%s: face %" PRIu64 " (%" PRId32 " %" PRId32 " %" PRId32
                                 ") has an index outside [0, %" PRIu64 ")",
@@ -454,15 +475,16 @@ gdt_status gdt_ply_write_faces(gdt_ply_writer *w, const int32_t *tri, size_t n, 
                             "%s: face %" PRIu64 " (%" PRId32 " %" PRId32 " %" PRId32
                             ") repeats a vertex",
                             w->path, w->nface + i, t[0], t[1], t[2]);
-        if (GDT_PLY_BUFFER_BYTES - w->fill < PLY_FACE_BYTES && ply_flush(w, err) != GDT_OK)
+        if (GDT_PLY_BUFFER_BYTES - fill < PLY_FACE_BYTES && ply_room(w, &fill, err) != GDT_OK)
             return w->fail.status;
-        p = w->buf + w->fill;
+        p = w->buf + fill;
         p[0] = 3;
         gdt_le_put_u32(p + 1, (uint32_t)t[0]);
         gdt_le_put_u32(p + 5, (uint32_t)t[1]);
         gdt_le_put_u32(p + 9, (uint32_t)t[2]);
-        w->fill += PLY_FACE_BYTES;
+        fill += PLY_FACE_BYTES;
     }
+    w->fill = fill;
     w->nface += n;
     return GDT_OK;
 }

@@ -262,6 +262,17 @@ static uint64_t rotl(uint64_t v, int r)
     return (v << r) | (v >> (64 - r));
 }
 
+/* The little-endian 64-bit word at b (any alignment). */
+static uint64_t load_le64(const unsigned char *b)
+{
+    uint64_t w;
+    memcpy(&w, b, sizeof w);
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
+    w = __builtin_bswap64(w);
+#endif
+    return w;
+}
+
 /* The hashes' common end: the tail bytes b[0..n), then the final mix. */
 static uint64_t hash_finish(uint64_t h, const unsigned char *b, size_t n)
 {
@@ -306,22 +317,17 @@ uint64_t gdt_hash64_wide(const void *p, size_t n, uint64_t seed)
     const uint64_t k1 = UINT64_C(0x9e3779b185ebca87), k2 = UINT64_C(0xc2b2ae3d27d4eb4f),
                    k3 = UINT64_C(0x165667b19e3779f9);
     const unsigned char *b = p;
-    uint64_t h[4], r;
+    uint64_t h0 = seed ^ ((uint64_t)n * k1), h1 = (seed + k3) ^ ((uint64_t)n * k1),
+             h2 = (seed + 2 * k3) ^ ((uint64_t)n * k1), h3 = (seed + 3 * k3) ^ ((uint64_t)n * k1);
+    uint64_t r;
     size_t i = 0;
 
-    for (int l = 0; l < 4; l++)
-        h[l] = (seed + (uint64_t)l * k3) ^ ((uint64_t)n * k1);
     for (; i + 32 <= n; i += 32) {
-        for (int l = 0; l < 4; l++) {
-            uint64_t w = 0;
-            for (int q = 7; q >= 0; q--)
-                w = (w << 8) | b[i + 8 * (size_t)l + (size_t)q];
-            w *= k2;
-            w = rotl(w, 31) * k1;
-            h[l] ^= w;
-            h[l] = rotl(h[l], 27) * k1 + k3;
-        }
+        h0 = rotl(h0 ^ (rotl(load_le64(b + i) * k2, 31) * k1), 27) * k1 + k3;
+        h1 = rotl(h1 ^ (rotl(load_le64(b + i + 8) * k2, 31) * k1), 27) * k1 + k3;
+        h2 = rotl(h2 ^ (rotl(load_le64(b + i + 16) * k2, 31) * k1), 27) * k1 + k3;
+        h3 = rotl(h3 ^ (rotl(load_le64(b + i + 24) * k2, 31) * k1), 27) * k1 + k3;
     }
-    r = rotl(h[0], 1) + rotl(h[1], 7) + rotl(h[2], 12) + rotl(h[3], 18);
+    r = rotl(h0, 1) + rotl(h1, 7) + rotl(h2, 12) + rotl(h3, 18);
     return hash_finish(r, b + i, n - i);
 }

@@ -12,14 +12,29 @@ static inline uint16_t gdt_le_get_u16(const unsigned char *p)
     return (uint16_t)(p[0] | (p[1] << 8));
 }
 
+/* Whole-word loads and stores (memcpy, byte-swapped on big-endian hosts):
+ * byte-by-byte loops are not always merged by the compiler, and the PLY
+ * and tile writers store hundreds of millions of words. */
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
+#define GDT_LE32(v) __builtin_bswap32(v)
+#define GDT_LE64(v) __builtin_bswap64(v)
+#else
+#define GDT_LE32(v) (v)
+#define GDT_LE64(v) (v)
+#endif
+
 static inline uint32_t gdt_le_get_u32(const unsigned char *p)
 {
-    return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24);
+    uint32_t v;
+    memcpy(&v, p, sizeof v);
+    return GDT_LE32(v);
 }
 
 static inline uint64_t gdt_le_get_u64(const unsigned char *p)
 {
-    return (uint64_t)gdt_le_get_u32(p) | ((uint64_t)gdt_le_get_u32(p + 4) << 32);
+    uint64_t v;
+    memcpy(&v, p, sizeof v);
+    return GDT_LE64(v);
 }
 
 static inline int32_t gdt_le_get_i32(const unsigned char *p)
@@ -41,14 +56,14 @@ static inline double gdt_le_get_f64(const unsigned char *p)
 
 static inline void gdt_le_put_u32(unsigned char *p, uint32_t v)
 {
-    for (int i = 0; i < 4; i++)
-        p[i] = (unsigned char)((v >> (8 * i)) & 0xffu);
+    v = GDT_LE32(v);
+    memcpy(p, &v, sizeof v);
 }
 
 static inline void gdt_le_put_u64(unsigned char *p, uint64_t v)
 {
-    for (int i = 0; i < 8; i++)
-        p[i] = (unsigned char)((v >> (8 * i)) & 0xffu);
+    v = GDT_LE64(v);
+    memcpy(p, &v, sizeof v);
 }
 
 /* Stores d as IEEE 754 binary64. */

@@ -5,10 +5,12 @@
 #define GDT_TILED_FILES_H
 
 #include <stdint.h>
+#include <string.h>
 #include <stdio.h>
 
 #include "gdt_error.h"
 #include "gdt_tiler.h"
+#include "private/tiler_io.h"
 
 #define TR_MAGIC "GDTTRI01"
 #define TR_HEADER 64
@@ -17,29 +19,32 @@
 #define MF_MAGIC "GDTMRG01"
 #define MF_HEADER 16
 
+/* Little-endian words (tl_le64/tl_le32 of tiler_io.h: whole-word memcpy,
+ * since byte loops are not always merged by the compiler). */
 static inline void tr_put_u64(unsigned char *p, uint64_t v)
 {
-    for (int i = 0; i < 8; i++)
-        p[i] = (unsigned char)(v >> (8 * i));
+    v = tl_le64(v);
+    memcpy(p, &v, sizeof v);
 }
 
 static inline void tr_put_u32(unsigned char *p, uint32_t v)
 {
-    for (int i = 0; i < 4; i++)
-        p[i] = (unsigned char)(v >> (8 * i));
+    v = tl_le32(v);
+    memcpy(p, &v, sizeof v);
 }
 
 static inline uint64_t tr_get_u64(const unsigned char *p)
 {
-    uint64_t v = 0;
-    for (int i = 7; i >= 0; i--)
-        v = (v << 8) | p[i];
-    return v;
+    uint64_t v;
+    memcpy(&v, p, sizeof v);
+    return tl_le64(v);
 }
 
 static inline uint32_t tr_get_u32(const unsigned char *p)
 {
-    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
+    uint32_t v;
+    memcpy(&v, p, sizeof v);
+    return tl_le32(v);
 }
 
 /* "a/b", malloc'd; NULL when out of memory. */

@@ -35,6 +35,15 @@ static inline uint64_t tl_le64(uint64_t v)
 #endif
 }
 
+static inline uint32_t tl_le32(uint32_t v)
+{
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
+    return __builtin_bswap32(v);
+#else
+    return v;
+#endif
+}
+
 static inline void tl_rec_put(unsigned char *dst, const gdt_point *p)
 {
     uint64_t w[4];
