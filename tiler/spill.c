@@ -17,15 +17,24 @@
  * In memory: when half the budget holds every record (pass 1 counted them)
  * and the merge workers' hash tables, each record goes straight to its
  * tile's range of one array, in input order: the records the merge would
- * read back from the .raw files, without writing them.
+ * read back from the .raw files, without writing them.  The array's
+ * pages are faulted in ahead of the scatter by a helper thread
+ * (MADV_POPULATE_WRITE), on the core the single-threaded read leaves idle.
  */
+#define _GNU_SOURCE 1 /* MADV_POPULATE_WRITE */
 #include "private/tiler_impl.h"
 #include "private/tiler_io.h"
 
 #include <inttypes.h>
+#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/mman.h>
 #include <unistd.h>
+
+#ifndef MADV_POPULATE_WRITE
+#define MADV_POPULATE_WRITE 23 /* Linux 5.14 */
+#endif
 
 typedef struct spill_src {
     gdt_cloud *cloud;   /* either the cloud ... */
@@ -277,12 +286,50 @@ static unsigned resident_workers(const gdt_tiler *t)
     return w;
 }
 
+/* Faults in [p, p + n) front to back, 8 MiB at a time, until done or
+ * *stop (a kernel without MADV_POPULATE_WRITE ends it at once). */
+typedef struct prefault {
+    pthread_t tid;
+    unsigned char *p;
+    size_t n;
+    int stop; /* __atomic accesses */
+} prefault;
+
+static void *prefault_main(void *arg)
+{
+    prefault *f = arg;
+    const size_t step = (size_t)8 << 20;
+    for (size_t at = 0; at < f->n && !__atomic_load_n(&f->stop, __ATOMIC_RELAXED); at += step)
+        if (madvise(f->p + at, f->n - at < step ? f->n - at : step, MADV_POPULATE_WRITE) != 0)
+            break;
+    return NULL;
+}
+
+/* Starts a prefault of the whole pages inside [p, p + n); 0 if none runs. */
+static int prefault_start(prefault *f, void *p, size_t n)
+{
+    long pg = sysconf(_SC_PAGESIZE);
+    uintptr_t a = (uintptr_t)p, b = a + n;
+    if (pg <= 0)
+        return 0;
+    a = (a + (uintptr_t)pg - 1) / (uintptr_t)pg * (uintptr_t)pg;
+    b = b / (uintptr_t)pg * (uintptr_t)pg;
+    if (b <= a || b - a < ((size_t)8 << 20))
+        return 0; /* not worth a thread */
+    f->p = (unsigned char *)a;
+    f->n = b - a;
+    __atomic_store_n(&f->stop, 0, __ATOMIC_RELAXED);
+    return pthread_create(&f->tid, NULL, prefault_main, f) == 0;
+}
+
 /* Pass 2 into t->resident (see the design note). */
 static gdt_status spill_resident(gdt_tiler *t, gdt_point *buf, gdt_error *err)
 {
     tile_cache cache = {0, 0, UINT64_MAX};
     uint64_t *fill, done = 0;
     gdt_status st = GDT_OK;
+    prefault pf;
+    int pf_running;
 
     t->res_off = malloc((t->ntiles + 1) * sizeof *t->res_off);
     fill = malloc(t->ntiles * sizeof *fill);
@@ -302,6 +349,8 @@ static gdt_status spill_resident(gdt_tiler *t, gdt_point *buf, gdt_error *err)
                              "out of memory (pass 2 in memory, %" PRIu64 " points)",
                              t->res_off[t->ntiles]);
     }
+    pf_running = prefault_start(&pf, t->resident,
+                                (size_t)t->res_off[t->ntiles] * sizeof *t->resident);
     for (;;) {
         size_t n = 0;
         st = gdt_cloud_read(t->cloud, buf, t->sz.read_cap, &n, err);
@@ -325,6 +374,10 @@ static gdt_status spill_resident(gdt_tiler *t, gdt_point *buf, gdt_error *err)
             st = tl_progress(t, 2, done, t->plan.points, err);
         if (st != GDT_OK)
             break;
+    }
+    if (pf_running) {
+        __atomic_store_n(&pf.stop, 1, __ATOMIC_RELAXED);
+        pthread_join(pf.tid, NULL);
     }
     for (uint64_t k = 0; k < t->ntiles; k++)
         t->tiles[k].written = fill[k] - t->res_off[k];
