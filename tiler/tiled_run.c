@@ -240,6 +240,8 @@ fail:
     return st;
 }
 
+#define SORT_AHEAD 16 /* faces between a prefetch and its use */
+
 /* Certified faces of the current tile as output indices, each rotated to
  * start at its smallest index, in sorted order: a counting sort on the first
  * index, then insertion sort inside each (short) bucket.  The order depends
@@ -248,8 +250,6 @@ fail:
  * compacted into its front, rotated (face k is written after triangle t >= k
  * is read), so the slot's triangles are consumed.  The 3 * nf sorted values
  * go to out as little-endian 32-bit words (the .tri file image). */
-#define SORT_AHEAD 16
-
 static gdt_status sort_faces(tr_ctx *c, gdt_mesh *m, size_t nf, uint32_t base,
                              unsigned char *out, gdt_error *err)
 {
