@@ -1,6 +1,6 @@
 /* Streaming binary little-endian PLY writer (see gdt_ply.h). */
-#define _GNU_SOURCE 1 /* O_DIRECT */
 #include "gdt_ply.h"
+#include "gdt_direct_io.h"
 #include "private/bytes.h"
 #include "private/fd_io.h"
 
@@ -20,9 +20,6 @@
 
 #define PLY_VERTEX_BYTES 24u
 #define PLY_FACE_BYTES 13u
-/* Direct writes go in whole blocks of this many bytes, from buffers and at
- * file offsets aligned to it (a multiple of every logical block size). */
-#define PLY_DIRECT_ALIGN 4096u
 
 /* Invariants:
  *  - the file holds `flushed` bytes, buf holds the next `fill` bytes;
@@ -31,7 +28,7 @@
  *    already closed and removed, and every call returns fail again;
  *  - vcount_off/fcount_off are file offsets of the fixed-width count fields;
  *  - direct: fd was opened with O_DIRECT and flushed is a multiple of
- *    PLY_DIRECT_ALIGN.  The file is written once and not read back here,
+ *    GDT_DIO_BLOCK.  The file is written once and not read back here,
  *    so the writer bypasses the page cache where the file system allows it:
  *    a buffered write first fills fresh page-cache pages, which on a large
  *    output costs more system time than the write itself.  The last partial
@@ -102,49 +99,22 @@ static gdt_status ply_refail(const gdt_ply_writer *w, gdt_error *err)
     return gdt_error_set(err, w->fail.status, w->fail.code, "%s", w->fail.msg);
 }
 
-/* Leaves direct I/O: the rest of the file goes through the page cache. */
-static int ply_end_direct(gdt_ply_writer *w)
-{
-    int fl = fcntl(w->fd, F_GETFL);
-    w->direct = 0;
-    if (fl < 0 || fcntl(w->fd, F_SETFL, fl & ~O_DIRECT) != 0)
-        return errno;
-    return 0;
-}
-
 /* Writes out the buffer: all of it (all != 0), else at least the whole
- * blocks of a direct writer, whose partial block stays at the start of buf. */
+ * blocks of a direct writer, whose partial block stays at the start of buf.
+ * The last write (all) leaves direct mode: the tail, and the counts
+ * patched in place, go through the page cache. */
 static gdt_status ply_write_out(gdt_ply_writer *w, int all, gdt_error *err)
 {
     size_t head = w->fill;
     int e = 0;
 
     if (w->direct) {
-        head = w->fill / PLY_DIRECT_ALIGN * PLY_DIRECT_ALIGN;
-        while (head > 0) {
-            ssize_t k = write(w->fd, w->buf, head);
-            if (k < 0 && errno == EINTR)
-                continue;
-            if (k < 0 && errno == EINVAL) {
-                /* the file system refuses this direct write: buffered from here */
-                e = ply_end_direct(w);
-                break;
-            }
-            if (k <= 0) {
-                e = k < 0 ? errno : EIO;
-                break;
-            }
-            w->flushed += (uint64_t)k;
-            w->fill -= (size_t)k;
-            memmove(w->buf, w->buf + k, w->fill);
-            head -= (size_t)k;
-            if ((size_t)k % PLY_DIRECT_ALIGN != 0)
-                e = ply_end_direct(w); /* a short write: the offset lost its alignment */
-            if (e != 0 || !w->direct)
-                break;
-        }
+        e = gdt_dio_write_blocks(w->fd, &w->direct, w->buf, w->fill, &head);
+        w->flushed += head;
+        w->fill -= head;
+        memmove(w->buf, w->buf + head, w->fill);
         if (e == 0 && w->direct && all)
-            e = ply_end_direct(w); /* the tail, and the counts patched in place */
+            e = gdt_dio_end(w->fd, &w->direct);
         head = w->direct ? 0 : w->fill;
     }
     if (e == 0 && head > 0)
@@ -160,7 +130,7 @@ static gdt_status ply_write_out(gdt_ply_writer *w, int all, gdt_error *err)
     return GDT_OK;
 }
 
-/* Makes room in the buffer (at least PLY_DIRECT_ALIGN bytes free after it). */
+/* Makes room in the buffer (at least GDT_DIO_BLOCK bytes free after it). */
 static gdt_status ply_flush(gdt_ply_writer *w, gdt_error *err)
 {
     return ply_write_out(w, 0, err);
@@ -374,7 +344,7 @@ gdt_status gdt_ply_create(gdt_ply_writer **out, const char *path, const gdt_ply_
     w->path = strdup(path);
     w->dir_path = dir_of(path);
     w->tmp_path = malloc(len + 32);
-    if (posix_memalign((void **)&w->buf, PLY_DIRECT_ALIGN, GDT_PLY_BUFFER_BYTES) != 0)
+    if (posix_memalign((void **)&w->buf, GDT_DIO_BLOCK, GDT_PLY_BUFFER_BYTES) != 0)
         w->buf = NULL;
     if (w->path == NULL || w->dir_path == NULL || w->tmp_path == NULL || w->buf == NULL) {
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
@@ -382,10 +352,7 @@ gdt_status gdt_ply_create(gdt_ply_writer **out, const char *path, const gdt_ply_
     }
     snprintf(w->tmp_path, len + 32, "%s.tmp-%ld", path, (long)getpid());
 
-    w->fd = open(w->tmp_path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC | O_DIRECT, 0666);
-    w->direct = w->fd >= 0;
-    if (w->fd < 0 && errno == EINVAL) /* no direct I/O on this file system */
-        w->fd = open(w->tmp_path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
+    w->fd = gdt_dio_create(w->tmp_path, 0666, &w->direct);
     if (w->fd < 0) {
         st = gdt_error_set(err, GDT_EIO, 4701, "%s: cannot create temporary file %s: %s", path,
                            w->tmp_path, strerror(errno));

@@ -79,8 +79,8 @@ gdt_add_test_exe(test_gcd_kernels ${CMAKE_CURRENT_SOURCE_DIR}/c/test_gcd_kernels
 add_test(NAME gcd_kernels COMMAND test_gcd_kernels)
 set_tests_properties(gcd_kernels PROPERTIES LABELS "gcd" SKIP_RETURN_CODE 77)
 
-# The OpenCL CPU device's big buffers on 4 KiB pages, and on huge pages
-# allowed with GDT_THP=1.
+# The OpenCL CPU device's big buffers get the huge-page advice only
+# with GDT_THP=1.
 gdt_add_test_exe(test_ocl_pages ${CMAKE_CURRENT_SOURCE_DIR}/c/test_ocl_pages.c)
 add_test(NAME ocl_pages COMMAND test_ocl_pages)
 add_test(NAME ocl_pages_thp_kept COMMAND test_ocl_pages)

@@ -1,10 +1,8 @@
 /* tiled_files.c — paths, messages and direct I/O shared by the stages of
  * the tiled run (see private/tiled_files.h). */
-#define _GNU_SOURCE 1 /* O_DIRECT */
 #include "private/tiled_files.h"
 
 #include <errno.h>
-#include <fcntl.h>
 #include <inttypes.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -67,59 +65,23 @@ gdt_status tr_interrupted(const char *job, const char *where, gdt_error *err)
                          where, job);
 }
 
-int tr_create_direct(const char *path, int *direct)
-{
-    int fd = open(path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC | O_DIRECT, 0644);
-    *direct = fd >= 0;
-    if (fd < 0 && errno == EINVAL) /* no direct I/O on this file system */
-        fd = open(path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-    return fd;
-}
-
-/* Takes fd out of direct mode. */
-static int end_direct(int fd, int *direct)
-{
-    int fl = fcntl(fd, F_GETFL);
-    *direct = 0;
-    if (fl < 0 || fcntl(fd, F_SETFL, fl & ~O_DIRECT) != 0)
-        return errno;
-    return 0;
-}
-
 gdt_status tr_write_direct(int fd, int *direct, const unsigned char *buf, size_t len,
                            const char *path, gdt_error *err)
 {
     size_t done = 0;
-    int e = 0;
+    int e = gdt_dio_write_blocks(fd, direct, buf, len, &done);
 
-    /* invariant: while *direct, done is a multiple of TR_BLOCK */
-    while (done < len && e == 0) {
-        size_t want = len - done;
-        ssize_t w;
-        if (*direct) {
-            want = want / TR_BLOCK * TR_BLOCK;
-            if (want == 0) {
-                e = end_direct(fd, direct);
-                continue;
-            }
-        }
-        w = write(fd, buf + done, want);
+    if (e == 0 && *direct)
+        e = gdt_dio_end(fd, direct); /* the tail through the page cache */
+    while (e == 0 && done < len) {
+        ssize_t w = write(fd, buf + done, len - done);
         if (w < 0 && errno == EINTR)
             continue;
-        if (w < 0 && errno == EINVAL && *direct) {
-            e = end_direct(fd, direct); /* refused: the page cache from here */
-            continue;
-        }
-        if (w <= 0) {
+        if (w <= 0)
             e = w < 0 ? errno : EIO;
-            break;
-        }
-        done += (size_t)w;
-        if (*direct && (size_t)w % TR_BLOCK != 0)
-            e = end_direct(fd, direct);
+        else
+            done += (size_t)w;
     }
-    if (e == 0 && *direct)
-        e = end_direct(fd, direct);
     if (e != 0)
         return gdt_error_set(err, GDT_EIO, 4803, "%s: write failed: %s", path, strerror(e));
     return GDT_OK;
@@ -130,17 +92,14 @@ gdt_status tr_dread_open(tr_dread *r, const char *path, size_t cap, gdt_error *e
     memset(r, 0, sizeof *r);
     r->fd = -1;
     r->path = strdup(path);
-    if (r->path == NULL || cap == 0 || cap % TR_BLOCK != 0 ||
-        posix_memalign((void **)&r->buf, TR_BLOCK, cap) != 0) {
+    if (r->path == NULL || cap == 0 || cap % GDT_DIO_BLOCK != 0 ||
+        posix_memalign((void **)&r->buf, GDT_DIO_BLOCK, cap) != 0) {
         r->buf = NULL;
         tr_dread_close(r);
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     }
     r->cap = cap;
-    r->fd = open(path, O_RDONLY | O_CLOEXEC | O_DIRECT);
-    r->direct = r->fd >= 0;
-    if (r->fd < 0 && errno == EINVAL)
-        r->fd = open(path, O_RDONLY | O_CLOEXEC);
+    r->fd = gdt_dio_open_read(path, &r->direct);
     if (r->fd < 0) {
         int e = errno;
         gdt_status st =
@@ -152,7 +111,7 @@ gdt_status tr_dread_open(tr_dread *r, const char *path, size_t cap, gdt_error *e
 }
 
 /* Refills buf from the file (len = 0 at its end).  While direct, off is a
- * multiple of TR_BLOCK: a read that returns a partial block is the end of
+ * multiple of GDT_DIO_BLOCK: a read that returns a partial block is the end of
  * the file, or else the reader leaves direct mode. */
 static gdt_status dread_fill(tr_dread *r, gdt_error *err)
 {
@@ -162,7 +121,7 @@ static gdt_status dread_fill(tr_dread *r, gdt_error *err)
         if (k < 0 && errno == EINTR)
             continue;
         if (k < 0 && errno == EINVAL && r->direct) {
-            if (end_direct(r->fd, &r->direct) != 0)
+            if (gdt_dio_end(r->fd, &r->direct) != 0)
                 break;
             continue;
         }
@@ -170,7 +129,7 @@ static gdt_status dread_fill(tr_dread *r, gdt_error *err)
             break;
         r->off += (uint64_t)k;
         r->len = (size_t)k;
-        if (r->direct && (size_t)k % TR_BLOCK != 0 && end_direct(r->fd, &r->direct) != 0)
+        if (r->direct && (size_t)k % GDT_DIO_BLOCK != 0 && gdt_dio_end(r->fd, &r->direct) != 0)
             break;
         return GDT_OK;
     }

@@ -140,7 +140,7 @@ static int reserve(void **p, size_t *cap, size_t need, size_t elem)
     return 0;
 }
 
-/* reserve for a buffer of direct I/O (aligned to TR_BLOCK); the content
+/* reserve for a buffer of direct I/O (aligned to GDT_DIO_BLOCK); the content
  * is not kept when it grows. */
 static int reserve_blocks(unsigned char **p, size_t *cap, size_t need)
 {
@@ -150,7 +150,7 @@ static int reserve_blocks(unsigned char **p, size_t *cap, size_t need)
     free(*p);
     *p = NULL;
     *cap = 0;
-    if (posix_memalign(&q, TR_BLOCK, need) != 0)
+    if (posix_memalign(&q, GDT_DIO_BLOCK, need) != 0)
         return -1;
     *p = q;
     *cap = need;
@@ -202,13 +202,13 @@ static gdt_status commit_tmp(int *fd, const char *tmp, const char *path, int nos
     return st;
 }
 
-/* Writes buf to path through path.tmp: write, fsync (unless nosync),
- * rename.  On failure nothing is left at either name.  direct: buf is
- * aligned to TR_BLOCK and its whole blocks bypass the page cache
- * (tr_write_direct). */
+/* Writes buf (aligned to GDT_DIO_BLOCK) to path through path.tmp, with
+ * direct I/O where allowed (tr_write_direct), then fsync (unless nosync)
+ * and rename.  On failure nothing is left at either name. */
 static gdt_status write_atomic(const char *path, const unsigned char *buf, size_t len,
-                               int nosync, int direct, gdt_error *err)
+                               int nosync, gdt_error *err)
 {
+    int direct;
     size_t lp = strlen(path);
     char *tmp = malloc(lp + 5);
     int fd = -1;
@@ -218,14 +218,12 @@ static gdt_status write_atomic(const char *path, const unsigned char *buf, size_
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     memcpy(tmp, path, lp);
     memcpy(tmp + lp, ".tmp", 5);
-    fd = direct ? tr_create_direct(tmp, &direct)
-                : open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    fd = gdt_dio_create(tmp, 0644, &direct);
     if (fd < 0) {
         st = gdt_error_set(err, GDT_EIO, 4802, "%s: cannot create: %s", tmp, strerror(errno));
         goto fail;
     }
-    st = direct ? tr_write_direct(fd, &direct, buf, len, tmp, err)
-                : write_all(fd, buf, len, tmp, err);
+    st = tr_write_direct(fd, &direct, buf, len, tmp, err);
     if (st == GDT_OK)
         st = commit_tmp(&fd, tmp, path, nosync, err);
     if (st != GDT_OK)
@@ -472,7 +470,7 @@ static gdt_status post_tile(tr_ctx *c, tr_slot *sl, gdt_error *err)
     st = tr_tile_path(c->tiles_dir, d, "tri", &path, err);
     /* durability comes in batches: see sync_tiles */
     if (st == GDT_OK)
-        st = write_atomic(path, c->fbuf, len, 1, 1, err);
+        st = write_atomic(path, c->fbuf, len, 1, err);
     free(path);
     if (st != GDT_OK)
         return st;

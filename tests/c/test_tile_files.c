@@ -1,4 +1,5 @@
-/* test_tile_files — the direct I/O of the tile files (tiler/tiled_files.c).
+/* test_tile_files — the direct I/O of the tile files (tiler/tiled_files.c
+ * over io/direct_io.c).
  *
  *   test_tile_files WORKDIR
  *
@@ -34,14 +35,14 @@ static void one_file(const char *dir, size_t len, int start_direct, uint64_t *se
 
     gdt_error_clear(&err);
     snprintf(path, sizeof path, "%s/f_%zu_%d", dir, len, start_direct);
-    if (back == NULL || posix_memalign((void **)&buf, TR_BLOCK, len + 1) != 0) {
+    if (back == NULL || posix_memalign((void **)&buf, GDT_DIO_BLOCK, len + 1) != 0) {
         CHECK(0, "%s", "out of memory");
         free(back);
         return;
     }
     for (size_t i = 0; i < len; i++)
         buf[i] = (unsigned char)gdt_splitmix64(seed);
-    fd = start_direct ? tr_create_direct(path, &direct) : -1;
+    fd = start_direct ? gdt_dio_create(path, 0644, &direct) : -1;
     if (!start_direct)
         fd = creat(path, 0644);
     CHECK(fd >= 0, "%s: cannot create: %s", path, strerror(errno));

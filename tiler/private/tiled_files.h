@@ -8,6 +8,7 @@
 #include <string.h>
 #include <stdio.h>
 
+#include "gdt_direct_io.h"
 #include "gdt_error.h"
 #include "gdt_tiler.h"
 #include "private/tiler_io.h"
@@ -67,19 +68,12 @@ gdt_status tr_open_tri(const char *tiles_dir, const gdt_tile_desc *d, uint64_t b
                        gdt_error *err);
 
 /* Direct I/O for the large tile files, which are written once and read
- * once: whole TR_BLOCK blocks bypass the page cache (O_DIRECT), from
- * buffers aligned to TR_BLOCK, where the file system allows it; the rest
- * (a file's last partial block, or everything on a file system without
- * direct I/O) goes through the page cache as usual.  Fresh page-cache pages
- * cost more system time than the disk transfer. */
-#define TR_BLOCK 4096u
+ * once (gdt_direct_io.h): whole blocks bypass the page cache where the file
+ * system allows it. */
 #define TR_DREAD_BYTES ((size_t)1 << 20) /* read buffer of the tile-file readers */
 
-/* Creates (truncates) path for writing, with O_DIRECT when the file system
- * allows it (*direct = 1).  Returns the descriptor, or -1 with errno set. */
-int tr_create_direct(const char *path, int *direct);
-/* Writes all len bytes of buf (aligned to TR_BLOCK when *direct) to fd at
- * its position: whole blocks directly, then the tail through the page
+/* Writes all len bytes of buf (aligned to GDT_DIO_BLOCK when *direct) to fd
+ * at its position: whole blocks directly, then the tail through the page
  * cache (fd leaves direct mode; *direct = 0).  path names fd in errors.
  * returns: GDT_OK; GDT_EIO 4803. */
 gdt_status tr_write_direct(int fd, int *direct, const unsigned char *buf, size_t len,
@@ -89,13 +83,13 @@ gdt_status tr_write_direct(int fd, int *direct, const unsigned char *buf, size_t
 typedef struct tr_dread {
     int fd;             /* -1: closed */
     int direct;
-    unsigned char *buf; /* cap bytes, aligned to TR_BLOCK; owned */
+    unsigned char *buf; /* cap bytes, aligned to GDT_DIO_BLOCK; owned */
     size_t cap, pos, len;
     uint64_t off;       /* file offset of buf[len] */
     char *path;         /* owned, for messages */
 } tr_dread;
 
-/* Opens path; cap (a multiple of TR_BLOCK) bytes of buffer.
+/* Opens path; cap (a multiple of GDT_DIO_BLOCK) bytes of buffer.
  * returns: GDT_OK; GDT_EIO 4805 (cannot open); GDT_EINTERNAL 7001. */
 gdt_status tr_dread_open(tr_dread *r, const char *path, size_t cap, gdt_error *err);
 /* The next n bytes into dst; *got < n only at the end of the file.
