@@ -6,9 +6,11 @@
  * Files of lengths around the block size and the reader's buffer are
  * written with tr_write_direct, starting in direct mode and in buffered
  * mode, and read back with tr_dread in pieces of many sizes (one byte, a
- * 12-byte record, odd sizes, more than the buffer); every byte must come
- * back, the reader must report the end exactly, and the writer must leave
- * direct mode after the tail.  A reader of a missing file fails with 4805.
+ * 12-byte record, odd sizes, more than the buffer), by a reader in direct
+ * mode, one in buffered mode (as on a file system that refuses O_DIRECT)
+ * and one that leaves direct mode mid-file; every byte must come back, the
+ * reader must report the end exactly, and the writer must leave direct
+ * mode after the tail.  A reader of a missing file fails with 4805.
  */
 #include <errno.h>
 #include <fcntl.h>
@@ -51,31 +53,44 @@ static void one_file(const char *dir, size_t len, int start_direct, uint64_t *se
         CHECK(direct == 0, "len %zu: the writer is still in direct mode", len);
         close(fd);
     }
-    for (size_t p = 0; p < sizeof pieces / sizeof pieces[0]; p++) {
-        tr_dread r;
-        size_t at = 0, got = 0;
-        gdt_status st = tr_dread_open(&r, path, TR_DREAD_BYTES, &err);
-        CHECK(st == GDT_OK, "%s", err.msg);
-        if (st != GDT_OK)
-            continue;
-        if (pieces[p] < 12 && len > 65536) {
+    /* mode 0: the reader as opened (direct where the file system allows
+     * it); 1: buffered from the start, as on a file system that refuses
+     * O_DIRECT; 2: leaving direct mode after the first piece */
+    for (int mode = 0; mode < 3; mode++) {
+        for (size_t p = 0; p < sizeof pieces / sizeof pieces[0]; p++) {
+            tr_dread r;
+            size_t at = 0, got = 0;
+            gdt_status st = tr_dread_open(&r, path, TR_DREAD_BYTES, &err);
+            CHECK(st == GDT_OK, "%s", err.msg);
+            if (st != GDT_OK)
+                continue;
+            if (pieces[p] < 12 && len > 65536) {
+                tr_dread_close(&r);
+                continue; /* byte by byte only on the small files */
+            }
+            if (mode == 0 && p == 0 && len == 0 && !r.direct)
+                printf("note: this file system refuses O_DIRECT; the reader is buffered\n");
+            if (mode == 1 && r.direct)
+                CHECK(gdt_dio_end(r.fd, &r.direct) == 0, "%s", "cannot leave direct mode");
+            do {
+                size_t want = pieces[p] < len + 1 - at ? pieces[p] : len + 1 - at;
+                st = tr_dread_bytes(&r, back + at, want, &got, &err);
+                at += got;
+                if (mode == 2 && r.direct)
+                    CHECK(gdt_dio_end(r.fd, &r.direct) == 0, "%s", "cannot leave direct mode");
+                if (got < want)
+                    break;
+            } while (st == GDT_OK && at <= len);
+            CHECK(st == GDT_OK, "%s", err.msg);
+            CHECK(at == len, "len %zu, mode %d, pieces of %zu: read %zu bytes", len, mode,
+                  pieces[p], at);
+            CHECK(memcmp(back, buf, len) == 0, "len %zu, mode %d, pieces of %zu: bytes differ",
+                  len, mode, pieces[p]);
+            st = tr_dread_bytes(&r, back, 1, &got, &err);
+            CHECK(st == GDT_OK && got == 0, "len %zu, mode %d: a byte after the end", len, mode);
+            CHECK(mode == 0 || !r.direct, "len %zu, mode %d: still direct", len, mode);
             tr_dread_close(&r);
-            continue; /* byte by byte only on the small files */
         }
-        do {
-            size_t want = pieces[p] < len + 1 - at ? pieces[p] : len + 1 - at;
-            st = tr_dread_bytes(&r, back + at, want, &got, &err);
-            at += got;
-            if (got < want)
-                break;
-        } while (st == GDT_OK && at <= len);
-        CHECK(st == GDT_OK, "%s", err.msg);
-        CHECK(at == len, "len %zu, pieces of %zu: read %zu bytes", len, pieces[p], at);
-        CHECK(memcmp(back, buf, len) == 0, "len %zu, pieces of %zu: bytes differ", len,
-              pieces[p]);
-        st = tr_dread_bytes(&r, back, 1, &got, &err);
-        CHECK(st == GDT_OK && got == 0, "len %zu: a byte after the end", len);
-        tr_dread_close(&r);
     }
     {
         struct stat sb;
