@@ -720,8 +720,50 @@ static gdt_status fake_fan(gdt_core *c, gcd_run *r, gdt_error *err)
     return gcd_link_all(c, r, 0, err);
 }
 
-/* Real triangles to the output mesh, compacted into d_aux2 and d_aux3
- * (dead after Phase 5). */
+/* Real triangles to the output mesh.  On a CPU device the compaction
+ * writes straight into out's arrays, wrapped as buffers; elsewhere (or
+ * when wrapping is refused) into d_aux2 and d_aux3, dead after Phase 5,
+ * which are read back. */
+static gdt_status compact_into(gdt_core *c, gcd_run *r, gdt_mesh *out, uint32_t nreal,
+                               gdt_error *err)
+{
+    size_t T = r->ntris, bytes = 12 * (size_t)nreal;
+    gcd_buf wt = {NULL, 0, "mesh triangles"}, wo = {NULL, 0, "mesh links"};
+    gdt_status st = GDT_OK;
+
+    if (!c->opts.copy_out) {
+        st = gdt_ocl_buf_wrap(c->ocl, out->tri, bytes, wt.what, &wt.b, err);
+        if (st == GDT_OK)
+            st = gdt_ocl_buf_wrap(c->ocl, out->opp, bytes, wo.what, &wo.b, err);
+    }
+    if (st == GDT_OK && (wt.b == NULL || wo.b == NULL)) {
+        gdt_ocl_buf_release(c->ocl, wt.b);
+        gdt_ocl_buf_release(c->ocl, wo.b);
+        wt.b = wo.b = NULL;
+        st = gcd_buf_need(c, &c->d_aux2, 12 * T, err);
+        if (st == GDT_OK)
+            st = gcd_buf_need(c, &c->d_aux3, 12 * T, err);
+    }
+    if (st == GDT_OK)
+        st = gcd_args(c->k.m_compact_tris, err, "bbububbb", &c->d_tri, &c->d_opp, (unsigned)T,
+                      &c->d_flags, nreal, &c->d_int2in, wt.b != NULL ? &wt : &c->d_aux2,
+                      wo.b != NULL ? &wo : &c->d_aux3);
+    if (st == GDT_OK)
+        st = gcd_launch(c, c->k.m_compact_tris, T, err);
+    if (st == GDT_OK && wt.b != NULL) {
+        st = gdt_ocl_buf_sync_host(c->ocl, wt.b, err);
+        if (st == GDT_OK)
+            st = gdt_ocl_buf_sync_host(c->ocl, wo.b, err);
+    } else if (st == GDT_OK) {
+        st = gdt_ocl_read(c->ocl, c->d_aux2.b, 0, out->tri, bytes, err);
+        if (st == GDT_OK)
+            st = gdt_ocl_read(c->ocl, c->d_aux3.b, 0, out->opp, bytes, err);
+    }
+    gdt_ocl_buf_release(c->ocl, wt.b);
+    gdt_ocl_buf_release(c->ocl, wo.b);
+    return st;
+}
+
 static gdt_status extract(gdt_core *c, gcd_run *r, gdt_mesh *out, gdt_error *err)
 {
     size_t T = r->ntris;
@@ -730,17 +772,14 @@ static gdt_status extract(gdt_core *c, gcd_run *r, gdt_mesh *out, gdt_error *err
 
     if (T > 0 &&
         (gcd_buf_need(c, &c->d_flags, 4 * T, err) != GDT_OK ||
-         gcd_buf_need(c, &c->d_aux2, 12 * T, err) != GDT_OK ||
-         gcd_buf_need(c, &c->d_aux3, 12 * T, err) != GDT_OK ||
          gcd_args(c->k.m_real_flags, err, "buib", &c->d_tri, (unsigned)T, (int)r->n,
                   &c->d_flags) != GDT_OK ||
          gcd_launch(c, c->k.m_real_flags, T, err) != GDT_OK ||
-         gcd_scan(c, &c->d_flags, T, &nreal, err) != GDT_OK ||
-         gcd_args(c->k.m_compact_tris, err, "bbububbb", &c->d_tri, &c->d_opp, (unsigned)T,
-                  &c->d_flags, nreal, &c->d_int2in, &c->d_aux2, &c->d_aux3) != GDT_OK ||
-         gcd_launch(c, c->k.m_compact_tris, T, err) != GDT_OK))
+         gcd_scan(c, &c->d_flags, T, &nreal, err) != GDT_OK))
         return err->status;
     st = gdt_mesh_reserve(out, r->n, nreal, out->ids != NULL, err);
+    if (st == GDT_OK && nreal > 0)
+        st = compact_into(c, r, out, nreal, err);
     if (st != GDT_OK)
         return st;
     /* out->pts had room for n (see gdt_core_triangulate) when it is the input */
@@ -751,9 +790,6 @@ static gdt_status extract(gdt_core *c, gcd_run *r, gdt_mesh *out, gdt_error *err
             out->ids[i] = (int64_t)i;
     out->nverts = r->n;
     out->ntris = nreal;
-    if (gdt_ocl_read(c->ocl, c->d_aux2.b, 0, out->tri, 12 * (size_t)nreal, err) != GDT_OK ||
-        gdt_ocl_read(c->ocl, c->d_aux3.b, 0, out->opp, 12 * (size_t)nreal, err) != GDT_OK)
-        return err->status;
     return GDT_OK;
 }
 

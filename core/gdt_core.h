@@ -88,6 +88,10 @@ typedef struct gdt_core_opts {
     int profile;             /* time every kernel (gdt_core_profile_dump) */
     int check_phases;        /* debug: download and verify the triangulation
                                 after phases 2, 3 and 4 (GDT_EINTERNAL 7690) */
+    int copy_out;            /* test: the result is compacted in device buffers
+                                and read back, as on devices with memory of
+                                their own (default on a CPU device: the
+                                kernels write the caller's mesh directly) */
 } gdt_core_opts;
 
 /* Per-phase figures of one gdt_core_triangulate call (cf. Fig. 11 of the

@@ -122,6 +122,15 @@ gdt_status gdt_ocl_buf_create(gdt_ocl *ocl, size_t bytes, const char *what, gdt_
                               gdt_error *err);
 void gdt_ocl_buf_release(gdt_ocl *ocl, gdt_ocl_buf *b);
 size_t gdt_ocl_buf_size(const gdt_ocl_buf *b);
+/* On a CPU device: a buffer over the caller's memory host[0..bytes)
+ * (CL_MEM_USE_HOST_PTR), so that kernels write where the caller reads
+ * without a copy; host stays the caller's (gdt_ocl_buf_release leaves it).
+ * *out = NULL (and GDT_OK) where that is not available: the caller then
+ * copies.  After kernels wrote it, gdt_ocl_buf_sync_host makes host hold
+ * the contents. */
+gdt_status gdt_ocl_buf_wrap(gdt_ocl *ocl, void *host, size_t bytes, const char *what,
+                            gdt_ocl_buf **out, gdt_error *err);
+gdt_status gdt_ocl_buf_sync_host(gdt_ocl *ocl, gdt_ocl_buf *b, gdt_error *err);
 /* Blocking transfers of bytes at offset. */
 gdt_status gdt_ocl_write(gdt_ocl *ocl, gdt_ocl_buf *b, size_t offset, const void *src,
                          size_t bytes, gdt_error *err);

@@ -45,6 +45,7 @@ struct gdt_ocl_program {
 struct gdt_ocl_buf {
     cl_mem mem;
     void *host; /* CPU devices: our own allocation behind the buffer */
+    int borrowed; /* host is the caller's (gdt_ocl_buf_wrap): not freed */
     size_t bytes;
     const char *what;
     gdt_ocl_buf *prev, *next;
@@ -762,6 +763,17 @@ gdt_status gdt_ocl_kernel_get(gdt_ocl_program *p, const char *name, gdt_ocl_kern
                          p->file, name, gdt_ocl_error_name(CL_INVALID_KERNEL_NAME));
 }
 
+/* Records a new buffer in the context's list (released with it). */
+static void buf_link(gdt_ocl *ocl, gdt_ocl_buf *b, size_t bytes, const char *what)
+{
+    b->bytes = bytes;
+    b->what = what;
+    b->next = ocl->bufs;
+    if (ocl->bufs)
+        ocl->bufs->prev = b;
+    ocl->bufs = b;
+}
+
 gdt_status gdt_ocl_buf_create(gdt_ocl *ocl, size_t bytes, const char *what, gdt_ocl_buf **out,
                               gdt_error *err)
 {
@@ -810,12 +822,7 @@ gdt_status gdt_ocl_buf_create(gdt_ocl *ocl, size_t bytes, const char *what, gdt_
                              "OpenCL clCreateBuffer(%s, %zu bytes) failed: %s (%d)", what, alloc,
                              gdt_ocl_error_name(rc), (int)rc);
     }
-    b->bytes = bytes;
-    b->what = what;
-    b->next = ocl->bufs;
-    if (ocl->bufs)
-        ocl->bufs->prev = b;
-    ocl->bufs = b;
+    buf_link(ocl, b, bytes, what);
     *out = b;
     return GDT_OK;
 }
@@ -831,8 +838,46 @@ void gdt_ocl_buf_release(gdt_ocl *ocl, gdt_ocl_buf *b)
     if (b->next)
         b->next->prev = b->prev;
     clReleaseMemObject(b->mem);
-    free(b->host);
+    if (!b->borrowed)
+        free(b->host);
     free(b);
+}
+
+gdt_status gdt_ocl_buf_wrap(gdt_ocl *ocl, void *host, size_t bytes, const char *what,
+                            gdt_ocl_buf **out, gdt_error *err)
+{
+    gdt_ocl_buf *b;
+    cl_int rc;
+
+    *out = NULL;
+    if (!ocl->is_cpu || host == NULL || bytes == 0)
+        return GDT_OK;
+    b = calloc(1, sizeof *b);
+    if (b == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    b->mem = clCreateBuffer(ocl->ctx, CL_MEM_READ_WRITE | CL_MEM_USE_HOST_PTR, bytes, host, &rc);
+    if (rc != CL_SUCCESS) {
+        free(b);
+        return GDT_OK; /* the caller copies instead */
+    }
+    b->host = host;
+    b->borrowed = 1;
+    buf_link(ocl, b, bytes, what);
+    *out = b;
+    return GDT_OK;
+}
+
+gdt_status gdt_ocl_buf_sync_host(gdt_ocl *ocl, gdt_ocl_buf *b, gdt_error *err)
+{
+    cl_int rc;
+    void *p = clEnqueueMapBuffer(ocl->queue, b->mem, CL_TRUE, CL_MAP_READ, 0, b->bytes, 0, NULL,
+                                 NULL, &rc);
+    if (rc != CL_SUCCESS)
+        return cl_fail(err, "clEnqueueMapBuffer", b->what, rc);
+    rc = clEnqueueUnmapMemObject(ocl->queue, b->mem, p, 0, NULL, NULL);
+    if (rc == CL_SUCCESS)
+        rc = clFinish(ocl->queue);
+    return rc == CL_SUCCESS ? GDT_OK : cl_fail(err, "clEnqueueUnmapMemObject", b->what, rc);
 }
 
 size_t gdt_ocl_buf_size(const gdt_ocl_buf *b) { return b->bytes; }
