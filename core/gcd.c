@@ -530,17 +530,16 @@ static gdt_status setup_run(gdt_core *c, gcd_run *r, const gdt_ipt *pts, size_t 
     }
     if (n == 0)
         return GDT_OK;
-    tmp = malloc(2 * n * sizeof *tmp);
-    if (tmp == NULL)
-        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    /* the points as int32 pairs, written where the buffer is mapped (its
+     * own memory on a CPU device: no staging copy) */
+    if (gcd_buf_need(c, GCD_PTS_IN(c), 8 * n, err) != GDT_OK ||
+        gdt_ocl_map_write(c->ocl, GCD_PTS_IN(c)->b, 8 * n, (void **)&tmp, err) != GDT_OK)
+        return err->status;
     for (size_t i = 0; i < n; i++) {
         tmp[2 * i] = (int32_t)pts[i].x;
         tmp[2 * i + 1] = (int32_t)pts[i].y;
     }
-    if (gcd_buf_need(c, GCD_PTS_IN(c), 8 * n, err) == GDT_OK)
-        gdt_ocl_write(c->ocl, GCD_PTS_IN(c)->b, 0, tmp, 8 * n, err);
-    free(tmp);
-    return err->status == GDT_OK ? GDT_OK : err->status;
+    return gdt_ocl_unmap(c->ocl, GCD_PTS_IN(c)->b, tmp, err);
 }
 
 /* Reads the current triangle list (live and dead slots) and positions into

@@ -131,6 +131,12 @@ size_t gdt_ocl_buf_size(const gdt_ocl_buf *b);
 gdt_status gdt_ocl_buf_wrap(gdt_ocl *ocl, void *host, size_t bytes, const char *what,
                             gdt_ocl_buf **out, gdt_error *err);
 gdt_status gdt_ocl_buf_sync_host(gdt_ocl *ocl, gdt_ocl_buf *b, gdt_error *err);
+/* Maps the first bytes of b for writing (their old contents are lost);
+ * the caller fills *host, then gdt_ocl_unmap hands them to the device.  On
+ * a CPU device *host is the buffer's own memory: no copy. */
+gdt_status gdt_ocl_map_write(gdt_ocl *ocl, gdt_ocl_buf *b, size_t bytes, void **host,
+                             gdt_error *err);
+gdt_status gdt_ocl_unmap(gdt_ocl *ocl, gdt_ocl_buf *b, void *host, gdt_error *err);
 /* Blocking transfers of bytes at offset. */
 gdt_status gdt_ocl_write(gdt_ocl *ocl, gdt_ocl_buf *b, size_t offset, const void *src,
                          size_t bytes, gdt_error *err);

@@ -892,6 +892,30 @@ static gdt_status check_range(const gdt_ocl_buf *b, size_t off, size_t bytes, co
     return GDT_OK;
 }
 
+gdt_status gdt_ocl_map_write(gdt_ocl *ocl, gdt_ocl_buf *b, size_t bytes, void **host,
+                             gdt_error *err)
+{
+    cl_int rc;
+    *host = NULL;
+    if (check_range(b, 0, bytes, "map", err) != GDT_OK)
+        return err->status;
+    *host = clEnqueueMapBuffer(ocl->queue, b->mem, CL_TRUE, CL_MAP_WRITE_INVALIDATE_REGION, 0,
+                               bytes, 0, NULL, NULL, &rc);
+    if (rc != CL_SUCCESS) {
+        *host = NULL;
+        return cl_fail(err, "clEnqueueMapBuffer", b->what, rc);
+    }
+    return GDT_OK;
+}
+
+gdt_status gdt_ocl_unmap(gdt_ocl *ocl, gdt_ocl_buf *b, void *host, gdt_error *err)
+{
+    cl_int rc = clEnqueueUnmapMemObject(ocl->queue, b->mem, host, 0, NULL, NULL);
+    if (rc == CL_SUCCESS)
+        rc = clFinish(ocl->queue);
+    return rc == CL_SUCCESS ? GDT_OK : cl_fail(err, "clEnqueueUnmapMemObject", b->what, rc);
+}
+
 gdt_status gdt_ocl_write(gdt_ocl *ocl, gdt_ocl_buf *b, size_t offset, const void *src,
                          size_t bytes, gdt_error *err)
 {
