@@ -34,7 +34,7 @@
 typedef struct tr_summary {
     uint64_t points_read, vertices, tiles, faces, certified, merge_faces;
     uint64_t max_tile_points, max_halo_points, gcd_tiles, insert_tiles;
-    double t_pass1, t_pass2, t_tiles, t_core, t_certify, t_merge, t_write, t_check, t_total;
+    double t_pass1, t_pass2, t_tiles, t_core, t_certify, t_post, t_merge, t_write, t_check, t_total;
     gdt_cert_stats cert;
     gdt_merge_stats merge;
     int checked;
@@ -66,7 +66,7 @@ typedef struct tr_ctx tr_ctx;
  * pending record) runs on its own thread while the main thread loads the
  * next tile and runs the core on it.  While it runs it alone touches cert,
  * count, fbuf, seam, seam_total, pending/npending/nsynced, t_flushed and s.cert,
- * s.certified, s.t_certify; the main thread reads them only after
+ * s.certified, s.t_certify, s.t_post; the main thread reads them only after
  * post_join. */
 typedef struct tr_post {
     pthread_t tid;
@@ -397,7 +397,7 @@ static gdt_status sync_tiles(tr_ctx *c, gdt_error *err)
  * .tri file and its pending record.  The slot's triangle array is the face
  * sort's scratch: the slot holds no mesh afterwards (the next core run
  * into it refills it). */
-static gdt_status post_tile(tr_ctx *c, tr_slot *sl, gdt_error *err)
+static gdt_status post_tile_run(tr_ctx *c, tr_slot *sl, gdt_error *err)
 {
     const gdt_tile_plan *pl = c->plan;
     const gdt_tile_desc *d = &sl->d;
@@ -426,6 +426,7 @@ static gdt_status post_tile(tr_ctx *c, tr_slot *sl, gdt_error *err)
     if (reserve((void **)&c->cert, &c->cap_cert, m->ntris + 1, 1) != 0)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     st = gdt_certify_tile(c->certifier, m, sl->lh, sl->nh, &r, c->cert, &c->s.cert, err);
+    c->s.t_certify += gdt_now() - t0;
     if (st != GDT_OK)
         return st;
     nf = 0;
@@ -447,7 +448,6 @@ static gdt_status post_tile(tr_ctx *c, tr_slot *sl, gdt_error *err)
     if (st != GDT_OK)
         return st;
     c->s.certified += nf;
-    c->s.t_certify += gdt_now() - t0;
 
     p = c->fbuf;
     memset(p, 0, TR_HEADER);
@@ -486,6 +486,16 @@ static gdt_status post_tile(tr_ctx *c, tr_slot *sl, gdt_error *err)
     if (c->npending - c->nsynced >= 256 || gdt_now() - c->t_flushed > 1.0)
         return sync_tiles(c, err);
     return GDT_OK;
+}
+
+/* post_tile_run, timed (s.t_post: the whole post stage, of which
+ * s.t_certify is the certification). */
+static gdt_status post_tile(tr_ctx *c, tr_slot *sl, gdt_error *err)
+{
+    double t0 = gdt_now();
+    gdt_status st = post_tile_run(c, sl, err);
+    c->s.t_post += gdt_now() - t0;
+    return st;
 }
 
 static void *reclaim_main(void *arg)
@@ -942,6 +952,7 @@ static gdt_status write_summary(const tr_ctx *c, gdt_error *err)
     gdt_json_double(&j, "tiles", s->t_tiles);
     gdt_json_double(&j, "core", s->t_core);
     gdt_json_double(&j, "certify", s->t_certify);
+    gdt_json_double(&j, "post", s->t_post);
     gdt_json_double(&j, "merge", s->t_merge);
     gdt_json_double(&j, "write", s->t_write);
     if (s->checked)
@@ -1516,9 +1527,11 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
                 c.s.merge.seam_vertices, c.s.device, c.s.t_total,
                 c.s.resumed ? ", resumed" : "", c.s.checked ? ", checked exactly" : "");
     gdt_log_note(&c.log,
-                 "times: pass 1 %.2f s, pass 2 %.2f s, tiles %.2f s (core %.2f, certify %.2f), "
+                 "times: pass 1 %.2f s, pass 2 %.2f s, tiles %.2f s (core %.2f, post %.2f, of which "
+                 "certify %.2f), "
                  "merge %.2f s, write %.2f s; tiles reused %" PRIu64 ", computed %" PRIu64,
-                 c.s.t_pass1, c.s.t_pass2, c.s.t_tiles, c.s.t_core, c.s.t_certify, c.s.t_merge,
+                 c.s.t_pass1, c.s.t_pass2, c.s.t_tiles, c.s.t_core, c.s.t_post, c.s.t_certify,
+                 c.s.t_merge,
                  c.s.t_write, c.s.tiles_reused, c.s.tiles_redone);
     if (!opts->keep_job) {
         gdt_tiler_destroy(c.tiler);

@@ -48,6 +48,10 @@ def check_summary(summary, mesh, plan=None, halo=None):
     for k in tu.TIME_KEYS:
         assert isinstance(times[k], (int, float)) and times[k] >= 0.0, (k, times[k])
     assert times["total"] >= max(times[k] for k in tu.TIME_KEYS if k != "total") - 1e-6
+    # the post stage (one tile at a time, inside the tile stage) holds the certification
+    for k in ("core", "post", "certify"):
+        assert isinstance(times[k], (int, float)) and times[k] >= 0.0, (k, times)
+    assert times["certify"] <= times["post"] + 1e-6 and times["post"] <= times["tiles"] + 1e-6, times
     assert isinstance(summary["peak_rss_bytes"], int) and summary["peak_rss_bytes"] > 0
     assert isinstance(summary["device"], str) and summary["device"]
     assert tu.tile_count(summary) >= 1
