@@ -15,8 +15,8 @@ LAS, the tiled pipeline, writing the PLY); the best run counts.  The peak
 RSS is the child's own ru_maxrss (os.wait4), the largest over the repeats;
 its CPU time (user + system, all threads) is printed beside the wall time.
 Mpts/s is input records per second of the best wall time.  The per-stage
-times, the tile count and the certified fraction come from the run's --json
-summary (best run).  The LAS is in the page cache when the timing starts.
+times (core and post are parts of tiles), the tile count and the certified
+fraction come from the run's --json summary (best run).  The LAS is in the page cache when the timing starts.
 
 At the CGAL size (default: the smallest size), the distinct points of the
 same cloud, duplicates merged and in input order, exactly as bench_core.py
@@ -60,7 +60,9 @@ import time
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 GEN = ROOT / "scripts" / "gen_cloud.py"
 VALIDATE = ROOT / "scripts" / "validate_mesh.py"
-STAGES = ("pass1", "pass2", "tiles", "merge", "write", "total")
+# "core" (the OpenCL triangulation) and "post" (the previous tile's certification, seam,
+# face sort and tile file, beside it) are both inside "tiles"
+STAGES = ("pass1", "pass2", "tiles", "core", "post", "merge", "write", "total")
 # Disk use per input record, for the free-space warning: LAS point format 3
 # (34 bytes), the PLY (about 2 faces per vertex) and the job folder's spills.
 LAS_BYTES_PER_POINT = 34
