@@ -125,15 +125,17 @@ size_t gdt_ocl_buf_size(const gdt_ocl_buf *b);
 /* On a CPU device: a buffer over the caller's memory host[0..bytes)
  * (CL_MEM_USE_HOST_PTR), so that kernels write where the caller reads
  * without a copy; host stays the caller's (gdt_ocl_buf_release leaves it).
- * *out = NULL (and GDT_OK) where that is not available: the caller then
- * copies.  After kernels wrote it, gdt_ocl_buf_sync_host makes host hold
- * the contents. */
+ * *out = NULL (and GDT_OK) on other devices or when the runtime refuses:
+ * the caller then copies.  After kernels wrote it, gdt_ocl_buf_sync_host
+ * (a blocking map and unmap) makes host hold the contents, also on a
+ * runtime that keeps a copy of its own behind such a buffer. */
 gdt_status gdt_ocl_buf_wrap(gdt_ocl *ocl, void *host, size_t bytes, const char *what,
                             gdt_ocl_buf **out, gdt_error *err);
 gdt_status gdt_ocl_buf_sync_host(gdt_ocl *ocl, gdt_ocl_buf *b, gdt_error *err);
 /* Maps the first bytes of b for writing (their old contents are lost);
  * the caller fills *host, then gdt_ocl_unmap hands them to the device.  On
- * a CPU device *host is the buffer's own memory: no copy. */
+ * a CPU device the runtime normally hands out the buffer's own memory (no
+ * copy; PoCL does); elsewhere it stages and copies at the unmap. */
 gdt_status gdt_ocl_map_write(gdt_ocl *ocl, gdt_ocl_buf *b, size_t bytes, void **host,
                              gdt_error *err);
 gdt_status gdt_ocl_unmap(gdt_ocl *ocl, gdt_ocl_buf *b, void *host, gdt_error *err);
