@@ -798,7 +798,7 @@ gdt_status gdt_ocl_buf_create(gdt_ocl *ocl, size_t bytes, const char *what, gdt_
          * defrag=madvise), and on virtual machines that hand free memory
          * back to the host it cost far more: touching 1 GiB took 0.55-2.3 s
          * on huge pages against 0.41-0.72 s on 4 KiB pages, and the
-         * 10M-point run spent 1.3 s more system time. */
+         * 10M-point run spent 1.3-1.9 s more system time. */
         size_t rounded = (alloc + OCL_HUGE_ALIGN - 1) / OCL_HUGE_ALIGN * OCL_HUGE_ALIGN;
         b->host = aligned_alloc(OCL_HUGE_ALIGN, rounded);
         if (b->host != NULL) {
