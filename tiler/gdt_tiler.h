@@ -132,6 +132,9 @@ typedef struct gdt_tiler_opts {
     void *progress_ctx;
     int threads;           /* host threads for the --dup merge (0 or 1: one);
                               the files do not depend on it */
+    uint64_t file_id[2];   /* the job's id: seeds the checksums of the .pts and
+                              .edge files (gdt_job_file_seed), so that a file of
+                              another job never verifies */
     /* Test knobs: none of them changes a byte of the output. */
     int test_tiny;         /* tiny buffers, 4 descriptors, out-of-core merge from 64
                               records: forces every spill and merge path */
@@ -230,13 +233,29 @@ const gdt_tile_plan *gdt_tiler_get_plan(const gdt_tiler *t);
  *   passes), GDT_EUSAGE 2505, GDT_EIO 4502..4505, GDT_EINTERNAL 7501/7502. */
 gdt_status gdt_tiler_pass2(gdt_tiler *t, gdt_error *err);
 
+/* The size and checksum (gdt_hash64_wide over the whole file, seeded with
+ * gdt_job_file_seed(opts.file_id, k, kind)) of one pass-2 file. */
+typedef struct gdt_tiler_file_sum {
+    uint64_t size, sum;
+} gdt_tiler_file_sum;
+
+/* After pass 2 or an adoption: the records of tile k's .pts file (out[0])
+ * and .edge file (out[1]), computed while pass 2 wrote them.
+ * returns: GDT_EUSAGE 2505. */
+gdt_status gdt_tiler_file_sums(const gdt_tiler *t, uint64_t k, gdt_tiler_file_sum out[2],
+                               gdt_error *err);
+
 /* Resume: after pass 1, takes the .pts and .edge files that a completed
- * pass 2 of the same job left, instead of running pass 2 again.  The caller
- * vouches (from its job record) that pass 2 completed with the same inputs
- * and options; only the files' presence and sizes are checked here.
+ * pass 2 of the same job left, instead of running pass 2 again.  expect
+ * holds 2 records per tile (.pts, .edge, as gdt_tiler_file_sums gave them);
+ * every file is read once and must match its size and checksum, and its
+ * record counts must fit the pass-1 count of its tile.  Nothing changes
+ * unless every file verifies.
  * returns: GDT_EUSAGE 2505 (out of order, no job directory), GDT_EJOB 6501
- *   (a tile file is missing or its size is impossible). */
-gdt_status gdt_tiler_adopt_pass2(gdt_tiler *t, gdt_error *err);
+ *   (a tile file is missing or damaged, or another job's: the message names
+ *   it and says why), GDT_EINTERNAL 7001. */
+gdt_status gdt_tiler_adopt_pass2(gdt_tiler *t, const gdt_tiler_file_sum *expect,
+                                 gdt_error *err);
 
 /* Number of non-empty tiles (0 before pass 1). */
 uint64_t gdt_tiler_tile_count(const gdt_tiler *t);

@@ -455,6 +455,9 @@ static gdt_status merge_tile(gdt_tiler *t, uint64_t k, scratch *scr, size_t cap,
         st = tl_wfile_init(&we, edge_tmp, edge, t->sz.part_recs, !t->opts.test_nosync, err);
     if (st != GDT_OK)
         goto fail;
+    /* the checksums the journal records, computed as the bytes go out */
+    tl_wfile_hash(&wp, gdt_job_file_seed(t->opts.file_id, k, GDT_JOB_FILE_PTS));
+    tl_wfile_hash(&we, gdt_job_file_seed(t->opts.file_id, k, GDT_JOB_FILE_EDGE));
     out.pts = &wp;
     out.edge = &we;
     out.x0 = tl->i * t->plan.span;
@@ -469,7 +472,11 @@ static gdt_status merge_tile(gdt_tiler *t, uint64_t k, scratch *scr, size_t cap,
         goto fail;
     tl->points = wp.nrec;
     tl->edge = we.nrec;
-    st = tl_wfile_commit(&wp, err);
+    st = tl_wfile_sum(&wp, &tl->sum[0], err);
+    if (st == GDT_OK)
+        st = tl_wfile_sum(&we, &tl->sum[1], err);
+    if (st == GDT_OK)
+        st = tl_wfile_commit(&wp, err);
     if (st == GDT_OK)
         st = tl_wfile_commit(&we, err);
     if (st != GDT_OK)

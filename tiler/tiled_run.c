@@ -114,6 +114,8 @@ struct tr_ctx {
     gdt_seam seam;      /* one tile's seam (tile stage), one row's (merge) */
     uint64_t seam_total; /* seam vertices of all tiles (merge progress) */
     gdt_job *jobdb;
+    uint64_t job_id[2];   /* seeds every checksum the journal records */
+    int lock_fd;          /* the job directory's lock (gdt_job_lock), or -1 */
     tr_pending *pending;  /* finished tiles not yet recorded */
     size_t npending, cap_pending;
     size_t nsynced;       /* pending[0, nsynced) are on disk, to be recorded */
@@ -157,10 +159,12 @@ static int reserve_blocks(unsigned char **p, size_t *cap, size_t need)
     return 0;
 }
 
-static gdt_status make_dir(const char *path, gdt_error *err)
+/* *created = 1 when this call made the directory. */
+static gdt_status make_dir(const char *path, int *created, gdt_error *err)
 {
     struct stat sb;
-    if (mkdir(path, 0777) == 0)
+    *created = mkdir(path, 0777) == 0;
+    if (*created)
         return GDT_OK;
     if (errno == EEXIST && stat(path, &sb) == 0 && S_ISDIR(sb.st_mode))
         return GDT_OK;
@@ -479,7 +483,8 @@ static gdt_status post_tile_run(tr_ctx *c, tr_slot *sl, gdt_error *err)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     c->pending[c->npending].k = k;
     c->pending[c->npending].size = len;
-    c->pending[c->npending].checksum = gdt_hash64_wide(c->fbuf, len, k);
+    c->pending[c->npending].checksum =
+        gdt_hash64_wide(c->fbuf, len, gdt_job_file_seed(c->job_id, k, GDT_JOB_FILE_TRI));
     c->npending++;
     /* the wait for the disk is taken here, beside the next tile's core,
      * not on the thread that drives the core */
@@ -615,8 +620,8 @@ static gdt_status flush_pending(tr_ctx *c, gdt_error *err)
 
 /* A tile recorded as finished: its .tri file is reused when its size and
  * checksum match the record (the merge reads its seam from there, as for a
- * tile computed now).  *ok = 0: the file is missing or damaged (the tile
- * must be redone). */
+ * tile computed now).  *ok = 0: the file is missing, damaged or another
+ * job's; a warning names it and the reason, and the tile is redone. */
 static gdt_status reuse_tile(tr_ctx *c, uint64_t k, uint64_t size, uint64_t sum, int *ok,
                              gdt_error *err)
 {
@@ -624,6 +629,7 @@ static gdt_status reuse_tile(tr_ctx *c, uint64_t k, uint64_t size, uint64_t sum,
     char *path = NULL;
     FILE *f = NULL;
     const unsigned char *p;
+    const char *why = NULL;
     uint64_t nf, nv, ne;
     gdt_status st = gdt_tiler_tile_info(c->tiler, k, &d, err);
 
@@ -632,29 +638,37 @@ static gdt_status reuse_tile(tr_ctx *c, uint64_t k, uint64_t size, uint64_t sum,
         st = tr_tile_path(c->tiles_dir, &d, "tri", &path, err);
     if (st != GDT_OK)
         return st;
-    if (size < TR_HEADER || size > SIZE_MAX ||
+    if (size >= TR_HEADER && size <= SIZE_MAX &&
         reserve_blocks(&c->fbuf, &c->cap_fbuf, (size_t)size) != 0) {
         free(path);
-        return size < TR_HEADER ? GDT_OK
-                                : gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     }
-    f = fopen(path, "rb");
-    free(path);
-    if (f == NULL)
-        return GDT_OK;
-    if (fread(c->fbuf, 1, (size_t)size, f) != size || fgetc(f) != EOF ||
-        gdt_hash64_wide(c->fbuf, (size_t)size, k) != sum) {
+    if (size < TR_HEADER || size > SIZE_MAX)
+        why = "its record is impossible";
+    else if ((f = fopen(path, "rb")) == NULL)
+        why = strerror(errno);
+    else if (fread(c->fbuf, 1, (size_t)size, f) != size || fgetc(f) != EOF)
+        why = "its size differs from the one recorded";
+    else if (gdt_hash64_wide(c->fbuf, (size_t)size,
+                             gdt_job_file_seed(c->job_id, k, GDT_JOB_FILE_TRI)) != sum)
+        why = "damaged or not this job's (its checksum differs from the one recorded)";
+    if (f != NULL)
         fclose(f);
+    p = c->fbuf;
+    if (why == NULL) {
+        nf = tr_get_u64(p + 24);
+        nv = tr_get_u64(p + 32);
+        ne = tr_get_u64(p + 40);
+        if (memcmp(p, TR_MAGIC, 8) != 0 || tr_get_u64(p + 8) != c->base[k] ||
+            tr_get_u64(p + 16) != d.points || TR_HEADER + 12 * nf + 24 * nv + 16 * ne != size)
+            why = "its header does not fit the tile";
+    }
+    if (why != NULL) {
+        gdt_log_warn(&c->log, 6803, "%s: redoing the tile: %s", path, why);
+        free(path);
         return GDT_OK;
     }
-    fclose(f);
-    p = c->fbuf;
-    nf = tr_get_u64(p + 24);
-    nv = tr_get_u64(p + 32);
-    ne = tr_get_u64(p + 40);
-    if (memcmp(p, TR_MAGIC, 8) != 0 || tr_get_u64(p + 8) != c->base[k] ||
-        tr_get_u64(p + 16) != d.points || TR_HEADER + 12 * nf + 24 * nv + 16 * ne != size)
-        return GDT_OK;
+    free(path);
     c->seam_total += nv;
     c->s.certified += nf;
     *ok = 1;
@@ -1023,13 +1037,13 @@ static void text_abs(tr_text *t, const char *key, const char *path)
         text_add(t, "%s=%s/%s\n", key, cwd, path);
 }
 
-/* The options that fix the output, one "key=value" per line. */
+/* The options and inputs that fix the output, one "key=value" per line
+ * (not the output path: finished work serves any -o). */
 static gdt_status build_params(const gdt_options *o, char **out, gdt_error *err)
 {
     tr_text t = {NULL, 0, 0, 0};
     text_add(&t, "tile=%d\ncell=%.17g\nhalo=%ld\ndup=%d\nquantum=%.17g\n", o->tile, o->cell,
              o->halo, (int)o->dup, o->quantum);
-    text_abs(&t, "output", o->output);
     text_add(&t, "inputs=%zu\n", o->ninputs);
     for (size_t i = 0; i < o->ninputs; i++) {
         if (strchr(o->inputs[i], '\n') != NULL) {
@@ -1108,10 +1122,13 @@ static void first_difference(const char *a, const char *b, char *msg, size_t len
 }
 
 /* Removes the files a job directory holds (job.db and its WAL files,
- * index.vdb, merge.faces, tiles/ with our tile files), then the directories
- * if empty.
+ * index.vdb, merge.faces, tiles/ with our tile files) and tiles/ if empty.
+ * With final (the end of the run that holds the lock), the lock file goes
+ * last, then the job directory itself if it is empty and own_dir (a run of
+ * this job created it); otherwise (--restart) the lock file and the
+ * directory stay.
  * Never removes anything else: --job may name a directory the user owns. */
-static void remove_job_files(const char *job)
+static void remove_job_files(const char *job, int final, int own_dir)
 {
     static const char *const names[] = {"job.db", "job.db-wal", "job.db-shm", "job.db-journal",
                                         "index.vdb", "index.vdb.tmp", MF_NAME,
@@ -1139,7 +1156,33 @@ static void remove_job_files(const char *job)
         rmdir(tiles);
         free(tiles);
     }
-    rmdir(job);
+    if (!final)
+        return;
+    {
+        char *lock = tr_path_join(job, "lock");
+        if (lock != NULL)
+            unlink(lock);
+        free(lock);
+    }
+    if (own_dir)
+        rmdir(job);
+}
+
+/* 1 when the journal in job says a run of that job created the directory
+ * (meta "dir" = "made"); 0 when not, or when it cannot be read. */
+static int job_dir_owned(const char *job)
+{
+    gdt_job *j = NULL;
+    char *v = NULL;
+    gdt_error e;
+    int own;
+    gdt_error_clear(&e);
+    if (gdt_job_open(&j, job, 0, NULL, &e) == GDT_OK)
+        gdt_job_get_meta(j, "dir", &v, &e);
+    gdt_job_close(j);
+    own = v != NULL && strcmp(v, "made") == 0;
+    free(v);
+    return own;
 }
 
 /* The tiler's progress hook: shows progress and carries the stop request. */
@@ -1155,21 +1198,36 @@ static int tiler_progress(void *ctx, int stage, uint64_t done, uint64_t total)
 }
 
 /* Opens or creates the journal and checks that it belongs to this command.
+ * A journal without finished work (gdt_job_has_work) is taken over: its
+ * params and fingerprint are rewritten.  The output path is recorded for
+ * --resume but not compared.  own_dir: the directory was made by this run or
+ * (--restart) by an earlier run of the job; recorded in a new journal.
  * returns GDT_EJOB 6903 (options differ), 6904 (an input changed). */
-static gdt_status open_journal(tr_ctx *c, gdt_error *err)
+static gdt_status open_journal(tr_ctx *c, int own_dir, gdt_error *err)
 {
     char *params = NULL, *fp = NULL, *old_params = NULL, *old_fp = NULL;
     char diff[512];
-    int is_new = 0;
+    int is_new = 0, has_work = 0;
+    tr_text out = {NULL, 0, 0, 0};
     gdt_status st = build_params(c->opts, &params, err);
 
     if (st == GDT_OK)
         st = build_fingerprint(c->opts, &fp, err);
+    if (st == GDT_OK) {
+        text_abs(&out, "output", c->opts->output);
+        if (out.failed)
+            st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    }
     if (st == GDT_OK)
         st = gdt_job_open(&c->jobdb, c->job, 1, &is_new, err);
-    if (st == GDT_OK && !is_new)
+    if (st == GDT_OK) {
+        gdt_job_id(c->jobdb, c->job_id);
+        if (!is_new)
+            st = gdt_job_has_work(c->jobdb, &has_work, err);
+    }
+    if (st == GDT_OK && has_work)
         st = gdt_job_get_meta(c->jobdb, "params", &old_params, err);
-    if (st == GDT_OK && !is_new)
+    if (st == GDT_OK && has_work)
         st = gdt_job_get_meta(c->jobdb, "fingerprint", &old_fp, err);
     if (st != GDT_OK)
         goto done;
@@ -1198,18 +1256,87 @@ static gdt_status open_journal(tr_ctx *c, gdt_error *err)
                            c->job, diff);
         goto done;
     }
-    if (old_params == NULL || old_fp == NULL) {
+    st = gdt_job_begin(c->jobdb, err);
+    if (st == GDT_OK && (old_params == NULL || old_fp == NULL)) {
+        /* a new job, or one that finished nothing: this command's now */
+        if (!is_new)
+            gdt_log_note(&c->log, "%s: taking over a job without finished work", c->job);
         st = gdt_job_set_meta(c->jobdb, "fingerprint", fp, err);
         if (st == GDT_OK)
             st = gdt_job_set_meta(c->jobdb, "params", params, err);
-    } else {
+        if (st == GDT_OK && is_new)
+            st = gdt_job_set_meta(c->jobdb, "dir", own_dir ? "made" : "given", err);
+    } else if (st == GDT_OK) {
         c->s.resumed = 1;
     }
+    if (st == GDT_OK)
+        st = gdt_job_set_meta(c->jobdb, "output", out.s + strlen("output="), err);
+    if (st == GDT_OK)
+        st = gdt_job_commit(c->jobdb, err);
 done:
+    free(out.s);
     free(params);
     free(fp);
     free(old_params);
     free(old_fp);
+    return st;
+}
+
+/* Records pass 2 as done together with the size and checksum of every
+ * .pts and .edge file it wrote (one transaction). */
+static gdt_status record_pass2(tr_ctx *c, gdt_error *err)
+{
+    uint64_t ntiles = gdt_tiler_tile_count(c->tiler);
+    gdt_status st = gdt_job_begin(c->jobdb, err);
+    for (uint64_t k = 0; st == GDT_OK && k < ntiles; k++) {
+        gdt_tiler_file_sum fs[2];
+        st = gdt_tiler_file_sums(c->tiler, k, fs, err);
+        if (st == GDT_OK)
+            st = gdt_job_put_file(c->jobdb, k, GDT_JOB_FILE_PTS, fs[0].size, fs[0].sum, err);
+        if (st == GDT_OK)
+            st = gdt_job_put_file(c->jobdb, k, GDT_JOB_FILE_EDGE, fs[1].size, fs[1].sum, err);
+    }
+    if (st == GDT_OK)
+        st = gdt_job_set_stage(c->jobdb, "pass2", 1, err);
+    if (st == GDT_OK)
+        st = gdt_job_commit(c->jobdb, err);
+    return st;
+}
+
+/* Pass 2 recorded as done: its files are adopted if every one matches its
+ * record (*ok = 1); otherwise a warning names the first that does not and
+ * why, and pass 2 is redone (*ok = 0). */
+static gdt_status adopt_pass2(tr_ctx *c, int *ok, gdt_error *err)
+{
+    uint64_t ntiles = gdt_tiler_tile_count(c->tiler);
+    gdt_tiler_file_sum *fs = malloc((2 * ntiles + 1) * sizeof *fs);
+    gdt_error e2;
+    gdt_status st = GDT_OK, ad = GDT_OK;
+
+    *ok = 0;
+    if (fs == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    gdt_error_clear(&e2);
+    for (uint64_t k = 0; st == GDT_OK && ad == GDT_OK && k < 2 * ntiles; k++) {
+        int found = 0;
+        st = gdt_job_get_file(c->jobdb, k / 2, k % 2 ? GDT_JOB_FILE_EDGE : GDT_JOB_FILE_PTS,
+                              &found, &fs[k].size, &fs[k].sum, err);
+        if (st == GDT_OK && !found)
+            ad = gdt_error_set(&e2, GDT_EJOB, 6501,
+                               "the job records no %s file of tile %" PRIu64,
+                               k % 2 ? ".edge" : ".pts", k / 2);
+    }
+    if (st == GDT_OK && ad == GDT_OK)
+        ad = gdt_tiler_adopt_pass2(c->tiler, fs, &e2);
+    free(fs);
+    if (st != GDT_OK)
+        return st;
+    if (ad == GDT_OK)
+        *ok = 1;
+    else if (ad == GDT_EJOB)
+        gdt_log_warn(&c->log, 6502, "redoing pass 2: %s", e2.msg);
+    else
+        st = gdt_error_set(err, ad, e2.code, "%s", e2.msg);
     return st;
 }
 
@@ -1274,13 +1401,14 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     gdt_tiler_opts to;
     core_start cstart;
     uint64_t ntiles, hull;
-    int done = 0;
+    int done = 0, created = 0;
     double t_start = gdt_now(), t0;
     gdt_status st;
 
     memset(&c, 0, sizeof c);
     memset(&cstart, 0, sizeof cstart);
     c.opts = opts;
+    c.lock_fd = -1;
     c.t_flushed = gdt_now();
     gdt_mesh_init(&c.slot[0].mesh);
     gdt_mesh_init(&c.slot[1].mesh);
@@ -1300,11 +1428,17 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     st = gdt_certifier_create(&c.certifier, host_threads(opts->threads), err);
     if (st != GDT_OK)
         goto fail;
-    if (opts->restart)
-        remove_job_files(c.job);
-    st = make_dir(c.job, err);
+    /* one run per job: the lock comes before anything in the directory is
+     * read or removed (--restart must not remove a running job's files) */
+    st = make_dir(c.job, &created, err);
     if (st == GDT_OK)
-        st = open_journal(&c, err);
+        st = gdt_job_lock(c.job, &c.lock_fd, err);
+    if (st == GDT_OK && opts->restart) {
+        created |= job_dir_owned(c.job);
+        remove_job_files(c.job, 0, 0);
+    }
+    if (st == GDT_OK)
+        st = open_journal(&c, created, err);
     if (st != GDT_OK)
         goto fail;
 
@@ -1322,6 +1456,8 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     to.dup = opts->dup;
     to.threads = host_threads(opts->threads);
     to.job_dir = c.job;
+    to.file_id[0] = c.job_id[0];
+    to.file_id[1] = c.job_id[1];
     to.log = &c.log;
     to.progress = tiler_progress;
     to.progress_ctx = &c;
@@ -1345,14 +1481,10 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     if (st != GDT_OK)
         goto fail;
     if (done) {
-        gdt_error e2;
-        gdt_error_clear(&e2);
-        if (gdt_tiler_adopt_pass2(c.tiler, &e2) == GDT_OK) {
-            c.s.pass2_reused = 1;
-        } else {
-            gdt_log_note(&c.log, "redoing pass 2: %s", e2.msg);
-            done = 0;
-        }
+        st = adopt_pass2(&c, &done, err);
+        if (st != GDT_OK)
+            goto fail;
+        c.s.pass2_reused = done;
     }
     if (!done) {
         st = gdt_job_set_stage(c.jobdb, "pass2", 0, err);
@@ -1363,7 +1495,7 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
         if (st == GDT_EINTERRUPTED)
             st = tr_interrupted(c.job, "pass 2", err);
         if (st == GDT_OK)
-            st = gdt_job_set_stage(c.jobdb, "pass2", 1, err);
+            st = record_pass2(&c, err);
         if (st != GDT_OK)
             goto fail;
     }
@@ -1534,11 +1666,16 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
                  c.s.t_merge,
                  c.s.t_write, c.s.tiles_reused, c.s.tiles_redone);
     if (!opts->keep_job) {
+        char *dir = NULL;
+        gdt_error e2;
+        gdt_error_clear(&e2);
+        gdt_job_get_meta(c.jobdb, "dir", &dir, &e2);
         gdt_tiler_destroy(c.tiler);
         c.tiler = NULL;
         gdt_job_close(c.jobdb);
         c.jobdb = NULL;
-        remove_job_files(c.job);
+        remove_job_files(c.job, 1, dir != NULL && strcmp(dir, "made") == 0);
+        free(dir);
     }
 fail:
     {
@@ -1570,6 +1707,7 @@ fail:
     gdt_tiler_destroy(c.tiler);
     gdt_cloud_close(c.cloud);
     gdt_job_close(c.jobdb);
+    gdt_job_unlock(c.job, c.lock_fd, 0);
     free(c.tiles_dir);
     free(c.job);
     return st;
@@ -1601,21 +1739,25 @@ gdt_status gdt_cli_resume(const gdt_options *opts, gdt_error *err)
 {
     gdt_options o = *opts;
     gdt_job *j = NULL;
-    char *params = NULL, *v = NULL;
+    char *params = NULL, *v = NULL, *output = NULL;
     char **inputs = NULL;
     size_t n = 0;
     gdt_status st = gdt_job_open(&j, opts->resume, 0, NULL, err);
 
     if (st == GDT_OK)
         st = gdt_job_get_meta(j, "params", &params, err);
+    if (st == GDT_OK)
+        st = gdt_job_get_meta(j, "output", &output, err);
     gdt_job_close(j);
-    if (st != GDT_OK)
+    if (st == GDT_OK && params == NULL)
+        st = gdt_error_set(err, GDT_EJOB, 6905,
+                           "%s: the job there never recorded its options; start it again "
+                           "with the original command",
+                           opts->resume);
+    if (st != GDT_OK) {
+        free(output);
         return st;
-    if (params == NULL)
-        return gdt_error_set(err, GDT_EJOB, 6905,
-                             "%s: the job there never recorded its options; start it again "
-                             "with the original command",
-                             opts->resume);
+    }
 #define NEED(key)                                                                            \
     do {                                                                                     \
         free(v);                                                                             \
@@ -1656,7 +1798,8 @@ gdt_status gdt_cli_resume(const gdt_options *opts, gdt_error *err)
         }
     }
     free(v);
-    v = param_get(params, "output", NULL);
+    v = output;
+    output = NULL;
     if (v == NULL || n == 0) {
         st = gdt_error_set(err, GDT_EJOB, 6905, "%s: job record lacks the output or inputs",
                            opts->resume);
@@ -1673,6 +1816,7 @@ done:
         free(inputs[i]);
     free(inputs);
     free(v);
+    free(output);
     free(params);
     return st;
 }

@@ -544,14 +544,73 @@ gdt_status gdt_tiler_pass2(gdt_tiler *t, gdt_error *err)
     return GDT_OK;
 }
 
-gdt_status gdt_tiler_adopt_pass2(gdt_tiler *t, gdt_error *err)
+gdt_status gdt_tiler_file_sums(const gdt_tiler *t, uint64_t k, gdt_tiler_file_sum out[2],
+                               gdt_error *err)
+{
+    if (t->state != 2 || k >= t->ntiles)
+        return gdt_error_set(err, GDT_EUSAGE, 2505,
+                             "tile %" PRIu64 " has no files (pass 2 not done, or no such tile)",
+                             k);
+    out[0].size = t->tiles[k].points * TL_REC;
+    out[0].sum = t->tiles[k].sum[0];
+    out[1].size = t->tiles[k].edge * TL_REC;
+    out[1].sum = t->tiles[k].sum[1];
+    return GDT_OK;
+}
+
+/* Verifies the pass-2 file kind (0 .pts, 1 .edge) of tile k against its
+ * record: one read.  *recs: its records, at most max (a .pts file holds at
+ * least one).  returns: GDT_EJOB 6501 naming the file and what is wrong. */
+static gdt_status verify_file(gdt_tiler *t, uint64_t k, int kind, const gdt_tiler_file_sum *want,
+                              uint64_t max, uint64_t *recs, gdt_error *err)
+{
+    static const char *const ext[2] = {"pts", "edge"};
+    const tl_tile *tl = &t->tiles[k];
+    char *path = tl_tile_file(t, k, ext[kind], 0);
+    uint64_t size = 0, sum = 0;
+    gdt_error e2;
+    gdt_status st;
+
+    if (path == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    gdt_error_clear(&e2);
+    if (tl_file_sum(path,
+                    gdt_job_file_seed(t->opts.file_id, k,
+                                      kind == 0 ? GDT_JOB_FILE_PTS : GDT_JOB_FILE_EDGE),
+                    &size, &sum, &e2) != GDT_OK)
+        st = gdt_error_set(err, GDT_EJOB, 6501, "%s: tile file missing or unreadable (%s)", path,
+                           e2.msg);
+    else if (size != want->size)
+        st = gdt_error_set(err, GDT_EJOB, 6501,
+                           "%s: tile file of %" PRIu64 " bytes, the job recorded %" PRIu64, path,
+                           size, want->size);
+    else if (sum != want->sum)
+        st = gdt_error_set(err, GDT_EJOB, 6501,
+                           "%s: tile file damaged or not this job's (its checksum differs from "
+                           "the one recorded)",
+                           path);
+    else if (size % TL_REC != 0 || (kind == 0 && size == 0) || size / TL_REC > max)
+        st = gdt_error_set(err, GDT_EJOB, 6501,
+                           "%s: %" PRIu64 " bytes cannot be tile (%" PRId64 ", %" PRId64
+                           ") of %" PRIu64 " points",
+                           path, size, tl->i, tl->j, tl->count);
+    else
+        st = GDT_OK;
+    *recs = size / TL_REC;
+    free(path);
+    return st;
+}
+
+gdt_status gdt_tiler_adopt_pass2(gdt_tiler *t, const gdt_tiler_file_sum *expect,
+                                 gdt_error *err)
 {
     uint64_t *points = NULL, *edges = NULL;
     gdt_status st = GDT_OK;
 
-    if (t->state != 1 || t->job_dir == NULL)
+    if (t->state != 1 || t->job_dir == NULL || expect == NULL)
         return gdt_error_set(err, GDT_EUSAGE, 2505,
-                             "adopting tile files needs pass 1 and a job directory");
+                             "adopting tile files needs pass 1, a job directory and their "
+                             "records");
     /* every file is checked before any state changes: a refused adoption
      * leaves the tiler exactly after pass 1, ready for pass 2 */
     points = malloc((t->ntiles + 1) * sizeof *points);
@@ -561,22 +620,9 @@ gdt_status gdt_tiler_adopt_pass2(gdt_tiler *t, gdt_error *err)
         goto done;
     }
     for (uint64_t k = 0; k < t->ntiles && st == GDT_OK; k++) {
-        const tl_tile *tl = &t->tiles[k];
-        char *pts = tl_tile_file(t, k, "pts", 0), *edge = tl_tile_file(t, k, "edge", 0);
-        gdt_error e2;
-        gdt_error_clear(&e2);
-        if (pts == NULL || edge == NULL)
-            st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-        else if (tl_file_records(pts, &points[k], &e2) != GDT_OK ||
-                 tl_file_records(edge, &edges[k], &e2) != GDT_OK || points[k] == 0 ||
-                 points[k] > tl->count || edges[k] > points[k])
-            st = gdt_error_set(err, GDT_EJOB, 6501,
-                               "tile (%" PRId64 ", %" PRId64 ") of the job in %s is missing or "
-                               "damaged%s%s: run again with --restart",
-                               tl->i, tl->j, t->job_dir, e2.status != GDT_OK ? ": " : "",
-                               e2.status != GDT_OK ? e2.msg : "");
-        free(pts);
-        free(edge);
+        st = verify_file(t, k, 0, &expect[2 * k], t->tiles[k].count, &points[k], err);
+        if (st == GDT_OK)
+            st = verify_file(t, k, 1, &expect[2 * k + 1], points[k], &edges[k], err);
     }
     if (st != GDT_OK)
         goto done;
@@ -584,6 +630,8 @@ gdt_status gdt_tiler_adopt_pass2(gdt_tiler *t, gdt_error *err)
         tl_tile *tl = &t->tiles[k];
         tl->points = points[k];
         tl->edge = edges[k];
+        tl->sum[0] = expect[2 * k].sum;
+        tl->sum[1] = expect[2 * k + 1].sum;
         tl->written = tl->count;
         t->stats.merged_duplicates += tl->count - tl->points;
         if (tl->points > t->stats.max_tile_points)

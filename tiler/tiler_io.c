@@ -94,8 +94,23 @@ gdt_status tl_wfile_flush(tl_wfile *w, gdt_error *err)
         if (st != GDT_OK)
             return st;
     }
+    if (w->hashed)
+        gdt_hash_wide_update(&w->hash, w->buf, w->len * TL_REC);
     st = write_all(w->fd, w->buf, w->len * TL_REC, w->tmp_path, err);
     w->len = 0;
+    return st;
+}
+
+void tl_wfile_hash(tl_wfile *w, uint64_t seed)
+{
+    w->hashed = 1;
+    gdt_hash_wide_init(&w->hash, seed);
+}
+
+gdt_status tl_wfile_sum(tl_wfile *w, uint64_t *sum, gdt_error *err)
+{
+    gdt_status st = tl_wfile_flush(w, err);
+    *sum = gdt_hash_wide_final(&w->hash);
     return st;
 }
 
@@ -270,6 +285,44 @@ void tl_rfile_close(tl_rfile *r)
     free(r->buf);
     memset(r, 0, sizeof *r);
     r->fd = -1;
+}
+
+gdt_status tl_file_sum(const char *path, uint64_t seed, uint64_t *size, uint64_t *sum,
+                       gdt_error *err)
+{
+    enum { CHUNK = 1 << 20 };
+    unsigned char *buf = malloc(CHUNK);
+    gdt_hash_wide h;
+    gdt_status st = GDT_OK;
+    int fd;
+
+    if (buf == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    fd = open(path, O_RDONLY | O_CLOEXEC);
+    if (fd < 0) {
+        st = gdt_error_set(err, GDT_EIO, 4504, "cannot open %s: %s", path, strerror(errno));
+        free(buf);
+        return st;
+    }
+    (void)posix_fadvise(fd, 0, 0, POSIX_FADV_SEQUENTIAL);
+    gdt_hash_wide_init(&h, seed);
+    for (;;) {
+        ssize_t n = read(fd, buf, CHUNK);
+        if (n < 0 && errno == EINTR)
+            continue;
+        if (n < 0) {
+            st = gdt_error_set(err, GDT_EIO, 4504, "cannot read %s: %s", path, strerror(errno));
+            break;
+        }
+        if (n == 0)
+            break;
+        gdt_hash_wide_update(&h, buf, (size_t)n);
+    }
+    close(fd);
+    free(buf);
+    *size = h.n;
+    *sum = gdt_hash_wide_final(&h);
+    return st;
 }
 
 gdt_status tl_sync_dir(const char *dir, gdt_error *err)

@@ -217,6 +217,7 @@ typedef struct run_opts {
     int nosync;
     prog *progress;
     int threads;         /* --dup merge workers (0: one) */
+    uint64_t id;         /* the job id's first word (the checksums' seed) */
 } run_opts;
 
 typedef struct vdb_check {
@@ -391,6 +392,29 @@ static void check_run(gdt_tiler *t, const char *job, const gdt_point *in, size_t
     free(exp);
 }
 
+/* Damage 1 flips a bit of path (at byte 40), 2 swaps path and other, 4
+ * removes path; doing 1 or 2 again undoes it. */
+static void damage_file(int damage, const char *path, const char *other)
+{
+    if (damage == 1) {
+        FILE *f = fopen(path, "r+b");
+        int ch = EOF;
+        if (f != NULL && fseek(f, 40, SEEK_SET) == 0 && (ch = fgetc(f)) != EOF &&
+            fseek(f, 40, SEEK_SET) == 0)
+            fputc(ch ^ 4, f);
+        CHECK(f != NULL && ch != EOF, "cannot damage %s", path);
+        if (f != NULL)
+            fclose(f);
+    } else if (damage == 2) {
+        char tmp[4200];
+        snprintf(tmp, sizeof tmp, "%s.swap", path);
+        CHECK(rename(path, tmp) == 0 && rename(other, path) == 0 && rename(tmp, other) == 0,
+              "cannot swap %s and %s", path, other);
+    } else if (damage == 4) {
+        unlink(path);
+    }
+}
+
 static gdt_status open_tiler(const char *pcd, const char *job, const run_opts *ro,
                              gdt_cloud **cloud, gdt_tiler **t, gdt_error *err)
 {
@@ -412,6 +436,8 @@ static gdt_status open_tiler(const char *pcd, const char *job, const run_opts *r
     o.density_voxels = ro->voxels;
     o.test_nosync = ro->nosync;
     o.threads = ro->threads;
+    o.file_id[0] = ro->id;
+    o.file_id[1] = 42;
     if (ro->progress != NULL) {
         o.progress = on_progress;
         o.progress_ctx = ro->progress;
@@ -521,7 +547,7 @@ int main(int argc, char **argv)
 
     /* Given cell and halo, every --dup rule, normal and tiny budgets. */
     for (int r = 0; r < 3; r++) {
-        run_opts ro = {64, 13.0, 5, rules[r], 0, 0, r > 0, NULL, 0};
+        run_opts ro = {64, 13.0, 5, rules[r], 0, 0, r > 0, NULL, 0, 0};
         gdt_cloud *c1 = NULL, *c2 = NULL;
         gdt_tiler *a, *b;
         char what[64];
@@ -569,7 +595,7 @@ int main(int argc, char **argv)
     {
         long halos[2] = {100, 0};
         for (int q = 0; q < 2; q++) {
-            run_opts ro = {64, 9.0, halos[q], GDT_DUP_FIRST, q == 0, 0, 1, NULL, 0};
+            run_opts ro = {64, 9.0, halos[q], GDT_DUP_FIRST, q == 0, 0, 1, NULL, 0, 0};
             gdt_cloud *c = NULL;
             gdt_tiler *t;
             char what[64];
@@ -591,9 +617,11 @@ int main(int argc, char **argv)
 
     /* Auto cell and halo: about N^2/4 points per tile, exact counts. */
     {
-        run_opts ro = {64, 0.0, -1, GDT_DUP_FIRST, 0, 0, 1, NULL, 0};
+        run_opts ro = {64, 0.0, -1, GDT_DUP_FIRST, 0, 0, 1, NULL, 0, 7};
         gdt_cloud *c = NULL;
         gdt_tiler *t;
+        gdt_tiler_file_sum *sums = NULL;
+        uint64_t nt = 0;
         snprintf(job, sizeof job, "%s/job-auto", workdir);
         t = run(pcd, job, &ro, &c);
         if (t != NULL) {
@@ -606,38 +634,65 @@ int main(int argc, char **argv)
             CHECK(p->span % (INT64_C(1) << p->density_shift) == 0,
                   "density voxel does not divide the tile");
             check_run(t, job, in, n, merged, nmerged, "auto");
+            /* the records a journal would keep: each checksum is the one of
+             * the file's bytes as written */
+            nt = gdt_tiler_tile_count(t);
+            sums = calloc(2 * nt + 1, sizeof *sums);
+            for (uint64_t k = 0; sums != NULL && k < nt; k++) {
+                char path[4096];
+                uint64_t size = 0, sum = 0;
+                CHECK(gdt_tiler_file_sums(t, k, &sums[2 * k], &err) == GDT_OK, "sums: %s",
+                      err.msg);
+                gdt_tiler_tile_path(t, k, "pts", path, sizeof path);
+                CHECK(tl_file_sum(path, gdt_job_file_seed((uint64_t[2]){7, 42}, k,
+                                                          GDT_JOB_FILE_PTS),
+                                  &size, &sum, &err) == GDT_OK &&
+                          size == sums[2 * k].size && sum == sums[2 * k].sum,
+                      "tile %" PRIu64 ": the recorded .pts checksum is not the file's", k);
+            }
         }
         finish(t, c);
-        /* Resume: pass 1 again, then adopt the tile files instead of pass 2. */
-        t = NULL;
-        c = NULL;
-        gdt_error_clear(&err);
-        if (open_tiler(pcd, job, &ro, &c, &t, &err) == GDT_OK &&
-            gdt_tiler_pass1(t, &err) == GDT_OK) {
-            CHECK(gdt_tiler_adopt_pass2(t, &err) == GDT_OK, "adopt: %s", err.msg);
-            check_run(t, job, in, n, merged, nmerged, "auto, adopted");
-        } else {
-            CHECK(0, "reopening the auto job: %s", err.msg);
+        /* Resume: pass 1 again, then adopt the tile files instead of pass 2;
+         * then with one flipped bit in a .pts file, a .edge file swapped
+         * with another tile's, another job's id, and a missing file. */
+        for (int damage = 0; sums != NULL && damage < 5; damage++) {
+            char path[4096], other[4096];
+            run_opts r2 = ro;
+            t = NULL;
+            c = NULL;
+            gdt_error_clear(&err);
+            r2.id = damage == 3 ? 8 : 7;
+            if (open_tiler(pcd, job, &r2, &c, &t, &err) != GDT_OK ||
+                gdt_tiler_pass1(t, &err) != GDT_OK) {
+                CHECK(0, "reopening the auto job: %s", err.msg);
+                finish(t, c);
+                break;
+            }
+            gdt_tiler_tile_path(t, nt / 2, damage == 2 ? "edge" : "pts", path, sizeof path);
+            gdt_tiler_tile_path(t, nt / 2 + 1, "edge", other, sizeof other);
+            damage_file(damage, path, other);
+            if (damage == 0) {
+                CHECK(gdt_tiler_adopt_pass2(t, sums, &err) == GDT_OK, "adopt: %s", err.msg);
+                check_run(t, job, in, n, merged, nmerged, "auto, adopted");
+            } else {
+                CHECK(gdt_tiler_adopt_pass2(t, sums, &err) == GDT_EJOB && err.code == 6501 &&
+                          strstr(err.msg, damage == 3 ? "tile_" : strrchr(path, '/') + 1) != NULL,
+                      "adopting with damage %d: %s", damage, err.msg);
+                CHECK(gdt_tiler_tile_count(t) == nt &&
+                          gdt_tiler_load_tile(t, 0, &(gdt_point_buf){0}, &(gdt_point_buf){0},
+                                              &err) == GDT_EUSAGE,
+                      "a refused adoption changed the tiler's state");
+                damage_file(damage, path, other); /* undone (a flip or a swap) */
+            }
+            finish(t, c);
         }
-        finish(t, c);
-        t = NULL;
-        c = NULL;
-        gdt_error_clear(&err);
-        if (open_tiler(pcd, job, &ro, &c, &t, &err) == GDT_OK &&
-            gdt_tiler_pass1(t, &err) == GDT_OK) {
-            char path[4096];
-            gdt_tiler_tile_path(t, gdt_tiler_tile_count(t) / 2, "edge", path, sizeof path);
-            unlink(path);
-            CHECK(gdt_tiler_adopt_pass2(t, &err) == GDT_EJOB && err.code == 6501,
-                  "adopting with a missing file: %s", err.msg);
-        }
-        finish(t, c);
+        free(sums);
     }
 
     /* A density grid forced to coarsen: the counts stay exact (given cell:
      * same tiles as before; auto cell: the voxel still divides the tile). */
     {
-        run_opts ro = {64, 13.0, 5, GDT_DUP_FIRST, 0, 64, 1, NULL, 0};
+        run_opts ro = {64, 13.0, 5, GDT_DUP_FIRST, 0, 64, 1, NULL, 0, 0};
         gdt_cloud *c = NULL;
         gdt_tiler *t;
         snprintf(job, sizeof job, "%s/job-coarse", workdir);
@@ -663,7 +718,7 @@ int main(int argc, char **argv)
     /* Progress reports, and a stop request in the middle of pass 2. */
     {
         prog pr;
-        run_opts ro = {64, 13.0, 5, GDT_DUP_FIRST, 0, 0, 1, &pr, 0};
+        run_opts ro = {64, 13.0, 5, GDT_DUP_FIRST, 0, 0, 1, &pr, 0, 0};
         gdt_cloud *c = NULL;
         gdt_tiler *t = NULL;
         gdt_status st;
@@ -701,8 +756,8 @@ int main(int argc, char **argv)
      * in the merge stops it with the job left to run again. */
     {
         prog pr;
-        run_opts r1 = {64, 13.0, 5, GDT_DUP_FIRST, 0, 0, 1, NULL, 1};
-        run_opts r4 = {64, 13.0, 5, GDT_DUP_FIRST, 0, 0, 1, &pr, 4};
+        run_opts r1 = {64, 13.0, 5, GDT_DUP_FIRST, 0, 0, 1, NULL, 1, 0};
+        run_opts r4 = {64, 13.0, 5, GDT_DUP_FIRST, 0, 0, 1, &pr, 4, 0};
         gdt_cloud *c1 = NULL, *c4 = NULL;
         gdt_tiler *t1, *t4;
         gdt_status st;
@@ -751,7 +806,7 @@ int main(int argc, char **argv)
     {
         gdt_cloud *c = NULL;
         gdt_tiler *t = NULL;
-        run_opts ro = {1024, 4194304.0, 0, GDT_DUP_FIRST, 0, 0, 1, NULL, 0};
+        run_opts ro = {1024, 4194304.0, 0, GDT_DUP_FIRST, 0, 0, 1, NULL, 0, 0};
         gdt_status st;
         snprintf(job, sizeof job, "%s/job-refused", workdir);
         make_dir(job);
@@ -858,7 +913,7 @@ int main(int argc, char **argv)
     {
         gdt_cloud *c = NULL;
         gdt_tiler *t = NULL;
-        run_opts ro = {64, 13.0, 5, GDT_DUP_FIRST, 0, 0, 1, NULL, 0};
+        run_opts ro = {64, 13.0, 5, GDT_DUP_FIRST, 0, 0, 1, NULL, 0, 0};
         gdt_status st;
         char moved[2100];
         snprintf(moved, sizeof moved, "%s/moved.pcd", workdir);

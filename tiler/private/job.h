@@ -3,19 +3,37 @@
  * or power cut.
  *
  * Tables:
- *   meta(key, value)               "params" (the options and paths that fix
- *                                  the output, one "key=value" per line) and
+ *   meta(key, value)               "schema", "id" (the job's random 128-bit
+ *                                  id, 32 hex digits), "params" (the options
+ *                                  and input paths that fix the output, one
+ *                                  "key=value" per line), "output" (the
+ *                                  output path of the latest run, for
+ *                                  --resume; not part of params, so another
+ *                                  -o reuses the finished work) and
  *                                  "fingerprint" (per input: size, mtime and
  *                                  a hash of its first and last 64 KiB)
  *   stage(name, done)              "pass2" (the tiler's tile files), "ply"
  *   tile(k, file, size, checksum)  a finished tile: its .tri file
+ *   pfile(k, kind, size, checksum) a pass-2 file of tile k (kind
+ *                                  GDT_JOB_FILE_PTS or _EDGE), recorded in
+ *                                  the transaction that marks "pass2" done
+ * Creation: the tables, the schema row and the id are one transaction, so a
+ * failure (a full disk) leaves nothing or a complete empty journal; a
+ * database without a schema row and without any record is taken as new.
  * Protocol: a file is written to a temporary name, fsync'd and renamed
  * first, then recorded in one transaction.  So a record always names a
- * complete file; a file without a record is simply redone.  On resume the
- * recorded checksum is verified before a file is reused.
+ * complete file; a file without a record is simply redone.  Every checksum
+ * is gdt_hash64_wide over the whole file, seeded with gdt_job_file_seed (the
+ * job's id, the tile and the file kind): a file of another job, of another
+ * tile or of another kind never verifies.  On resume every recorded file is
+ * verified (size and checksum, one read) before it is reused.
+ * Lock: <job>/lock (gdt_job_lock), an flock held for the whole run, with
+ * the holder's pid as its content; the kernel drops it when the holder
+ * dies, so a stale file never blocks.
  *
  * Message numbers: 4901 cannot open/create, 4902 SQLite write failed
- * (disk full, I/O), 6901 not a job database (or newer schema).
+ * (disk full, I/O), 4903 the lock file cannot be created, 6901 not a job
+ * database (or another schema), 6906 another run holds the job.
  */
 #ifndef GDT_JOB_H
 #define GDT_JOB_H
@@ -27,8 +45,10 @@
 
 typedef struct gdt_job gdt_job;
 
-/* Opens <dir>/job.db.  With create, makes an empty journal when there is
- * none (*is_new = 1); without, a missing journal is GDT_EJOB 6902.
+/* Opens <dir>/job.db.  With create, makes an empty journal (with a fresh
+ * random id) when there is none, or when the database holds no schema row
+ * and no record (*is_new = 1); without, a missing journal is GDT_EJOB 6902.
+ * A journal this call created and could not complete is removed again.
  * Ownership: *out is new; close with gdt_job_close. */
 gdt_status gdt_job_open(gdt_job **out, const char *dir, int create, int *is_new,
                         gdt_error *err);
@@ -36,6 +56,23 @@ void gdt_job_close(gdt_job *j);
 
 /* 1 if <dir>/job.db exists. */
 int gdt_job_exists(const char *dir);
+
+/* The job's 128-bit id (meta "id"). */
+void gdt_job_id(const gdt_job *j, uint64_t id[2]);
+
+/* *has = 1 when the journal records finished work: a stage done, a tile or
+ * a pass-2 file.  A journal without any may be taken over by any command. */
+gdt_status gdt_job_has_work(gdt_job *j, int *has, gdt_error *err);
+
+/* Takes the exclusive lock of the job directory dir (which must exist):
+ * <dir>/lock, created if needed, flock'ed without waiting, the pid written
+ * into it.  *fd: the descriptor to keep open for the run (gdt_job_unlock).
+ * returns: GDT_EJOB 6906 (another process holds it: its pid is named),
+ *   GDT_EIO 4903. */
+gdt_status gdt_job_lock(const char *dir, int *fd, gdt_error *err);
+/* Releases the lock (fd < 0: nothing).  With remove, the lock file is
+ * unlinked first (the job directory is being removed). */
+void gdt_job_unlock(const char *dir, int fd, int remove);
 
 /* *value: malloc'ed copy, or NULL when the key is absent. */
 gdt_status gdt_job_get_meta(gdt_job *j, const char *key, char **value, gdt_error *err);
@@ -52,14 +89,42 @@ gdt_status gdt_job_put_tile(gdt_job *j, uint64_t k, const char *file, uint64_t s
 /* Groups the following updates into one transaction (one sync). */
 gdt_status gdt_job_begin(gdt_job *j, gdt_error *err);
 gdt_status gdt_job_commit(gdt_job *j, gdt_error *err);
-/* Forgets every tile record and the "ply" stage (pass 2 was redone). */
+/* Forgets every tile record, every pass-2 file record and the "ply" stage
+ * (pass 2 is being redone). */
 gdt_status gdt_job_clear_tiles(gdt_job *j, gdt_error *err);
+
+/* The kinds of files a checksum is bound to. */
+enum { GDT_JOB_FILE_PTS = 1, GDT_JOB_FILE_EDGE = 2, GDT_JOB_FILE_TRI = 3 };
+
+/* Record of pass-2 file (k, kind); *found = 0 when there is none. */
+gdt_status gdt_job_get_file(gdt_job *j, uint64_t k, int kind, int *found, uint64_t *size,
+                            uint64_t *checksum, gdt_error *err);
+gdt_status gdt_job_put_file(gdt_job *j, uint64_t k, int kind, uint64_t size, uint64_t checksum,
+                            gdt_error *err);
+
+/* The seed of the checksum of file kind of tile k in the job with this id. */
+uint64_t gdt_job_file_seed(const uint64_t id[2], uint64_t k, int kind);
 
 /* A 64-bit checksum of n bytes (not cryptographic: detects damage). */
 uint64_t gdt_hash64(const void *p, size_t n, uint64_t seed);
 /* The same kind of checksum, about four times faster on long buffers
  * (independent lanes); a different function: the tile files' records use it,
- * the input fingerprints keep gdt_hash64. */
+ * the input fingerprints keep gdt_hash64.  Equal to gdt_hash_wide_final
+ * after gdt_hash_wide_init(seed) and updates with the bytes in any pieces. */
 uint64_t gdt_hash64_wide(const void *p, size_t n, uint64_t seed);
+
+/* gdt_hash64_wide computed incrementally (a file as it is written or read):
+ * the state holds the four lanes, the bytes of an unfinished 32-byte block
+ * and the length so far.  Plain value; no resources. */
+typedef struct gdt_hash_wide {
+    uint64_t h[4];
+    uint64_t n;
+    unsigned char part[32];
+} gdt_hash_wide;
+
+void gdt_hash_wide_init(gdt_hash_wide *s, uint64_t seed);
+void gdt_hash_wide_update(gdt_hash_wide *s, const void *p, size_t n);
+/* The checksum of everything so far; the state is not changed. */
+uint64_t gdt_hash_wide_final(const gdt_hash_wide *s);
 
 #endif

@@ -22,6 +22,7 @@ typedef struct tl_tile {
     uint64_t written;   /* pass 2 */
     uint64_t points;    /* after the --dup merge */
     uint64_t edge;      /* records of the .edge file */
+    uint64_t sum[2];    /* checksums of the .pts and .edge files */
 } tl_tile;
 
 /* Open addressing (linear probing) from tile (i, j) to a value. */

@@ -8,7 +8,8 @@
  * costs no descriptor), under the temporary name; tl_wfile_commit flushes,
  * optionally fsyncs, closes and renames it to the final name (a writer
  * without a final name keeps its temporary name).  tl_wfile_abort closes and
- * unlinks.  tl_rfile: sequential reads of a record file through a
+ * unlinks.  With tl_wfile_hash, the writer also computes the file's
+ * checksum (gdt_hash64_wide) over the bytes as they are written.  tl_rfile: sequential reads of a record file through a
  * caller-sized buffer.
  *
  * Errors: GDT_EIO 4502 (create), 4503 (write), 4504 (read, short file),
@@ -23,6 +24,7 @@
 
 #include "gdt_cloud.h"
 #include "gdt_error.h"
+#include "private/job.h"
 
 #define TL_REC 32 /* bytes per record (GDT_TILER_REC_BYTES) */
 
@@ -77,6 +79,8 @@ typedef struct tl_wfile {
     size_t len, cap;       /* records */
     uint64_t nrec;         /* records written to the file so far (flushed or not) */
     int durable;           /* fsync before the rename */
+    int hashed;            /* hash holds the checksum of the bytes flushed */
+    gdt_hash_wide hash;
 } tl_wfile;
 
 /* Prepares a writer (no file yet).  final_path may be NULL.  cap >= 1.
@@ -87,6 +91,10 @@ gdt_status tl_wfile_init(tl_wfile *w, const char *tmp_path, const char *final_pa
 gdt_status tl_wfile_init_buf(tl_wfile *w, const char *tmp_path, const char *final_path,
                              unsigned char *buf, size_t cap, int durable, gdt_error *err);
 gdt_status tl_wfile_flush(tl_wfile *w, gdt_error *err);
+/* Starts the checksum (before the first put). */
+void tl_wfile_hash(tl_wfile *w, uint64_t seed);
+/* The checksum of every record put so far (flushes first). */
+gdt_status tl_wfile_sum(tl_wfile *w, uint64_t *sum, gdt_error *err);
 
 static inline gdt_status tl_wfile_put(tl_wfile *w, const gdt_point *p, gdt_error *err)
 {
@@ -130,6 +138,11 @@ void tl_rfile_close(tl_rfile *r);
 /* Size of a file in records (GDT_EIO 4504 if it cannot be stat'ed or its
  * size is not a multiple of the record size). */
 gdt_status tl_file_records(const char *path, uint64_t *nrec, gdt_error *err);
+
+/* Reads the whole file path once: *size its bytes, *sum its gdt_hash64_wide
+ * with seed.  returns: GDT_EIO 4504 (open, read), GDT_EINTERNAL 7001. */
+gdt_status tl_file_sum(const char *path, uint64_t seed, uint64_t *size, uint64_t *sum,
+                       gdt_error *err);
 
 /* fsync of a directory (after renames); GDT_EIO 4505. */
 gdt_status tl_sync_dir(const char *dir, gdt_error *err);
