@@ -461,6 +461,8 @@ static gdt_status post_tile_run(tr_ctx *c, tr_slot *sl, gdt_error *err)
     tr_put_u64(p + 24, nf);
     tr_put_u64(p + 32, c->seam.nv);
     tr_put_u64(p + 40, c->seam.ne);
+    tr_put_u64(p + 48, c->job_id[0]);
+    tr_put_u64(p + 56, c->job_id[1]);
     p += TR_HEADER + 12 * nf;
     for (size_t i = 0; i < c->seam.nv; i++, p += 24) {
         tr_put_u64(p, c->seam.v[i].id);
@@ -662,6 +664,8 @@ static gdt_status reuse_tile(tr_ctx *c, uint64_t k, uint64_t size, uint64_t sum,
         if (memcmp(p, TR_MAGIC, 8) != 0 || tr_get_u64(p + 8) != c->base[k] ||
             tr_get_u64(p + 16) != d.points || TR_HEADER + 12 * nf + 24 * nv + 16 * ne != size)
             why = "its header does not fit the tile";
+        else if (tr_get_u64(p + 48) != c->job_id[0] || tr_get_u64(p + 56) != c->job_id[1])
+            why = "its header names another job";
     }
     if (why != NULL) {
         gdt_log_warn(&c->log, 6803, "%s: redoing the tile: %s", path, why);
@@ -1215,6 +1219,8 @@ static gdt_status open_journal(tr_ctx *c, int own_dir, gdt_error *err)
         st = build_fingerprint(c->opts, &fp, err);
     if (st == GDT_OK) {
         text_abs(&out, "output", c->opts->output);
+        if (!out.failed)
+            out.s[--out.len] = '\0'; /* the line break */
         if (out.failed)
             st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     }
@@ -1225,12 +1231,20 @@ static gdt_status open_journal(tr_ctx *c, int own_dir, gdt_error *err)
         if (!is_new)
             st = gdt_job_has_work(c->jobdb, &has_work, err);
     }
-    if (st == GDT_OK && has_work)
+    if (st == GDT_OK && !is_new)
         st = gdt_job_get_meta(c->jobdb, "params", &old_params, err);
-    if (st == GDT_OK && has_work)
+    if (st == GDT_OK && !is_new)
         st = gdt_job_get_meta(c->jobdb, "fingerprint", &old_fp, err);
     if (st != GDT_OK)
         goto done;
+    if (!has_work && old_params != NULL && old_fp != NULL &&
+        (strcmp(old_params, params) != 0 || strcmp(old_fp, fp) != 0)) {
+        /* nothing finished there: the job becomes this command's */
+        gdt_log_note(&c->log, "%s: taking over a job without finished work", c->job);
+        free(old_params);
+        free(old_fp);
+        old_params = old_fp = NULL;
+    }
     if (old_params != NULL && strcmp(old_params, params) != 0) {
         first_difference(old_params, params, diff, sizeof diff);
         st = gdt_error_set(err, GDT_EJOB, 6903,
@@ -1258,9 +1272,6 @@ static gdt_status open_journal(tr_ctx *c, int own_dir, gdt_error *err)
     }
     st = gdt_job_begin(c->jobdb, err);
     if (st == GDT_OK && (old_params == NULL || old_fp == NULL)) {
-        /* a new job, or one that finished nothing: this command's now */
-        if (!is_new)
-            gdt_log_note(&c->log, "%s: taking over a job without finished work", c->job);
         st = gdt_job_set_meta(c->jobdb, "fingerprint", fp, err);
         if (st == GDT_OK)
             st = gdt_job_set_meta(c->jobdb, "params", params, err);

@@ -24,7 +24,8 @@
  *
  * .tri layout (little-endian): 64-byte header = "GDTTRI01", u64 vertex base,
  * u64 vertices, u64 certified faces, u64 seam vertices, u64 barrier edges,
- * u64 0, u64 0; faces as 3 x u32 output indices (counter-clockwise, each
+ * the job's 128-bit id as two u64 (so another job's file never passes for
+ * this job's, even where its faces are the same); faces as 3 x u32 output indices (counter-clockwise, each
  * rotated to its smallest index, sorted); seam vertices as u64 index,
  * i64 x, i64 y (merge frame); barrier edges as u64 a, u64 b. */
 #ifndef GDT_TILED_RUN_H
