@@ -1718,6 +1718,10 @@ fail:
     gdt_tiler_destroy(c.tiler);
     gdt_cloud_close(c.cloud);
     gdt_job_close(c.jobdb);
+    /* a directory this run made and left without a journal (the journal
+     * could not be created) holds nothing to resume: it goes */
+    if (st != GDT_OK && created && c.lock_fd >= 0 && c.jobdb == NULL && !gdt_job_exists(c.job))
+        remove_job_files(c.job, 1, 1);
     gdt_job_unlock(c.job, c.lock_fd, 0);
     free(c.tiles_dir);
     free(c.job);

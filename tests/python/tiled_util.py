@@ -236,9 +236,9 @@ class TriFile:
         assert m, f"{path}: unexpected name"
         self.i, self.j = int(m.group(1)), int(m.group(2))
         assert len(data) >= TRI_HEADER.size, f"{path}: {len(data)} bytes, shorter than the header"
-        magic, base, nv, nc, ns, nb, r0, r1 = TRI_HEADER.unpack_from(data)
+        magic, base, nv, nc, ns, nb, id0, id1 = TRI_HEADER.unpack_from(data)
         assert magic == TRI_MAGIC, f"{path}: magic {magic!r}"
-        assert (r0, r1) == (0, 0), f"{path}: reserved header words {r0}, {r1}"
+        self.job_id = (id0, id1)  # the job's random id (the same in every file)
         need = TRI_HEADER.size + 12 * nc + SEAM_DTYPE.itemsize * ns + EDGE_DTYPE.itemsize * nb
         assert len(data) == need, f"{path}: {len(data)} bytes, the header implies {need}"
         self.vertex_base, self.vertices = base, nv
@@ -257,6 +257,8 @@ def read_job(job):
     tiles = pathlib.Path(job) / "tiles"
     assert tiles.is_dir(), f"{tiles} missing (--keep-job)"
     tris = [TriFile(p) for p in tiles.iterdir() if p.name.endswith(".tri")]
+    ids = {t.job_id for t in tris}
+    assert len(ids) <= 1, f"{tiles}: .tri files of {len(ids)} different jobs"
     return sorted(tris, key=lambda t: (t.j, t.i))
 
 
