@@ -81,7 +81,8 @@
  * Message numbers: 2501 bad options, 2502 tile-local range, 2503 too many
  * tiles for the budget, 2504 budget too small, 2505 call out of order,
  * 2506 tile too large for the budget, 3501 input changed between passes,
- * 6501 tile files of an earlier run missing or damaged, 1301 stopped by the
+ * 6501 tile files of an earlier run missing or damaged, 6503 a tile file
+ * changed under the run (another size than written), 1301 stopped by the
  * progress callback (GDT_EINTERRUPTED),
  * 4501 job directory, 4502 create, 4503 write, 4504 read, 4505 fsync or
  * rename, 7501 internal, 7502 merge did not converge; from the index:
@@ -275,7 +276,8 @@ int gdt_tiler_tile_path(const gdt_tiler *t, uint64_t k, const char *kind, char *
  * deduplicated, inside the halo box, not in the tile) sorted by ordinal.
  * Both buffers are grown as needed and reused; their old content is dropped.
  * returns: GDT_EUSAGE 2505 (before pass 2, bad k), 2506 (tile and halo
- *   exceed half the memory budget), GDT_EIO 4504, GDT_EINTERNAL 7001. */
+ *   exceed half the memory budget), GDT_EIO 4504, GDT_EJOB 6503,
+ *   GDT_EINTERNAL 7001. */
 gdt_status gdt_tiler_load_tile(gdt_tiler *t, uint64_t k, gdt_point_buf *pts,
                                gdt_point_buf *halo, gdt_error *err);
 

@@ -204,8 +204,10 @@ gdt_status tl_rfile_open(tl_rfile *r, const char *path, uint64_t nrec, size_t ca
     }
     if (fstat(r->fd, &sb) != 0 || sb.st_size < 0 || (uint64_t)sb.st_size / TL_REC != nrec ||
         (uint64_t)sb.st_size % TL_REC != 0) {
-        st = gdt_error_set(err, GDT_EIO, 4504,
-                           "cannot read %s: it does not hold the %llu records written to it",
+        /* a job file that changed since it was written: the job is damaged */
+        st = gdt_error_set(err, GDT_EJOB, 6503,
+                           "%s: it does not hold the %llu records written to it (the job "
+                           "directory was changed; rerun with --restart)",
                            path, (unsigned long long)nrec);
         goto fail;
     }
@@ -226,9 +228,14 @@ static gdt_status rfile_fill(tl_rfile *r, gdt_error *err)
         ssize_t n = read(r->fd, r->buf + got, want * TL_REC - got);
         if (n < 0 && errno == EINTR)
             continue;
-        if (n <= 0)
+        if (n < 0)
             return gdt_error_set(err, GDT_EIO, 4504, "cannot read %s: %s", r->path,
-                                 n < 0 ? strerror(errno) : "the file is shorter than written");
+                                 strerror(errno));
+        if (n == 0)
+            return gdt_error_set(err, GDT_EJOB, 6503,
+                                 "%s: shorter than written (the job directory was changed; "
+                                 "rerun with --restart)",
+                                 r->path);
         got += (size_t)n;
     }
     r->pos = 0;

@@ -392,7 +392,7 @@ static void check_run(gdt_tiler *t, const char *job, const gdt_point *in, size_t
     free(exp);
 }
 
-/* Damage 1 flips a bit of path (at byte 40), 2 swaps path and other, 4
+/* Damage 1 flips a bit of path (at byte 40), 2 swaps path and other, 5
  * removes path; doing 1 or 2 again undoes it. */
 static void damage_file(int damage, const char *path, const char *other)
 {
@@ -410,7 +410,7 @@ static void damage_file(int damage, const char *path, const char *other)
         snprintf(tmp, sizeof tmp, "%s.swap", path);
         CHECK(rename(path, tmp) == 0 && rename(other, path) == 0 && rename(tmp, other) == 0,
               "cannot swap %s and %s", path, other);
-    } else if (damage == 4) {
+    } else if (damage == 5) {
         unlink(path);
     }
 }
@@ -654,8 +654,9 @@ int main(int argc, char **argv)
         finish(t, c);
         /* Resume: pass 1 again, then adopt the tile files instead of pass 2;
          * then with one flipped bit in a .pts file, a .edge file swapped
-         * with another tile's, another job's id, and a missing file. */
-        for (int damage = 0; sums != NULL && damage < 5; damage++) {
+         * with another tile's, another job's id, a file cut short after the
+         * adoption, and a missing file. */
+        for (int damage = 0; sums != NULL && damage < 6; damage++) {
             char path[4096], other[4096];
             run_opts r2 = ro;
             t = NULL;
@@ -674,6 +675,18 @@ int main(int argc, char **argv)
             if (damage == 0) {
                 CHECK(gdt_tiler_adopt_pass2(t, sums, &err) == GDT_OK, "adopt: %s", err.msg);
                 check_run(t, job, in, n, merged, nmerged, "auto, adopted");
+            } else if (damage == 4) {
+                /* a file cut short after the adoption: loading it is a job
+                 * error naming it, not an I/O or input error */
+                gdt_point_buf a = {0}, b = {0};
+                CHECK(gdt_tiler_adopt_pass2(t, sums, &err) == GDT_OK, "adopt: %s", err.msg);
+                CHECK(truncate(path, (off_t)sums[2 * (nt / 2)].size - 32) == 0, "truncate %s",
+                      path);
+                CHECK(gdt_tiler_load_tile(t, nt / 2, &a, &b, &err) == GDT_EJOB &&
+                          err.code == 6503 && strstr(err.msg, path) != NULL,
+                      "loading a truncated .pts file: %s", err.msg);
+                gdt_point_buf_free(&a);
+                gdt_point_buf_free(&b);
             } else {
                 CHECK(gdt_tiler_adopt_pass2(t, sums, &err) == GDT_EJOB && err.code == 6501 &&
                           strstr(err.msg, damage == 3 ? "tile_" : strrchr(path, '/') + 1) != NULL,

@@ -12,8 +12,9 @@
  * checksum (gdt_hash64_wide) over the bytes as they are written.  tl_rfile: sequential reads of a record file through a
  * caller-sized buffer.
  *
- * Errors: GDT_EIO 4502 (create), 4503 (write), 4504 (read, short file),
- * 4505 (fsync, rename), GDT_EINTERNAL 7001.
+ * Errors: GDT_EIO 4502 (create), 4503 (write), 4504 (read), 4505 (fsync,
+ * rename), GDT_EJOB 6503 (a record file of another size than written: the
+ * job directory was changed under the run), GDT_EINTERNAL 7001.
  */
 #ifndef GDT_TILER_IO_H
 #define GDT_TILER_IO_H
