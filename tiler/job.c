@@ -114,8 +114,17 @@ static void random_id(uint64_t id[2])
 static gdt_status init_meta(gdt_job *j, int create, int *fresh, gdt_error *err)
 {
     char *schema = NULL, *id = NULL;
+    int has = 0;
     gdt_status st = gdt_job_get_meta(j, "schema", &schema, err);
     *fresh = 0;
+    /* a journal of another schema that finished nothing holds nothing to
+     * lose: it is started afresh like an empty one */
+    if (st == GDT_OK && schema != NULL && atoi(schema) != JOB_SCHEMA &&
+        (st = gdt_job_has_work(j, &has, err)) == GDT_OK && !has && create) {
+        free(schema);
+        schema = NULL;
+        st = exec(j, "DELETE FROM meta; DELETE FROM stage;", err);
+    }
     if (st == GDT_OK && schema == NULL) {
         int64_t rows = 0;
         st = query_int(j,

@@ -363,8 +363,11 @@ def test_full_disk_while_creating_the_journal(jobs, tmp_path, size):
 
 
 @pytest.mark.sanitize
-@pytest.mark.parametrize("state", ["empty-file", "tables-only"])
+@pytest.mark.parametrize("state", ["empty-file", "tables-only", "old-schema", "old-schema-work"])
 def test_journal_without_schema_row_is_new(jobs, tmp_path, state):
+    """A journal cut short before its schema row (an empty file, tables
+    only) or of an older schema that finished nothing is started afresh;
+    one of an older schema with finished work is refused (exit 6)."""
     case = jobs.case
     out = tmp_path / "out.ply"
     job = tmp_path / "job"
@@ -375,9 +378,17 @@ def test_journal_without_schema_row_is_new(jobs, tmp_path, state):
         con = sqlite3.connect(job / "job.db")
         con.execute("CREATE TABLE meta(key TEXT PRIMARY KEY, value TEXT NOT NULL)")
         con.execute("CREATE TABLE stage(name TEXT PRIMARY KEY, done INTEGER NOT NULL)")
+        if state.startswith("old-schema"):
+            con.execute("INSERT INTO meta VALUES ('schema', '1'), ('params', 'tile=1')")
+            con.execute("INSERT INTO stage VALUES ('pass2', ?)", (int(state.endswith("work")),))
         con.commit()
         con.close()
     r = run(case.cmd(case.las, out, "--job", job))
+    if state == "old-schema-work":
+        assert r.returncode == 6 and "GDT-6901" in r.stderr and "job.db" in r.stderr, \
+            f"{state}: exit {r.returncode}\n{r.stderr}"
+        assert not out.exists()
+        return
     assert r.returncode == 0, f"{state}: exit {r.returncode}\n{r.stderr}"
     case.assert_same(out, f"run over a journal ({state})")
 

@@ -19,14 +19,18 @@
  *                                  the transaction that marks "pass2" done
  * Creation: the tables, the schema row and the id are one transaction, so a
  * failure (a full disk) leaves nothing or a complete empty journal; a
- * database without a schema row and without any record is taken as new.
+ * database without a schema row and without any record, or of another
+ * schema without finished work, is taken as new.
  * Protocol: a file is written to a temporary name, fsync'd and renamed
  * first, then recorded in one transaction.  So a record always names a
  * complete file; a file without a record is simply redone.  Every checksum
  * is gdt_hash64_wide over the whole file, seeded with gdt_job_file_seed (the
  * job's id, the tile and the file kind): a file of another job, of another
  * tile or of another kind never verifies.  On resume every recorded file is
- * verified (size and checksum, one read) before it is reused.
+ * verified (size and checksum, one read) before it is reused.  These are
+ * the only files a rerun takes over: index.vdb (pass 1) and merge.faces
+ * (the merge) are written anew by every run, and so is the PLY (the "ply"
+ * stage is only a record).
  * Lock: <job>/lock (gdt_job_lock), an flock held for the whole run, with
  * the holder's pid as its content; the kernel drops it when the holder
  * dies, so a stale file never blocks.
