@@ -1328,26 +1328,29 @@ static gdt_status adopt_pass2(tr_ctx *c, int *ok, gdt_error *err)
     if (fs == NULL)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     gdt_error_clear(&e2);
-    for (uint64_t k = 0; st == GDT_OK && ad == GDT_OK && k < 2 * ntiles; k++) {
+    /* fs[2k] .pts and fs[2k + 1] .edge of tile k */
+    for (uint64_t i = 0; st == GDT_OK && ad == GDT_OK && i < 2 * ntiles; i++) {
         int found = 0;
-        st = gdt_job_get_file(c->jobdb, k / 2, k % 2 ? GDT_JOB_FILE_EDGE : GDT_JOB_FILE_PTS,
-                              &found, &fs[k].size, &fs[k].sum, err);
+        st = gdt_job_get_file(c->jobdb, i / 2, i % 2 ? GDT_JOB_FILE_EDGE : GDT_JOB_FILE_PTS,
+                              &found, &fs[i].size, &fs[i].sum, err);
         if (st == GDT_OK && !found)
             ad = gdt_error_set(&e2, GDT_EJOB, 6501,
                                "the job records no %s file of tile %" PRIu64,
-                               k % 2 ? ".edge" : ".pts", k / 2);
+                               i % 2 ? ".edge" : ".pts", i / 2);
     }
     if (st == GDT_OK && ad == GDT_OK)
         ad = gdt_tiler_adopt_pass2(c->tiler, fs, &e2);
     free(fs);
     if (st != GDT_OK)
         return st;
-    if (ad == GDT_OK)
+    if (ad == GDT_OK) {
         *ok = 1;
-    else if (ad == GDT_EJOB)
+    } else if (ad == GDT_EJOB) {
         gdt_log_warn(&c->log, 6502, "redoing pass 2: %s", e2.msg);
-    else
-        st = gdt_error_set(err, ad, e2.code, "%s", e2.msg);
+    } else {
+        *err = e2; /* out of memory: not a reason to redo */
+        st = ad;
+    }
     return st;
 }
 
