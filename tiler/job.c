@@ -272,18 +272,14 @@ gdt_status gdt_job_has_work(gdt_job *j, int *has, gdt_error *err)
     return st;
 }
 
-/* The pid written in an open lock file (0 if unreadable). */
-static long lock_holder(int fd)
+/* The content of an open lock file, "<pid> made|given\n" ("" if none). */
+static void lock_content(int fd, char *b, size_t cap)
 {
-    char b[32];
-    ssize_t n = pread(fd, b, sizeof b - 1, 0);
-    if (n <= 0)
-        return 0;
-    b[n] = '\0';
-    return strtol(b, NULL, 10);
+    ssize_t n = pread(fd, b, cap - 1, 0);
+    b[n > 0 ? n : 0] = '\0';
 }
 
-gdt_status gdt_job_lock(const char *dir, int *out, gdt_error *err)
+gdt_status gdt_job_lock(const char *dir, int made, int *out, int *owned, gdt_error *err)
 {
     char *p = path_in(dir, "lock");
     gdt_status st = GDT_OK;
@@ -304,11 +300,12 @@ gdt_status gdt_job_lock(const char *dir, int *out, gdt_error *err)
         }
         if (flock(fd, LOCK_EX | LOCK_NB) != 0) {
             if (errno == EWOULDBLOCK) {
-                long pid = lock_holder(fd);
+                char holder[64];
+                lock_content(fd, holder, sizeof holder);
                 st = gdt_error_set(err, GDT_EJOB, 6906,
                                    "%s: another run (pid %ld) is using this job directory; "
                                    "wait until it ends, or use another --job",
-                                   dir, pid);
+                                   dir, strtol(holder, NULL, 10));
             } else {
                 st = gdt_error_set(err, GDT_EIO, 4903, "%s: cannot lock: %s", p,
                                    strerror(errno));
@@ -324,8 +321,13 @@ gdt_status gdt_job_lock(const char *dir, int *out, gdt_error *err)
             st = gdt_error_set(err, GDT_EIO, 4903, "%s: the lock file keeps disappearing", p);
     }
     if (st == GDT_OK) {
-        char b[32];
-        int n = snprintf(b, sizeof b, "%ld\n", (long)getpid());
+        /* the file outlives the journal when a removal is cut short, so it
+         * carries whether a run of this job made the directory */
+        char b[64];
+        int n;
+        lock_content(fd, b, sizeof b);
+        *owned = made || strstr(b, " made") != NULL;
+        n = snprintf(b, sizeof b, "%ld %s\n", (long)getpid(), *owned ? "made" : "given");
         if (ftruncate(fd, 0) != 0 || pwrite(fd, b, (size_t)n, 0) != n)
             st = gdt_error_set(err, GDT_EIO, 4903, "%s: cannot write: %s", p, strerror(errno));
     }

@@ -1129,8 +1129,8 @@ static void first_difference(const char *a, const char *b, char *msg, size_t len
  * index.vdb, merge.faces, tiles/ with our tile files) and tiles/ if empty.
  * With final (the end of the run that holds the lock), the lock file goes
  * last, then the job directory itself if it is empty and own_dir (a run of
- * this job created it); otherwise (--restart) the lock file and the
- * directory stay.
+ * this job created it, gdt_job_lock); otherwise (--restart) the lock file
+ * and the directory stay.
  * Never removes anything else: --job may name a directory the user owns. */
 static void remove_job_files(const char *job, int final, int own_dir)
 {
@@ -1172,23 +1172,6 @@ static void remove_job_files(const char *job, int final, int own_dir)
         rmdir(job);
 }
 
-/* 1 when the journal in job says a run of that job created the directory
- * (meta "dir" = "made"); 0 when not, or when it cannot be read. */
-static int job_dir_owned(const char *job)
-{
-    gdt_job *j = NULL;
-    char *v = NULL;
-    gdt_error e;
-    int own;
-    gdt_error_clear(&e);
-    if (gdt_job_open(&j, job, 0, NULL, &e) == GDT_OK)
-        gdt_job_get_meta(j, "dir", &v, &e);
-    gdt_job_close(j);
-    own = v != NULL && strcmp(v, "made") == 0;
-    free(v);
-    return own;
-}
-
 /* The tiler's progress hook: shows progress and carries the stop request. */
 static int tiler_progress(void *ctx, int stage, uint64_t done, uint64_t total)
 {
@@ -1204,10 +1187,9 @@ static int tiler_progress(void *ctx, int stage, uint64_t done, uint64_t total)
 /* Opens or creates the journal and checks that it belongs to this command.
  * A journal without finished work (gdt_job_has_work) is taken over: its
  * params and fingerprint are rewritten.  The output path is recorded for
- * --resume but not compared.  own_dir: the directory was made by this run or
- * (--restart) by an earlier run of the job; recorded in a new journal.
+ * --resume but not compared.
  * returns GDT_EJOB 6903 (options differ), 6904 (an input changed). */
-static gdt_status open_journal(tr_ctx *c, int own_dir, gdt_error *err)
+static gdt_status open_journal(tr_ctx *c, gdt_error *err)
 {
     char *params = NULL, *fp = NULL, *old_params = NULL, *old_fp = NULL;
     char diff[512];
@@ -1275,8 +1257,6 @@ static gdt_status open_journal(tr_ctx *c, int own_dir, gdt_error *err)
         st = gdt_job_set_meta(c->jobdb, "fingerprint", fp, err);
         if (st == GDT_OK)
             st = gdt_job_set_meta(c->jobdb, "params", params, err);
-        if (st == GDT_OK && is_new)
-            st = gdt_job_set_meta(c->jobdb, "dir", own_dir ? "made" : "given", err);
     } else if (st == GDT_OK) {
         c->s.resumed = 1;
     }
@@ -1415,7 +1395,7 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     gdt_tiler_opts to;
     core_start cstart;
     uint64_t ntiles, hull;
-    int done = 0, created = 0;
+    int done = 0, created = 0, own_dir = 0;
     double t_start = gdt_now(), t0;
     gdt_status st;
 
@@ -1446,13 +1426,11 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
      * read or removed (--restart must not remove a running job's files) */
     st = make_dir(c.job, &created, err);
     if (st == GDT_OK)
-        st = gdt_job_lock(c.job, &c.lock_fd, err);
-    if (st == GDT_OK && opts->restart) {
-        created |= job_dir_owned(c.job);
+        st = gdt_job_lock(c.job, created, &c.lock_fd, &own_dir, err);
+    if (st == GDT_OK && opts->restart)
         remove_job_files(c.job, 0, 0);
-    }
     if (st == GDT_OK)
-        st = open_journal(&c, created, err);
+        st = open_journal(&c, err);
     if (st != GDT_OK)
         goto fail;
 
@@ -1680,16 +1658,11 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
                  c.s.t_merge,
                  c.s.t_write, c.s.tiles_reused, c.s.tiles_redone);
     if (!opts->keep_job) {
-        char *dir = NULL;
-        gdt_error e2;
-        gdt_error_clear(&e2);
-        gdt_job_get_meta(c.jobdb, "dir", &dir, &e2);
         gdt_tiler_destroy(c.tiler);
         c.tiler = NULL;
         gdt_job_close(c.jobdb);
         c.jobdb = NULL;
-        remove_job_files(c.job, 1, dir != NULL && strcmp(dir, "made") == 0);
-        free(dir);
+        remove_job_files(c.job, 1, own_dir);
     }
 fail:
     {
@@ -1721,9 +1694,9 @@ fail:
     gdt_tiler_destroy(c.tiler);
     gdt_cloud_close(c.cloud);
     gdt_job_close(c.jobdb);
-    /* a directory this run made and left without a journal (the journal
-     * could not be created) holds nothing to resume: it goes */
-    if (st != GDT_OK && created && c.lock_fd >= 0 && c.jobdb == NULL && !gdt_job_exists(c.job))
+    /* a directory of this job left without a journal (the journal could
+     * not be created) holds nothing to resume: it goes */
+    if (st != GDT_OK && own_dir && c.lock_fd >= 0 && c.jobdb == NULL && !gdt_job_exists(c.job))
         remove_job_files(c.job, 1, 1);
     gdt_job_unlock(c.job, c.lock_fd, 0);
     free(c.tiles_dir);

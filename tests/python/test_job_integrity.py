@@ -288,6 +288,24 @@ def test_lock_of_a_killed_run_does_not_block(jobs, tmp_path):
     assert not job.exists()
 
 
+def test_removal_cut_short_leaves_no_directory(jobs, tmp_path):
+    """A job directory the run made, killed while a finished job was being
+    removed (the journal already gone, the rest not): the rerun computes
+    everything and removes the directory (it is still this job's)."""
+    case = jobs.case
+    out = tmp_path / "out.ply"
+    job = pathlib.Path(str(out) + ".gdt-job")
+    cmd = case.cmd(case.las, out)
+    kill_in_tile_stage(cmd, job)
+    for name in ("job.db", "job.db-wal", "job.db-shm", "index.vdb"):
+        if (job / name).exists():
+            (job / name).unlink()
+    r = run(cmd)
+    assert r.returncode == 0, f"{ru.shell(cmd)}: exit {r.returncode}\n{r.stderr}"
+    case.assert_same(out, "rerun after a removal cut short")
+    assert not job.exists(), f"job directory left: {ru.listing(job)}"
+
+
 @pytest.mark.sanitize
 def test_given_job_directory_is_kept(jobs, tmp_path):
     """--job naming a directory that existed before the job: its files go

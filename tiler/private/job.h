@@ -32,8 +32,9 @@
  * (the merge) are written anew by every run, and so is the PLY (the "ply"
  * stage is only a record).
  * Lock: <job>/lock (gdt_job_lock), an flock held for the whole run, with
- * the holder's pid as its content; the kernel drops it when the holder
- * dies, so a stale file never blocks.
+ * the holder's pid and whether a run of the job made the directory as its
+ * content; the kernel drops it when the holder dies, so a stale file never
+ * blocks.  It is removed last, after the journal, when a job is done.
  *
  * Message numbers: 4901 cannot open/create, 4902 SQLite write failed
  * (disk full, I/O), 4903 the lock file cannot be created, 6901 not a job
@@ -69,11 +70,14 @@ void gdt_job_id(const gdt_job *j, uint64_t id[2]);
 gdt_status gdt_job_has_work(gdt_job *j, int *has, gdt_error *err);
 
 /* Takes the exclusive lock of the job directory dir (which must exist):
- * <dir>/lock, created if needed, flock'ed without waiting, the pid written
- * into it.  *fd: the descriptor to keep open for the run (gdt_job_unlock).
+ * <dir>/lock, created if needed, flock'ed without waiting, then rewritten
+ * as "<pid> made|given".  *owned = 1 when made (the caller has just created
+ * dir) or the file already said "made": a run of this job created the
+ * directory, so its final clean-up may remove it.  *fd: the descriptor to
+ * keep open for the run (gdt_job_unlock).
  * returns: GDT_EJOB 6906 (another process holds it: its pid is named),
  *   GDT_EIO 4903. */
-gdt_status gdt_job_lock(const char *dir, int *fd, gdt_error *err);
+gdt_status gdt_job_lock(const char *dir, int made, int *fd, int *owned, gdt_error *err);
 /* Releases the lock (fd < 0: nothing).  With remove, the lock file is
  * unlinked first (the job directory is being removed). */
 void gdt_job_unlock(const char *dir, int fd, int remove);
