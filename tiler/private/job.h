@@ -25,9 +25,11 @@
  * first, then recorded in one transaction.  So a record always names a
  * complete file; a file without a record is simply redone.  Every checksum
  * is gdt_hash64_wide over the whole file, seeded with gdt_job_file_seed (the
- * job's id, the tile and the file kind): a file of another job, of another
- * tile or of another kind never verifies.  On resume every recorded file is
- * verified (size and checksum, one read) before it is reused.  These are
+ * job's id, the tile and the file kind; .tri headers carry the id too): a
+ * record of another job, tile or kind never vouches for a file, and a file
+ * passes only with exactly the bytes this job wrote.  On resume every
+ * recorded file is verified (size and checksum, one read) before it is
+ * reused.  These are
  * the only files a rerun takes over: index.vdb (pass 1) and merge.faces
  * (the merge) are written anew by every run, and so is the PLY (the "ply"
  * stage is only a record).
