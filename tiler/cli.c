@@ -102,8 +102,10 @@ void gdt_cli_print_help(FILE *out)
     fprintf(out,
             "\nexit codes:\n"
             "  0    success\n"
-            "  2    usage error (bad option or value; a stage not available in this build)\n"
-            "  3    bad input (unreadable, corrupt or lying file, unknown format)\n"
+            "  2    usage error (bad option or value; a stage not available in this build;\n"
+            "       an output that is an input, a special file or in no writable directory)\n"
+            "  3    bad input (unreadable, corrupt or lying file, unknown format; a FIFO,\n"
+            "       device or directory: inputs are read twice)\n"
             "  4    I/O error (read/write failure, disk full)\n"
             "  5    OpenCL device error\n"
             "  6    job directory does not match the command (use --restart)\n"
