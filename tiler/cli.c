@@ -390,6 +390,9 @@ static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
     if (opts->mode == GDT_MODE_RESUME && (opts->job != NULL || opts->restart))
         return gdt_error_set(err, GDT_EUSAGE, 2107,
                              "--resume DIR names the job itself (no --job, no --restart)");
+    if (opts->mode == GDT_MODE_RESUME && opts->output != NULL)
+        return gdt_error_set(err, GDT_EUSAGE, 2108,
+                             "--resume DIR writes the output its job recorded (no -o)");
     if (opts->device != NULL && opts->mode != GDT_MODE_RUN && opts->mode != GDT_MODE_RESUME)
         return gdt_error_set(err, GDT_EUSAGE, 2103,
                              "--device only applies to a triangulation run (not --info or "

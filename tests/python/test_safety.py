@@ -201,6 +201,10 @@ def test_resume_checks_the_recorded_paths(gdt_bin, cloud, tmp_path):
     out.unlink()
     r = run([gdt_bin, "--resume", job, "--json", cloud, "-q"])
     refused(r, 2, "is the input")
+    # -o would be ignored: the output is the recorded one
+    r = run([gdt_bin, "--resume", job, "-o", tmp_path / "other.ply", "-q"])
+    refused(r, 2, "no -o")
+    assert not (tmp_path / "other.ply").exists()
 
 
 # ------------------------------------------------ outputs checked at start-up
@@ -340,7 +344,6 @@ def assert_interrupted(rc, err, what):
         assert lines and "(interrupted)" in lines[-1], f"{what}: {err}"
 
 
-@pytest.mark.sanitize
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 @pytest.mark.parametrize("delay_ms", [0, 10, 30, 50])
 @pytest.mark.parametrize("mode", ["tiled", "reference", "info"])
@@ -357,6 +360,7 @@ def test_signal_at_start_up(gdt_bin, big_cloud, tmp_path, sig, delay_ms, mode):
         assert not (tmp_path / "o.ply").exists()
 
 
+@pytest.mark.sanitize
 def test_signal_during_single_tile_is_not_ignored(gdt_bin, big_cloud, tmp_path):
     rc, err = signal_after_start([gdt_bin, big_cloud, "--single-tile", "--tile", "1024",
                                   "-o", tmp_path / "o.ply"], signal.SIGINT, 0.1)
