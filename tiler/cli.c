@@ -406,8 +406,9 @@ static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
 /* SIGINT / SIGTERM ask the run to stop at its next check (between read
  * batches, tiles and output chunks, and the steps of the start-up); a
  * second signal kills at once (SA_RESETHAND).  The handlers are installed
- * before anything else (gdt_cli_install_signal_handlers), so there is no
- * moment at which a signal kills by its default action unannounced. */
+ * before anything else (gdt_cli_install_signal_handlers: main.c calls it
+ * from .preinit_array, before the libraries' initializers), so a signal
+ * kills by its default action only while the dynamic loader still runs. */
 static volatile sig_atomic_t g_stop;
 
 static void on_signal(int sig)

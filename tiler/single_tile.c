@@ -142,10 +142,12 @@ gdt_status gdt_cli_single_tile(const gdt_options *opts, gdt_error *err)
     copt.device = opts->device;
     copt.log = &log;
     st = gdt_core_create(&core, &copt, err);
-    if (st != GDT_OK && opts->stop != NULL && *opts->stop != 0)
-        gdt_error_clear(err); /* the kernel compiler gave up on the signal */
-    if (st == GDT_OK || err->status == GDT_OK)
+    if (opts->stop != NULL && *opts->stop != 0) {
+        /* a signal during the kernel build; when the build failed, the
+         * signal was the cause (the compiler removes its files on it) */
+        gdt_error_clear(err);
         st = gdt_cli_check_stop(opts, "the OpenCL start-up", err);
+    }
     if (st != GDT_OK)
         goto fail;
     s.device = gdt_core_device_name(core);
