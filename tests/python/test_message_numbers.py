@@ -2,7 +2,7 @@
 
 Scans the C and C++ sources for calls that record an error with a literal
 status and a literal message number (gdt_error_set, gdt_error_vset, and any
-helper called as f(..., GDT_Exxx, NNNN, ...)) and checks that the number's
+wrapper called as f(..., GDT_Exxx, NNNN, ...)) and checks that the number's
 first digit is the class of the status (io/gdt_error.h: the enum values are
 the exit codes; GDT_EINTERRUPTED, 130, uses 1xxx).  Calls whose status or
 number is not a literal are counted and listed, not checked.
@@ -132,7 +132,7 @@ def scan():
             for a, b in pairs:
                 check(m.start(), a, b)
         # every other call that passes a literal status then a literal number
-        # (helpers that forward to the setters)
+        # (wrappers that forward to the setters)
         for m in re.finditer(r"\b(GDT_E[A-Z]+)\s*,\s*(\d{4})\b", text):
             check(m.start(), m.group(1), m.group(2))
         mismatches.extend(sorted(found))
