@@ -65,10 +65,16 @@ typedef struct gdt_ocl_opts {
     gdt_log *log;           /* notes (-v) and warnings; may be NULL */
 } gdt_ocl_opts;
 
+/* Checks the syntax of a device SPEC (above) without touching OpenCL, so a
+ * malformed one is a usage error before any work.  NULL and "" are valid.
+ * returns: GDT_OK; GDT_EUSAGE 2110 (malformed). */
+gdt_status gdt_ocl_check_device_spec(const char *spec, gdt_error *err);
+
 /* Creates a context on the selected device.
  * Ownership: *out is allocated here; release with gdt_ocl_destroy.
- * Errors: GDT_EDEVICE 5101 (no platform/device, bad SPEC), 5102 (OpenCL
- * call failed), GDT_EINTERNAL 7001 (out of memory). */
+ * Errors: GDT_EUSAGE 2110 (malformed SPEC), GDT_EDEVICE 5101 (no
+ * platform/device, or none the SPEC names), 5102 (OpenCL call failed),
+ * GDT_EINTERNAL 7001 (out of memory). */
 gdt_status gdt_ocl_create(gdt_ocl **out, const gdt_ocl_opts *opts, gdt_error *err);
 
 /* Releases every kernel, program and buffer of the context, then the

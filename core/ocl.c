@@ -317,19 +317,61 @@ static int parse_uint(const char *s, const char *end, unsigned *v)
     return 0;
 }
 
+/* The device SPEC grammar (gdt_ocl.h), in one place: the syntax check of
+ * the command line and the selection both use it. */
+typedef enum spec_kind { SPEC_FIRST, SPEC_TYPE, SPEC_PAIR, SPEC_INDEX } spec_kind;
+
+typedef struct dev_spec {
+    spec_kind kind;
+    cl_device_type type; /* SPEC_TYPE */
+    unsigned a, b;       /* SPEC_INDEX: a; SPEC_PAIR: platform a, device b */
+} dev_spec;
+
+static gdt_status parse_spec(const char *spec, dev_spec *out, gdt_error *err)
+{
+    const char *colon;
+
+    memset(out, 0, sizeof *out);
+    if (spec == NULL || spec[0] == '\0')
+        return GDT_OK;
+    if (strcmp(spec, "cpu") == 0 || strcmp(spec, "gpu") == 0) {
+        out->kind = SPEC_TYPE;
+        out->type = spec[0] == 'c' ? CL_DEVICE_TYPE_CPU : CL_DEVICE_TYPE_GPU;
+        return GDT_OK;
+    }
+    colon = strchr(spec, ':');
+    out->kind = colon != NULL ? SPEC_PAIR : SPEC_INDEX;
+    if (colon != NULL ? parse_uint(spec, colon, &out->a) == 0 &&
+                            parse_uint(colon + 1, spec + strlen(spec), &out->b) == 0
+                      : parse_uint(spec, spec + strlen(spec), &out->a) == 0)
+        return GDT_OK;
+    return gdt_error_set(err, GDT_EUSAGE, 2110,
+                         "--device %s: expected an index N, PLATFORM:DEVICE, 'cpu' or 'gpu' "
+                         "(numbers up to 100000)",
+                         spec);
+}
+
+gdt_status gdt_ocl_check_device_spec(const char *spec, gdt_error *err)
+{
+    dev_spec ds;
+    return parse_spec(spec, &ds, err);
+}
+
 /* Picks the device SPEC designates among devs[0..n). */
 static gdt_status select_device(const dev_entry *devs, size_t n, const char *spec, size_t *pick,
                                 gdt_error *err)
 {
-    const char *colon;
-    unsigned a, b;
+    dev_spec ds;
+    gdt_status st = parse_spec(spec, &ds, err);
 
-    if (spec == NULL || spec[0] == '\0') {
+    if (st != GDT_OK)
+        return st;
+    if (ds.kind == SPEC_FIRST) {
         *pick = 0;
         return GDT_OK;
     }
-    if (strcmp(spec, "cpu") == 0 || strcmp(spec, "gpu") == 0) {
-        cl_device_type want = spec[0] == 'c' ? CL_DEVICE_TYPE_CPU : CL_DEVICE_TYPE_GPU;
+    if (ds.kind == SPEC_TYPE) {
+        cl_device_type want = ds.type;
         for (size_t i = 0; i < n; i++) {
             if (devs[i].type & want) {
                 *pick = i;
@@ -341,32 +383,23 @@ static gdt_status select_device(const dev_entry *devs, size_t n, const char *spe
                              "(%s)",
                              spec, spec, n, gdt_ocl_error_name(CL_DEVICE_NOT_FOUND));
     }
-    colon = strchr(spec, ':');
-    if (colon != NULL) {
-        if (parse_uint(spec, colon, &a) != 0 || parse_uint(colon + 1, spec + strlen(spec), &b) != 0)
-            goto bad;
+    if (ds.kind == SPEC_PAIR) {
         for (size_t i = 0; i < n; i++) {
-            if (devs[i].pi == a && devs[i].di == b) {
+            if (devs[i].pi == ds.a && devs[i].di == ds.b) {
                 *pick = i;
                 return GDT_OK;
             }
         }
         return gdt_error_set(err, GDT_EDEVICE, 5101,
-                             "--device %s: no device %u on platform %u (%s)", spec, b, a,
-                             gdt_ocl_error_name(CL_DEVICE_NOT_FOUND));
+                             "--device %s: no device %u on platform %u (%s)", spec, ds.b,
+                             ds.a, gdt_ocl_error_name(CL_DEVICE_NOT_FOUND));
     }
-    if (parse_uint(spec, spec + strlen(spec), &a) != 0)
-        goto bad;
-    if (a >= n)
+    if (ds.a >= n)
         return gdt_error_set(err, GDT_EDEVICE, 5101,
                              "--device %s: only %zu OpenCL device(s) found (%s)", spec, n,
                              gdt_ocl_error_name(CL_DEVICE_NOT_FOUND));
-    *pick = a;
+    *pick = ds.a;
     return GDT_OK;
-bad:
-    return gdt_error_set(err, GDT_EDEVICE, 5101,
-                         "--device %s: expected an index N, PLATFORM:DEVICE, 'cpu' or 'gpu' (%s)",
-                         spec, gdt_ocl_error_name(CL_INVALID_VALUE));
 }
 
 static void dev_string(cl_device_id d, cl_device_info what, char *buf, size_t len)

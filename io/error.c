@@ -38,6 +38,11 @@ void gdt_error_print(const gdt_error *err, FILE *stream)
             gdt_status_name(err->status), err->msg);
 }
 
+int gdt_error_code_in_class(gdt_status st, int n)
+{
+    return (st == GDT_EINTERRUPTED ? 1 : (int)st) * 1000 + n % 1000;
+}
+
 const char *gdt_status_name(gdt_status st)
 {
     switch (st) {

@@ -56,6 +56,11 @@ void gdt_error_clear(gdt_error *err);
 /* Prints "gdt-tile: error GDT-<code>: <msg>" on one line. */
 void gdt_error_print(const gdt_error *err, FILE *stream);
 
+/* The message number c*1000 + n (n in 0..999) of the class of st: c is 2..7
+ * for GDT_EUSAGE..GDT_EINTERNAL, 1 for GDT_EINTERRUPTED.  For the errors
+ * that repeat an earlier one, whose class is the earlier one's. */
+int gdt_error_code_in_class(gdt_status st, int n);
+
 /* Short name of a status class ("bad input", "I/O", ...). */
 const char *gdt_status_name(gdt_status st);
 

@@ -90,7 +90,8 @@ typedef struct gdt_ply_writer gdt_ply_writer;
  * returns: GDT_OK and *out set; else *out = NULL and nothing is left on disk:
  *   GDT_EINTERNAL 7701 (NULL/empty argument, negative epsg), 7702 (bad
  *   comment byte), 7703 (lattice not finite or spacing <= 0);
- *   GDT_EIO 4707 (path names a directory), 4701 (temporary cannot be created).
+ *   GDT_EIO 4707 (path names a directory), 4010/4011 (path exists and is no
+ *   regular file: gdt_outfile.h), 4701 (temporary cannot be created).
  * Ownership: *out must be ended by gdt_ply_finish or gdt_ply_abort; meta and
  * its strings are only read during the call. */
 gdt_status gdt_ply_create(gdt_ply_writer **out, const char *path, const gdt_ply_meta *meta,
@@ -121,7 +122,8 @@ const char *gdt_ply_temp_path(const gdt_ply_writer *w);
  * directory and frees w, also on failure.
  * returns: GDT_OK: the complete file is at the final path.  Otherwise the
  *   first error of the writer, or GDT_EIO 4702/4703/4704/4705 (flush, fsync,
- *   close, rename), and the temporary has been removed; GDT_EIO 4706 (the
+ *   close, rename), 4010/4011 (the path became something other than a
+ *   regular file: it is not replaced), and the temporary has been removed; GDT_EIO 4706 (the
  *   directory could not be synced: the complete file is at the final path
  *   but its name may not survive a power loss).  w == NULL: GDT_EINTERNAL. */
 gdt_status gdt_ply_finish(gdt_ply_writer *w, gdt_error *err);

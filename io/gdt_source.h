@@ -87,6 +87,18 @@ gdt_status gdt_source_read(gdt_source *src, gdt_src_point *buf, size_t cap, size
 /* Closes the file and frees everything; src may be NULL. */
 void gdt_source_close(gdt_source *src);
 
+/* Checks, without opening it (stat only: opening a FIFO blocks), that path
+ * can be an input: an existing regular file (symbolic links followed).
+ * returns: GDT_EINPUT 3001 (cannot be opened: missing, no permission),
+ * 3004 (a directory), 3005 (a FIFO, device or socket: every input is read
+ * more than once, so a stream cannot be one); GDT_EIO 4002 (stat failed
+ * otherwise).  gdt_source_open and gdt_source_sniff check this first. */
+gdt_status gdt_source_check_path(const char *path, gdt_error *err);
+
+/* "a regular file", "a directory", "a FIFO (pipe)", "a character device",
+ * ... for a st_mode of stat(2); a static string. */
+const char *gdt_file_kind(unsigned mode);
+
 /* Format sniffing only (reads at most the first 512 bytes). */
 gdt_status gdt_source_sniff(const char *path, gdt_format *fmt, gdt_error *err);
 

@@ -487,7 +487,7 @@ static gdt_status las_read(gdt_source *src, gdt_src_point *out, size_t cap, size
 
     *n = 0;
     if (im->failed != GDT_OK)
-        return gdt_error_set(err, im->failed, 3132,
+        return gdt_error_set(err, im->failed, gdt_error_code_in_class(im->failed, 132),
                              "%s: reading stopped after an earlier"
                              " error",
                              src->path);

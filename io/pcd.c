@@ -969,7 +969,8 @@ static gdt_status pcd_read(gdt_source *src, gdt_src_point *buf, size_t cap, size
 
     *n = 0;
     if (r->failed != GDT_OK)
-        return gdt_error_set(err, r->failed, 3299, "%s: PCD reading already failed", r->path);
+        return gdt_error_set(err, r->failed, gdt_error_code_in_class(r->failed, 299),
+                             "%s: PCD reading already failed", r->path);
     while (*n < cap && r->next < r->npoints) {
         double p[3];
         st = r->enc == PCD_ASCII    ? pcd_ascii_point(r, p, err)

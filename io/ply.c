@@ -1,6 +1,7 @@
 /* Streaming binary little-endian PLY writer (see gdt_ply.h). */
 #include "gdt_ply.h"
 #include "gdt_direct_io.h"
+#include "gdt_outfile.h"
 #include "private/bytes.h"
 #include "private/fd_io.h"
 
@@ -335,6 +336,9 @@ gdt_status gdt_ply_create(gdt_ply_writer **out, const char *path, const gdt_ply_
     len = strlen(path);
     if (path[len - 1] == '/' || (stat(path, &sb) == 0 && S_ISDIR(sb.st_mode)))
         return gdt_error_set(err, GDT_EIO, 4707, "%s: is a directory, not a file name", path);
+    st = gdt_outfile_check(path, err);
+    if (st != GDT_OK)
+        return st;
 
     w = calloc(1, sizeof *w);
     if (w == NULL)
@@ -530,6 +534,17 @@ gdt_status gdt_ply_finish(gdt_ply_writer *w, gdt_error *err)
         st = ply_fail(w, err, GDT_EIO, 4704, "%s: close failed (temporary %s removed): %s", w->path,
                       w->tmp_path, strerror(errno));
         goto fail;
+    }
+    {
+        /* the path may have changed since the start: never rename over a
+         * special file or a link */
+        gdt_error e2;
+        gdt_error_clear(&e2);
+        if (gdt_outfile_check(w->path, &e2) != GDT_OK) {
+            st = ply_fail(w, err, e2.status, e2.code, "%s (temporary %s removed)", e2.msg,
+                          w->tmp_path);
+            goto fail;
+        }
     }
     if (rename(w->tmp_path, w->path) != 0) {
         st = ply_fail(w, err, GDT_EIO, 4705, "%s: cannot rename %s to it (temporary removed): %s",

@@ -3,20 +3,88 @@
 #include "private/source_impl.h"
 
 #include <errno.h>
+#include <fcntl.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+const char *gdt_file_kind(unsigned mode)
+{
+    if (S_ISREG(mode))
+        return "a regular file";
+    if (S_ISDIR(mode))
+        return "a directory";
+    if (S_ISFIFO(mode))
+        return "a FIFO (pipe)";
+    if (S_ISCHR(mode))
+        return "a character device";
+    if (S_ISBLK(mode))
+        return "a block device";
+    if (S_ISSOCK(mode))
+        return "a socket";
+    if (S_ISLNK(mode))
+        return "a symbolic link";
+    return "not a regular file";
+}
+
+static gdt_status cannot_open(const char *path, int e, gdt_error *err)
+{
+    if (e == ENOENT || e == EACCES || e == ENOTDIR || e == ELOOP || e == ENAMETOOLONG)
+        return gdt_error_set(err, GDT_EINPUT, 3001, "%s: cannot open: %s", path, strerror(e));
+    return gdt_error_set(err, GDT_EIO, 4002, "%s: cannot open: %s", path, strerror(e));
+}
+
+static gdt_status check_mode(const char *path, mode_t mode, gdt_error *err)
+{
+    if (S_ISDIR(mode))
+        return gdt_error_set(err, GDT_EINPUT, 3004,
+                             "%s: is a directory, not a point cloud file", path);
+    if (!S_ISREG(mode))
+        return gdt_error_set(err, GDT_EINPUT, 3005,
+                             "%s: is %s: gdt-tile reads each input more than once (its passes), "
+                             "so an input must be a regular file; save the stream to a file "
+                             "first",
+                             path, gdt_file_kind(mode));
+    return GDT_OK;
+}
+
+gdt_status gdt_source_check_path(const char *path, gdt_error *err)
+{
+    struct stat sb;
+    if (stat(path, &sb) != 0)
+        return cannot_open(path, errno, err);
+    return check_mode(path, sb.st_mode, err);
+}
 
 gdt_status gdt_source_sniff(const char *path, gdt_format *fmt, gdt_error *err)
 {
     unsigned char head[512];
     size_t n;
-    FILE *f = fopen(path, "rb");
+    struct stat sb;
+    FILE *f = NULL;
+    int fd;
+    gdt_status st;
 
     *fmt = GDT_FORMAT_UNKNOWN;
+    /* stat first, and open without blocking: opening a FIFO for reading
+     * would wait for a writer */
+    st = gdt_source_check_path(path, err);
+    if (st != GDT_OK)
+        return st;
+    fd = open(path, O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+    if (fd < 0)
+        return cannot_open(path, errno, err);
+    if (fstat(fd, &sb) != 0 || (st = check_mode(path, sb.st_mode, err)) != GDT_OK) {
+        int e = errno;
+        close(fd);
+        return st != GDT_OK ? st : cannot_open(path, e, err);
+    }
+    f = fdopen(fd, "rb");
     if (f == NULL) {
-        return gdt_error_set(err, errno == ENOENT || errno == EACCES || errno == EISDIR
-                                      ? GDT_EINPUT : GDT_EIO,
-                             3001, "%s: cannot open: %s", path, strerror(errno));
+        int e = errno;
+        close(fd);
+        return cannot_open(path, e, err);
     }
     n = fread(head, 1, sizeof head, f);
     fclose(f);

@@ -1,7 +1,9 @@
 /* Command-line parsing, help text and the top-level dispatch of gdt-tile. */
 #include "gdt_cli.h"
+#include "gdt_ocl.h"
 #include "gdt_predicates.h"
 #include "private/cli_modes.h"
+#include "private/outpaths.h"
 #include "private/single_tile.h"
 #include "private/tiled_run.h"
 
@@ -100,8 +102,10 @@ void gdt_cli_print_help(FILE *out)
     fprintf(out,
             "\nexit codes:\n"
             "  0    success\n"
-            "  2    usage error (bad option or value; a stage not available in this build)\n"
-            "  3    bad input (unreadable, corrupt or lying file, unknown format)\n"
+            "  2    usage error (bad option or value; a stage not available in this build;\n"
+            "       an output that is an input, a special file or in no writable directory)\n"
+            "  3    bad input (unreadable, corrupt or lying file, unknown format; a FIFO,\n"
+            "       device or directory: inputs are read twice)\n"
             "  4    I/O error (read/write failure, disk full)\n"
             "  5    OpenCL device error\n"
             "  6    job directory does not match the command (use --restart)\n"
@@ -234,6 +238,8 @@ static gdt_status apply(gdt_options *opts, const opt_spec *o, const char *val, g
     case OPT_DEVICE:
         if (val[0] == '\0')
             st = gdt_error_set(err, GDT_EUSAGE, 2001, "--device: empty device specification");
+        else
+            st = gdt_ocl_check_device_spec(val, err);
         opts->device = val;
         break;
     case OPT_THREADS:
@@ -384,6 +390,9 @@ static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
     if (opts->mode == GDT_MODE_RESUME && (opts->job != NULL || opts->restart))
         return gdt_error_set(err, GDT_EUSAGE, 2107,
                              "--resume DIR names the job itself (no --job, no --restart)");
+    if (opts->mode == GDT_MODE_RESUME && opts->output != NULL)
+        return gdt_error_set(err, GDT_EUSAGE, 2108,
+                             "--resume DIR writes the output its job recorded (no -o)");
     if (opts->device != NULL && opts->mode != GDT_MODE_RUN && opts->mode != GDT_MODE_RESUME)
         return gdt_error_set(err, GDT_EUSAGE, 2103,
                              "--device only applies to a triangulation run (not --info or "
@@ -395,8 +404,11 @@ static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
 }
 
 /* SIGINT / SIGTERM ask the run to stop at its next check (between read
- * batches, tiles and output chunks); a second signal kills at once
- * (SA_RESETHAND). */
+ * batches, tiles and output chunks, and the steps of the start-up); a
+ * second signal kills at once (SA_RESETHAND).  The handlers are installed
+ * before anything else (gdt_cli_install_signal_handlers: main.c calls it
+ * from .preinit_array, before the libraries' initializers), so a signal
+ * kills by its default action only while the dynamic loader still runs. */
 static volatile sig_atomic_t g_stop;
 
 static void on_signal(int sig)
@@ -404,9 +416,21 @@ static void on_signal(int sig)
     g_stop = sig;
 }
 
-static void install_handlers(void)
+gdt_status gdt_cli_check_stop(const gdt_options *opts, const char *where, gdt_error *err)
 {
+    if (opts->stop == NULL || *opts->stop == 0)
+        return GDT_OK;
+    return gdt_error_set(err, GDT_EINTERRUPTED, 1303,
+                         "stopped by a signal during %s; nothing was written", where);
+}
+
+void gdt_cli_install_signal_handlers(void)
+{
+    static volatile sig_atomic_t installed;
     struct sigaction sa;
+    if (installed)
+        return;
+    installed = 1;
     memset(&sa, 0, sizeof sa);
     sa.sa_handler = on_signal;
     sigemptyset(&sa.sa_mask);
@@ -421,10 +445,12 @@ int gdt_cli_main(int argc, char **argv)
     gdt_error err;
     gdt_status st;
 
+    gdt_cli_install_signal_handlers();
     gdt_error_clear(&err);
     st = gdt_cli_parse(&opts, argc, argv, &err);
     if (st != GDT_OK)
         goto done;
+    opts.stop = &g_stop;
     switch (opts.mode) {
     case GDT_MODE_HELP:
         gdt_cli_print_help(stdout);
@@ -436,6 +462,13 @@ int gdt_cli_main(int argc, char **argv)
         break;
     }
     st = refuse_unavailable(&opts, &err);
+    if (st == GDT_OK)
+        st = gdt_cli_check_stop(&opts, "start-up", &err);
+    /* every path before any work; the tiled run checks its own (its job
+     * directory, and for --resume the paths the job recorded) */
+    if (st == GDT_OK && (opts.mode != GDT_MODE_RUN || opts.single_tile) &&
+        opts.mode != GDT_MODE_RESUME)
+        st = gdt_cli_check_paths(&opts, NULL, &err);
     if (st != GDT_OK)
         goto done;
     if (opts.mode == GDT_MODE_INFO) {
@@ -445,15 +478,13 @@ int gdt_cli_main(int argc, char **argv)
          * or reassociation: refuse to compute anything in a build that breaks it. */
         unsigned faults = 0;
         st = gdt_predicates_selftest(&faults, &err);
+        if (st == GDT_OK)
+            st = gdt_cli_check_stop(&opts, "start-up", &err);
         if (st == GDT_OK && opts.mode == GDT_MODE_REFERENCE) {
             st = gdt_cli_reference(&opts, &err);
         } else if (st == GDT_OK && opts.mode == GDT_MODE_RESUME) {
-            install_handlers();
-            opts.stop = &g_stop;
             st = gdt_cli_resume(&opts, &err);
         } else if (st == GDT_OK && opts.mode == GDT_MODE_RUN) {
-            install_handlers();
-            opts.stop = &g_stop;
             if (opts.single_tile) {
                 st = check_one_tile(&opts, &err);
                 if (st == GDT_OK)

@@ -62,6 +62,11 @@ void gdt_options_free(gdt_options *opts);
 /* Prints the full help text (usage, options with defaults, exit codes). */
 void gdt_cli_print_help(FILE *stream);
 
+/* Installs the SIGINT/SIGTERM handlers that set the stop flag of the runs
+ * (once; later calls do nothing).  gdt_cli_main calls it first; main() may
+ * call it earlier still. */
+void gdt_cli_install_signal_handlers(void);
+
 /* The whole program: parse, run the mode, print errors, return the exit code. */
 int gdt_cli_main(int argc, char **argv);
 

@@ -225,7 +225,11 @@ gdt_status gdt_cli_info(const gdt_options *opts, gdt_error *err)
                          gdt_cloud_input_info(cloud, i));
     }
     fflush(stdout);
-    st = scan_points(cloud, opts, &s, &log, err);
+    st = gdt_cli_check_stop(opts, "the reading", err);
+    if (st == GDT_OK)
+        st = scan_points(cloud, opts, &s, &log, err);
+    if (st == GDT_OK)
+        st = gdt_cli_check_stop(opts, "the reading", err);
     if (st != GDT_OK)
         goto fail;
     print_cloud(stdout, gdt_cloud_get_info(cloud), &s);

@@ -1,4 +1,5 @@
 #include "private/json_out.h"
+#include "gdt_outfile.h"
 
 #include <errno.h>
 #include <inttypes.h>
@@ -152,6 +153,8 @@ gdt_status gdt_json_close(gdt_json *j, gdt_error *err)
     if (st == GDT_OK && e != 0)
         st = gdt_error_set(err, GDT_EIO, 4102, "%s: cannot write the JSON summary: %s", j->path,
                            strerror(e));
+    if (st == GDT_OK)
+        st = gdt_outfile_check(j->path, err);
     if (st == GDT_OK && rename(j->tmp, j->path) != 0)
         st = gdt_error_set(err, GDT_EIO, 4103, "%s: cannot rename the JSON summary into place: %s",
                            j->path, strerror(errno));

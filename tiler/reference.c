@@ -75,6 +75,8 @@ gdt_status gdt_cli_reference(const gdt_options *opts, gdt_error *err)
     gdt_mesh_init(&mesh);
     gdt_log_init(&log, opts->verbosity);
     st = gdt_memcloud_load(&mc, opts, &log, "--reference", err);
+    if (st == GDT_OK)
+        st = gdt_cli_check_stop(opts, "the reading", err);
     if (st != GDT_OK)
         goto fail;
     s.points_read = mc.read;
@@ -88,6 +90,9 @@ gdt_status gdt_cli_reference(const gdt_options *opts, gdt_error *err)
         goto fail;
     s.faces = mesh.ntris;
     s.t_triangulate = gdt_now() - t0;
+    st = gdt_cli_check_stop(opts, "the triangulation", err);
+    if (st != GDT_OK)
+        goto fail;
 
     st = gdt_memcloud_finish(&mc, opts, &mesh, &s.rs.pred, &s.t_check, &s.t_write, &s.checked,
                              err);

@@ -8,6 +8,7 @@
  * Memory: about 150 bytes per point on the host, plus the device buffers of
  * the core (about 400 bytes per point, and up to 16 more per texel). */
 #include "private/single_tile.h"
+#include "private/cli_modes.h"
 #include "private/memcloud.h"
 
 #include <inttypes.h>
@@ -127,6 +128,8 @@ gdt_status gdt_cli_single_tile(const gdt_options *opts, gdt_error *err)
         return st;
 
     st = gdt_memcloud_load(&mc, opts, &log, "--single-tile", err);
+    if (st == GDT_OK)
+        st = gdt_cli_check_stop(opts, "the reading", err);
     if (st != GDT_OK)
         goto fail;
     s.points_read = mc.read;
@@ -139,6 +142,12 @@ gdt_status gdt_cli_single_tile(const gdt_options *opts, gdt_error *err)
     copt.device = opts->device;
     copt.log = &log;
     st = gdt_core_create(&core, &copt, err);
+    if (opts->stop != NULL && *opts->stop != 0) {
+        /* a signal during the kernel build; when the build failed, the
+         * signal was the cause (the compiler removes its files on it) */
+        gdt_error_clear(err);
+        st = gdt_cli_check_stop(opts, "the OpenCL start-up", err);
+    }
     if (st != GDT_OK)
         goto fail;
     s.device = gdt_core_device_name(core);
@@ -150,6 +159,9 @@ gdt_status gdt_cli_single_tile(const gdt_options *opts, gdt_error *err)
         goto fail;
     s.faces = mesh.ntris;
     s.t_triangulate = gdt_now() - t0;
+    st = gdt_cli_check_stop(opts, "the triangulation", err);
+    if (st != GDT_OK)
+        goto fail;
 
     st = gdt_memcloud_finish(&mc, opts, &mesh, &s.pred, &s.t_check, &s.t_write, &s.checked,
                              err);

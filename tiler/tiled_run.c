@@ -25,6 +25,7 @@
 #include "gdt_tiler.h"
 #include "private/job.h"
 #include "private/json_out.h"
+#include "private/outpaths.h"
 #include "private/progress.h"
 #include "private/run_stats.h"
 #include "private/tiled_files.h"
@@ -1414,6 +1415,10 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         goto fail;
     }
+    /* every path (those the job recorded, for --resume) before any work */
+    st = gdt_cli_check_paths(opts, c.job, err);
+    if (st != GDT_OK)
+        goto fail;
 
     /* the device while pass 1 runs */
     cstart.opts.device = opts->device;
@@ -1461,8 +1466,13 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     if (st != GDT_OK)
         goto fail;
     st = core_start_join(&cstart, &c.core, err);
-    if (st != GDT_OK && stopped(&c))
-        st = tr_interrupted(c.job, "pass 1", err); /* the same signal, as above */
+    if (stopped(&c)) {
+        /* a signal during the kernel build, reported now rather than at the
+         * next check; when the build failed, the signal was the cause: the
+         * kernel compiler removes its files on SIGINT/SIGTERM */
+        gdt_error_clear(err);
+        st = tr_interrupted(c.job, "the OpenCL start-up", err);
+    }
     if (st != GDT_OK)
         goto fail;
     snprintf(c.s.device, sizeof c.s.device, "%s", gdt_core_device_name(c.core));

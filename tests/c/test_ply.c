@@ -539,6 +539,46 @@ static void test_replace_and_abort(tctx *t)
     CHECK(t, gdt_ply_finish(NULL, &err) == GDT_EINTERNAL, "finish(NULL) accepted");
 }
 
+/* An output path that is, or becomes while the mesh is written, a FIFO or
+ * a symbolic link is never renamed over (a rename would replace the node
+ * or the link itself). */
+static void test_special_path_kept(tctx *t)
+{
+    const double xyz[9] = {1, 2, 3, 4, 5, 6, 7, 8, 9};
+    const int32_t tri[3] = {2, 0, 1};
+    gdt_ply_meta m = plain_meta();
+    char path[4200], link_path[4200];
+    gdt_ply_writer *w = NULL;
+    gdt_error err;
+    struct stat sb;
+
+    gdt_error_clear(&err);
+    path_in(t, path, sizeof path, "fifo.ply");
+    path_in(t, link_path, sizeof link_path, "link.ply");
+    CHECK(t, mkfifo(path, 0600) == 0, "mkfifo %s: %s", path, strerror(errno));
+    CHECK(t, symlink("fifo.ply", link_path) == 0, "symlink: %s", strerror(errno));
+    CHECK(t, gdt_ply_create(&w, path, &m, &err) == GDT_EIO && err.code == 4010 && w == NULL,
+          "create over a FIFO: %d %d %s", (int)err.status, err.code, err.msg);
+    gdt_error_clear(&err);
+    CHECK(t, gdt_ply_create(&w, link_path, &m, &err) == GDT_EIO && err.code == 4010,
+          "create over a link: %d %d %s", (int)err.status, err.code, err.msg);
+
+    /* the FIFO appears while the mesh is written */
+    unlink(path);
+    gdt_error_clear(&err);
+    w = NULL;
+    CHECK(t, gdt_ply_create(&w, path, &m, &err) == GDT_OK, "%s", err.msg);
+    if (w == NULL)
+        return;
+    gdt_ply_write_vertices(w, xyz, 3, &err);
+    gdt_ply_write_faces(w, tri, 1, &err);
+    CHECK(t, mkfifo(path, 0600) == 0, "mkfifo %s: %s", path, strerror(errno));
+    CHECK(t, gdt_ply_finish(w, &err) == GDT_EIO && err.code == 4010,
+          "finish over a FIFO: %d %d %s", (int)err.status, err.code, err.msg);
+    CHECK(t, lstat(path, &sb) == 0 && S_ISFIFO(sb.st_mode), "the FIFO was replaced");
+    CHECK(t, count_prefixed(t, "fifo.ply.tmp-") == 0, "temporary left after the refusal");
+}
+
 int main(int argc, char **argv)
 {
     tctx t;
@@ -562,6 +602,7 @@ int main(int argc, char **argv)
     test_misuse(&t);
     test_bad_meta(&t);
     test_replace_and_abort(&t);
+    test_special_path_kept(&t);
 
     int rc = gdt_check_finish(&t.c, "test_ply");
     if (rc == 0)

@@ -264,11 +264,14 @@ def test_write_error_removes_temporary_and_keeps_old_file(runner, ply_write, tmp
 
 @pytest.mark.sanitize
 def test_failed_rename_removes_temporary(runner, ply_write, tmp_path):
+    """A directory appears at the final path while the mesh is written: the
+    writer checks the path again before the rename and refuses to replace
+    anything but a regular file."""
     out = tmp_path / "out.ply"
     r = write(runner, ply_write, out, "--vertices", "100", "--faces", "50", "--quiet",
               "--block-final")
     assert r.returncode == 4, r.stderr
-    assert "GDT-4705" in r.stderr and "Is a directory" in r.stderr
+    assert "GDT-4010" in r.stderr and "is a directory" in r.stderr
     assert out.is_dir() and not any(out.iterdir())
     assert leftovers(tmp_path, "out.ply") == ["out.ply"]
 

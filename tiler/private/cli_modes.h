@@ -12,4 +12,9 @@ gdt_status gdt_cli_info(const gdt_options *opts, gdt_error *err);
  * written as the output PLY. */
 gdt_status gdt_cli_reference(const gdt_options *opts, gdt_error *err);
 
+/* GDT_EINTERRUPTED 1303 ("stopped by a signal during <where>") when
+ * opts->stop is set, else GDT_OK: the check between the steps of the modes
+ * that write nothing until their end. */
+gdt_status gdt_cli_check_stop(const gdt_options *opts, const char *where, gdt_error *err);
+
 #endif
