@@ -935,6 +935,7 @@ static gdt_status write_summary(const tr_ctx *c, gdt_error *err)
     gdt_json_uint(&j, "seam_triangles", s->merge.seam_triangles);
     gdt_json_uint(&j, "hull_vertices", s->merge.hull_vertices);
     gdt_json_uint(&j, "merge_rounds", s->merge.rounds);
+    gdt_json_uint(&j, "merge_deferred_rounds", s->merge.deferred);
     gdt_json_uint(&j, "merge_max_band_vertices", s->merge.max_band_vertices);
     gdt_json_uint(&j, "merge_peak_bytes", s->merge.peak_bytes);
     /* the band triangulations' Lawson flips (insertion and closing pass) */
