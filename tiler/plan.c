@@ -385,7 +385,7 @@ gdt_status tl_plan_finish(gdt_tiler *t, gdt_error *err)
         const uint64_t cap = (uint64_t)N * (uint64_t)N / 4;
         const uint64_t need = (p->points + cap - 1) / cap;
         if (t->ntiles > THIN_SURPLUS * need)
-            gdt_log_warn(t->log, 2507,
+            gdt_log_warn(t->log, 2508,
                          "--cell %.6g makes %" PRIu64 " tiles of %.1f points on average for "
                          "%" PRIu64 " points, where a tile of %" PRId64 " texels is planned "
                          "for %" PRIu64 ": leave --cell out (automatic), or give a larger "
