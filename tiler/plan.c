@@ -227,9 +227,9 @@ gdt_status tl_plan_finish(gdt_tiler *t, gdt_error *err)
          * makes more than THIN_SURPLUS times the tiles the points need, the
          * doubling cuts the tiles by a quarter at least, the densest tile
          * stays within N^2/4 and the texel within the median point spacing
-         * (points sharing texels cost the core more than tiles do).  A cloud that fills its tiles keeps its
-         * texel: at twice the texel its densest tile would hold about four
-         * times N^2/4. */
+         * (points sharing texels cost the core more than tiles do).  A
+         * cloud that fills its tiles keeps its texel: at twice the texel its
+         * densest tile would hold about four times N^2/4. */
         if (c >= 1 && p->points > 0) {
             const uint64_t cap = (uint64_t)N * (uint64_t)N / 4;
             const uint64_t need = (p->points + cap - 1) / cap;
