@@ -354,7 +354,10 @@ static int las_lattice_usable(const gdt_source_info *in)
 {
     return in->format == GDT_FORMAT_LAS && in->has_lattice && isfinite(in->scale[0]) &&
            isfinite(in->scale[1]) && in->scale[0] > 0.0 && in->scale[1] > 0.0 &&
-           isfinite(in->offset[0]) && isfinite(in->offset[1]);
+           isfinite(in->offset[0]) && isfinite(in->offset[1]) &&
+           /* every int32 record maps to a finite CRS coordinate (the PLY's) */
+           isfinite(fabs(in->offset[0]) + in->scale[0] * 2147483648.0) &&
+           isfinite(fabs(in->offset[1]) + in->scale[1] * 2147483648.0);
 }
 
 /* Planar cloud: lattice of the first LAS input, else the quantum lattice. */
@@ -712,4 +715,42 @@ void gdt_cloud_close(gdt_cloud *cloud)
     free(cloud->px);
     free(cloud->py);
     free(cloud);
+}
+
+/* v rounded up to two significant digits (v > 0, finite). */
+static double round_up_2(double v)
+{
+    double p = pow(10.0, floor(log10(v)) - 1.0);
+    return ceil(v / p * (1.0 - 1e-12)) * p;
+}
+
+gdt_status gdt_cloud_check_span(const gdt_cloud *cloud, int64_t wx, int64_t wy,
+                                const char *what, gdt_error *err)
+{
+    const gdt_lattice *L = &cloud->info.lattice;
+    const int64_t lim = INT32_MAX;
+    double grow, sx, sy;
+
+    if (wx <= lim && wy <= lim)
+        return GDT_OK;
+    /* the step that brings the wider axis within the limit, on both axes */
+    grow = (double)(wx > wy ? wx : wy) / (double)lim;
+    sx = round_up_2(L->sx * grow);
+    sy = round_up_2(L->sy * grow);
+    if (cloud->info.lattice_native)
+        return gdt_error_set(
+            err, GDT_EINPUT, 3406,
+            "%s: the cloud spans %" PRId64 " x %" PRId64 " lattice steps; %s handles at most "
+            "2^31 - 1 steps per axis, %.6g x %.6g CRS units on this lattice, whose step is "
+            "the scale of the LAS input %s (--quantum does not apply to LAS input): split the "
+            "input into areas at most that wide, or rewrite it with a LAS scale of at least "
+            "%.2g x %.2g",
+            cloud->in[0].path, wx, wy, what, L->sx * (double)lim, L->sy * (double)lim,
+            cloud->in[cloud->info.lattice_input].path, sx, sy);
+    return gdt_error_set(err, GDT_EINPUT, 3406,
+                         "%s: the cloud spans %" PRId64 " x %" PRId64 " lattice steps; %s "
+                         "handles at most 2^31 - 1 steps per axis, %.6g CRS units with "
+                         "--quantum %.17g: use --quantum %.2g or coarser, or split the input "
+                         "into areas at most that wide",
+                         cloud->in[0].path, wx, wy, what, L->sx * (double)lim, L->sx, sx);
 }

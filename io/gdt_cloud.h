@@ -43,7 +43,8 @@
  *
  * Message numbers: 2401 (no input, bad quantum); 3401 (coordinate not
  * finite), 3402 (lattice integer out of range), 3404 (LAS point count
- * differs from the header), 3405 (input changed since open), 3410 (different
+ * differs from the header), 3405 (input changed since open), 3406 (a cloud
+ * wider than 2^31 - 1 lattice steps, gdt_cloud_check_span), 3410 (different
  * CRSs), 3411 (geographic with projected), 3412 (CRSs that cannot be shown
  * equal), 3460 (header bounds not lon/lat), 3461 (a point cannot be
  * projected); warnings 3420 (LAS input snapped onto a foreign lattice), 3421
@@ -160,6 +161,14 @@ gdt_status gdt_cloud_read(gdt_cloud *cloud, gdt_point *buf, size_t cap, size_t *
 gdt_status gdt_cloud_rewind(gdt_cloud *cloud, gdt_error *err);
 /* cloud may be NULL. */
 void gdt_cloud_close(gdt_cloud *cloud);
+
+/* Checks that a cloud spanning wx x wy lattice steps (max - min per axis)
+ * fits the 2^31 - 1 steps per axis that `what` (a mode or stage, for the
+ * message) handles.  returns: GDT_EINPUT 3406 when it does not, with the
+ * limit in CRS units and advice that works for the lattice's kind (a LAS
+ * lattice is the file's scale, which --quantum does not change). */
+gdt_status gdt_cloud_check_span(const gdt_cloud *cloud, int64_t wx, int64_t wy,
+                                const char *what, gdt_error *err);
 
 /* In-memory duplicate merge: sorts pts by (x, y), keeps one point per (x, y)
  * and compacts the array in (x, y) order into pts[0 .. *kept).  The z of the

@@ -147,6 +147,25 @@
  * contradicts I3.  Both are reported as internal errors (7811) instead of
  * writing a wrong mesh.
  *
+ * Deferred rows.  Nothing above needs a row to be the tiles of one j:
+ * only that rows are runs of consecutive tiles in tile order (so Q_{r+1}
+ * holds every later point, and a tile neighbour of a certified triangle
+ * across a barrier edge of the row is a tile of that row or a later one),
+ * and the argument for I3 uses only that.  So a round may join its row to
+ * the next round's, which then triangulates W'_{r-1} u S_r u S_{r+1} with
+ * the walls of both rows: that is the proof run on rows r and r + 1 taken
+ * as one.  The merger defers a row (not the last) that brings fewer than
+ * half as many vertices as the previous triangulated round kept; such a
+ * round triangulates nothing and emits nothing, and its y_next is not
+ * used (the floor of later vertices stays the one of the last
+ * triangulated round, which is lower).  Each triangulated band but the
+ * last then holds at most three times the vertices that joined it since
+ * the previous one, so all triangulations together take at most 4 |U|
+ * vertices, even when the band keeps nearly all it holds (a strip
+ * a few lattice steps wide, every point of which is a hull point); rows
+ * that bring at least half the carried band are merged one by one as
+ * before.
+ *
  * Memory: a round holds W_r, DT(W_r) and the walls (about 200 bytes per
  * band vertex).  W'_r is the pending triangles' vertices (those whose disk
  * reaches into Q_{r+1}: about the northern seam of one row, more where
@@ -214,7 +233,9 @@ typedef struct gdt_merge_stats {
     uint64_t faces;             /* emitted */
     uint64_t hull_vertices;     /* vertices on the hull of the last round's band
                                    (= the hull of U = the hull of P) */
-    uint64_t rounds;            /* rounds run */
+    uint64_t rounds;            /* rounds run (one per row) */
+    uint64_t deferred;          /* of those, rounds whose row joined the next
+                                   round's band untriangulated */
     uint64_t max_band_vertices; /* largest |W_r| */
     uint64_t max_walls;         /* largest number of walls of a round */
     uint64_t peak_bytes;        /* largest memory held by the merger's own arrays at

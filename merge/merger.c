@@ -47,6 +47,8 @@ struct gdt_merger {
     size_t cap_stack;
     uint64_t *faces;
     size_t cap_faces;
+    size_t nw_carried;    /* band vertices handed on by the last triangulated round */
+    size_t nwall_carried; /* walls handed on by it (the first walls of the list) */
     uint64_t last_id; /* largest id so far (valid when have_id) */
     int64_t x0, x1;   /* every vertex has x0 <= x <= x1 */
     int64_t y_floor;  /* every vertex of later rounds has y >= y_floor (the
@@ -278,6 +280,15 @@ gdt_status gdt_merger_round(gdt_merger *m, const gdt_seam *row, int64_t y_next, 
         m->st.max_band_vertices = m->nw;
     if (m->nwall > m->st.max_walls)
         m->st.max_walls = m->nwall;
+    /* A row that adds fewer than half as many vertices as the band carries
+     * joins the next round's band instead (gdt_seam.h, "Deferred rows"):
+     * the triangulations then cost O(|U|) vertices in all, where a band
+     * that keeps most of its vertices (a strip whose every point is a hull
+     * point) would cost O(|U|) per row. */
+    if (!last && 2 * (m->nw - m->nw_carried) < m->nw_carried) {
+        m->st.deferred++;
+        return GDT_OK;
+    }
 
     if (grow((void **)&m->pts, &m->cap_pts, m->nw + 1, sizeof *m->pts) != 0) {
         st = no_memory(err);
@@ -329,7 +340,7 @@ gdt_status gdt_merger_round(gdt_merger *m, const gdt_seam *row, int64_t y_next, 
             st = gdt_error_set(err, GDT_EINTERNAL, 7811,
                                "%s edge %llu-%llu is not an edge of the seam triangulation "
                                "of round %llu: a certified triangle is not Delaunay",
-                               k < m->nwall - row->ne ? "border" : "barrier",
+                               k < m->nwall_carried ? "border" : "barrier",
                                (unsigned long long)m->wall[k].a, (unsigned long long)m->wall[k].b,
                                (unsigned long long)m->st.rounds);
             goto fail;
@@ -460,6 +471,8 @@ gdt_status gdt_merger_round(gdt_merger *m, const gdt_seam *row, int64_t y_next, 
         m->finished = 1;
         m->nw = 0;
         m->nwall = 0;
+        m->nw_carried = 0;
+        m->nwall_carried = 0;
     } else {
         gdt_seam_edge *swap = m->wall;
         size_t cap = m->cap_wall;
@@ -477,6 +490,8 @@ gdt_status gdt_merger_round(gdt_merger *m, const gdt_seam *row, int64_t y_next, 
         m->next = swap;
         m->cap_next = cap;
         m->nnext = 0;
+        m->nw_carried = m->nw;
+        m->nwall_carried = m->nwall;
     }
     m->st.t_classify += now_s() - t0;
     *faces_out = m->faces;

@@ -74,8 +74,8 @@ gdt_status gdt_seam_extract(gdt_seam *s, const gdt_mesh *m, const uint8_t *cert,
         if (x < 0 || y < 0 || x > GDT_COORD_MAX || y > GDT_COORD_MAX) {
             st = gdt_error_set(err, GDT_EINPUT, 3811,
                                "the cloud spans more than 2^31 - 1 lattice steps on an axis "
-                               "(point at %lld, %lld from its corner); the seam merge needs "
-                               "a coarser --quantum",
+                               "(point at %lld, %lld from its corner), more than the seam "
+                               "merge handles",
                                (long long)x, (long long)y);
             goto fail;
         }

@@ -6,8 +6,10 @@
  *  - "density": voxel (vx, vy, 0) holds the number of points with
  *    floor(x / V) = vx and floor(y / V) = vy, V = 2^density_shift lattice
  *    steps (absolute voxel indices, |vx|, |vy| < 2^30).
- * The grids' transforms map voxel centres to CRS coordinates, and the
- * metadata (gdt_vdb_meta, as int64, double and string metadata named
+ * The grids' transforms map voxel centres to lattice coordinates (a world
+ * unit is one lattice step: CRS x = gdt_lattice_ox + gdt_lattice_sx * world
+ * x, y likewise, as the string metadata "gdt_world" says; in lattice units
+ * no valid lattice gives a transform OpenVDB refuses), and the metadata (gdt_vdb_meta, as int64, double and string metadata named
  * "gdt_<field>" on both grids) makes the file self-describing.  The tiler
  * accumulates the density in a bounded histogram while it streams
  * (density.c) and fills both grids at the end of pass 1.

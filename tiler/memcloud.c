@@ -77,12 +77,11 @@ gdt_status gdt_memcloud_load(gdt_memcloud *mc, const gdt_options *opts, gdt_log 
         if (p->y < mc->min_y) mc->min_y = p->y;
         if (p->y > max_y) max_y = p->y;
     }
-    if (mc->kept > 0 && (max_x - mc->min_x > GDT_COORD_MAX || max_y - mc->min_y > GDT_COORD_MAX))
-        return gdt_error_set(err, GDT_EINPUT, 3401,
-                             "%s: the cloud spans %" PRId64 " x %" PRId64 " lattice steps; %s "
-                             "handles at most 2^31-1 per axis (use a coarser --quantum or the "
-                             "tiled pipeline)",
-                             opts->inputs[0], max_x - mc->min_x, max_y - mc->min_y, mode);
+    if (mc->kept > 0) {
+        st = gdt_cloud_check_span(mc->cloud, max_x - mc->min_x, max_y - mc->min_y, mode, err);
+        if (st != GDT_OK)
+            return st;
+    }
     mc->local = malloc((mc->kept > 0 ? mc->kept : 1) * sizeof *mc->local);
     if (mc->local == NULL)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");

@@ -11,6 +11,9 @@
  *     than N^2/4 points, but not below c_real / sqrt 2 (at most about twice
  *     the tiles): the tile stage's memory follows the densest tile, so this
  *     keeps it a function of N rather than of the cloud
+ *     then doubled while a thin cloud (a strip) makes more than 8 times the
+ *     tiles its points need, the tiles shrink, the densest stays within
+ *     N^2/4 and the texel within the spacing s (see THIN_SURPLUS)
  *   auto halo  H = ceil(8 s / c), s = 2^e / sqrt(median voxel count at e),
  *     clamped to [1, N/2] and to (N + 2H) c <= 2^31
  *   tiles      auto cell: sum of the voxels of each tile (exact, V | T);
@@ -31,6 +34,8 @@
 #define LOCAL_LIMIT (INT64_C(1) << 31) /* (N + 2H) * c may not exceed this */
 #define EST_MEAN 16                    /* points per voxel at the estimate level */
 #define HALO_SPACINGS 8.0              /* auto halo, in point spacings */
+#define THIN_SURPLUS 8                 /* auto cell: tiles per N^2/4 points before
+                                          a thin cloud gets a coarser texel */
 
 typedef struct vox {
     int64_t x, y;
@@ -104,8 +109,10 @@ static void vox_coarsen(vox_list *l)
     l->n = out;
 }
 
-/* Largest number of points in one tile of r x r voxels (r = T / V). */
-static gdt_status densest_tile(const vox_list *base, int64_t r, uint64_t *max, gdt_error *err)
+/* Largest number of points in one tile of r x r voxels (r = T / V); the
+ * number of non-empty tiles in *tiles when tiles is not NULL. */
+static gdt_status densest_tile(const vox_list *base, int64_t r, uint64_t *max, size_t *tiles,
+                               gdt_error *err)
 {
     tl_map m = {0};
     gdt_status st = GDT_OK;
@@ -117,6 +124,8 @@ static gdt_status densest_tile(const vox_list *base, int64_t r, uint64_t *max, g
         if (st == GDT_OK && (*v += base->v[k].n) > *max)
             *max = *v;
     }
+    if (tiles != NULL)
+        *tiles = m.n;
     tl_map_free(&m);
     return st;
 }
@@ -204,13 +213,39 @@ gdt_status tl_plan_finish(gdt_tiler *t, gdt_error *err)
             double cfloor = creal / sqrt(2.0);
             while (c - q >= q && (double)(c - q) >= cfloor) {
                 uint64_t densest;
-                st = densest_tile(&base, (N * c) >> shift, &densest, err);
+                st = densest_tile(&base, (N * c) >> shift, &densest, NULL, err);
                 if (st != GDT_OK)
                     goto fail;
                 if (densest <= cap)
                     break;
                 c -= q;
             }
+        }
+        /* A cloud thinner than a tile (a strip, a line) fills its tiles far
+         * below N^2/4 points at that texel, and the tile count then follows
+         * its length rather than its points.  Double the texel while the plan
+         * makes more than THIN_SURPLUS times the tiles the points need, the
+         * doubling cuts the tiles by a quarter at least, the densest tile
+         * stays within N^2/4 and the texel within the median point spacing
+         * (points sharing texels cost the core more than tiles do).  A
+         * cloud that fills its tiles keeps its texel: at twice the texel its
+         * densest tile would hold about four times N^2/4. */
+        if (c >= 1 && p->points > 0) {
+            const uint64_t cap = (uint64_t)N * (uint64_t)N / 4;
+            const uint64_t need = (p->points + cap - 1) / cap;
+            uint64_t densest;
+            size_t tiles, tiles2;
+            st = densest_tile(&base, (N * c) >> shift, &densest, &tiles, err);
+            while (st == GDT_OK && tiles > THIN_SURPLUS * need && 2 * c <= cmax &&
+                   (double)(2 * c) <= spacing) {
+                st = densest_tile(&base, (N * 2 * c) >> shift, &densest, &tiles2, err);
+                if (st != GDT_OK || densest > cap || 4 * tiles2 > 3 * tiles)
+                    break;
+                c *= 2;
+                tiles = tiles2;
+            }
+            if (st != GDT_OK)
+                goto fail;
         }
         if (c < 1) {
             st = gdt_error_set(err, GDT_EUSAGE, 2502,
@@ -344,6 +379,20 @@ gdt_status tl_plan_finish(gdt_tiler *t, gdt_error *err)
         p->max_points = counts[t->ntiles - 1];
     }
     p->empty_tiles = (uint64_t)p->nx * (uint64_t)p->ny - t->ntiles;
+    /* A given --cell far below the one the cloud needs: tiles with a few
+     * points each, whose per-tile costs then dominate the run. */
+    if (t->user_cell > 0 && p->points > 0) {
+        const uint64_t cap = (uint64_t)N * (uint64_t)N / 4;
+        const uint64_t need = (p->points + cap - 1) / cap;
+        if (t->ntiles > THIN_SURPLUS * need)
+            gdt_log_warn(t->log, 2508,
+                         "--cell %.6g makes %" PRIu64 " tiles of %.1f points on average for "
+                         "%" PRIu64 " points, where a tile of %" PRId64 " texels is planned "
+                         "for %" PRIu64 ": leave --cell out (automatic), or give a larger "
+                         "--cell or --tile",
+                         (double)p->cell * p->lattice.sx, t->ntiles,
+                         (double)p->points / (double)t->ntiles, p->points, N, cap);
+    }
 fail:
     free(base.v);
     free(counts);

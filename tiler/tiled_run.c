@@ -954,6 +954,7 @@ static gdt_status write_summary(const tr_ctx *c, gdt_error *err)
     gdt_json_uint(&j, "seam_triangles", s->merge.seam_triangles);
     gdt_json_uint(&j, "hull_vertices", s->merge.hull_vertices);
     gdt_json_uint(&j, "merge_rounds", s->merge.rounds);
+    gdt_json_uint(&j, "merge_deferred_rounds", s->merge.deferred);
     gdt_json_uint(&j, "merge_max_band_vertices", s->merge.max_band_vertices);
     gdt_json_uint(&j, "merge_peak_bytes", s->merge.peak_bytes);
     /* the band triangulations' Lawson flips (insertion and closing pass) */
@@ -1478,6 +1479,13 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     snprintf(c.s.device, sizeof c.s.device, "%s", gdt_core_device_name(c.core));
     c.plan = gdt_tiler_get_plan(c.tiler);
     c.s.t_pass1 = gdt_tiler_get_stats(c.tiler)->t_pass1;
+    /* the seam merge's frame is the lattice minus the plan's minimum: a
+     * wider cloud is refused before the tile stage, not at its end */
+    if (c.plan->points > 0 &&
+        (st = gdt_cloud_check_span(c.cloud, c.plan->max_x - c.plan->min_x,
+                                   c.plan->max_y - c.plan->min_y, "the tiled run",
+                                   err)) != GDT_OK)
+        goto fail;
     t0 = gdt_now();
     st = gdt_job_stage_done(c.jobdb, "pass2", &done, err);
     if (st != GDT_OK)

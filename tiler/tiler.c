@@ -175,8 +175,15 @@ gdt_status gdt_tiler_create(gdt_tiler **out, const gdt_tiler_opts *opts, gdt_clo
                                opts->cell, c, n);
             goto fail;
         }
-        if (r < 1.0)
-            r = 1.0;
+        /* a texel is a whole number of lattice steps: below one there is
+         * no texel to round to that keeps the tiles the user asked for */
+        if (c < 1.0 - 1e-9) {
+            st = gdt_error_set(err, GDT_EUSAGE, 2507,
+                               "--cell %.17g is %.6g lattice steps; the cloud's lattice step "
+                               "is %.17g CRS units, the smallest --cell",
+                               opts->cell, c, ci->lattice.sx);
+            goto fail;
+        }
         if (fabs(c - r) > 1e-9 * r)
             gdt_log_note(t->log, "tiler: --cell %.17g is %.17g lattice steps; using %.0f", opts->cell,
                          c, r);

@@ -44,13 +44,17 @@ gdt_status fail_from_exception(gdt_error *err, const char *what)
     }
 }
 
-openvdb::math::Transform::Ptr make_transform(double sx, double sy, double ox, double oy,
-                                             double cells, double base_x, double base_y)
+// The grids' world space is the lattice: a world unit is one lattice step,
+// so the transform depends on the plan alone and any lattice (a scale of
+// 1e-9 degrees as well as one of 1000 m) gives a transform OpenVDB accepts
+// (its maps refuse scales below about 1.4e-5).  Voxel (u, v) covers lattice
+// [(base + u) * cells, (base + u + 1) * cells): its centre is at world
+// (base + u + 0.5) * cells, and at CRS ox + sx * world (gdt_lattice_* and
+// gdt_world metadata).
+openvdb::math::Transform::Ptr make_transform(double cells, double base_x, double base_y)
 {
-    // Voxel (u, v) covers lattice [(base + u) * cells, (base + u + 1) * cells):
-    // its centre is at CRS ox + sx * cells * (base + u + 0.5).
-    openvdb::Vec3d scale(sx * cells, sy * cells, sx * cells);
-    openvdb::Vec3d trans(ox + sx * cells * (base_x + 0.5), oy + sy * cells * (base_y + 0.5), 0.0);
+    openvdb::Vec3d scale(cells, cells, cells);
+    openvdb::Vec3d trans(cells * (base_x + 0.5), cells * (base_y + 0.5), 0.0);
     openvdb::math::MapBase::Ptr map(new openvdb::math::ScaleTranslateMap(scale, trans));
     return openvdb::math::Transform::Ptr(new openvdb::math::Transform(map));
 }
@@ -70,6 +74,8 @@ void put_meta(openvdb::GridBase &g, const gdt_vdb_meta *m)
     g.insertMeta("gdt_lattice_ox", openvdb::DoubleMetadata(m->lattice.ox));
     g.insertMeta("gdt_lattice_oy", openvdb::DoubleMetadata(m->lattice.oy));
     g.insertMeta("gdt_dup", openvdb::StringMetadata(m->dup != nullptr ? m->dup : "first"));
+    g.insertMeta("gdt_world", openvdb::StringMetadata("lattice steps: CRS x = gdt_lattice_ox + "
+                                                      "gdt_lattice_sx * world x, y likewise"));
 }
 
 int64_t get_i64(const openvdb::GridBase &g, const char *name)
@@ -182,16 +188,15 @@ extern "C" gdt_status gdt_vdb_index_write(gdt_vdb_index *ix, const gdt_vdb_meta 
                                           const char *path, gdt_error *err)
 {
     try {
-        const gdt_lattice &L = meta->lattice;
         double v = std::ldexp(1.0, int(meta->density_shift));
         openvdb::Int64Grid::Ptr density = ix->density;
         openvdb::Int64Grid::Ptr tiles = ix->tiles;
         density->setName("density");
-        density->setTransform(make_transform(L.sx, L.sy, L.ox, L.oy, v, 0.0, 0.0));
+        density->setTransform(make_transform(v, 0.0, 0.0));
         density->setGridClass(openvdb::GRID_UNKNOWN);
         tiles->setName("tile_points");
-        tiles->setTransform(make_transform(L.sx, L.sy, L.ox, L.oy, double(meta->span),
-                                           double(meta->tile_i0), double(meta->tile_j0)));
+        tiles->setTransform(
+            make_transform(double(meta->span), double(meta->tile_i0), double(meta->tile_j0)));
         tiles->setGridClass(openvdb::GRID_UNKNOWN);
         put_meta(*density, meta);
         put_meta(*tiles, meta);

@@ -331,7 +331,7 @@ done:
 }
 
 typedef struct case_result {
-    uint64_t seam, band, rounds;
+    uint64_t seam, band, rounds, deferred;
 } case_result;
 
 /* The whole check of one point set (see the file comment). */
@@ -430,6 +430,7 @@ static void run_case_rule(gdt_checks *ck, const char *label, cloud *c, int64_t s
     res->seam = ms_rows.seam_vertices;
     res->band = ms_rows.max_band_vertices;
     res->rounds = ms_rows.rounds;
+    res->deferred = ms_rows.deferred;
 done:
     free(pts);
     free(all);
@@ -607,6 +608,18 @@ static void test_layouts(gdt_checks *ck)
         add(&c, 103, 5 * q + 2);
     }
     run_case(ck, "thin column", &c, 64, 1, &r);
+    c.n = 0;
+    /* two lattice columns, every y: every point is a hull point and stays in
+     * the band, so most rows join the next round untriangulated */
+    for (int64_t q = 0; q < 3000; q++) {
+        add(&c, 0, q);
+        add(&c, 1, q);
+    }
+    run_case(ck, "two columns", &c, 64, 2, &r);
+    GDT_CHECK(ck, r.band == r.seam && r.rounds > 40 && 2 * r.deferred > r.rounds,
+              "two columns: band %" PRIu64 " of %" PRIu64 ", %" PRIu64 " of %" PRIu64
+              " rounds deferred",
+              r.band, r.seam, r.deferred, r.rounds);
     c.n = 0;
     /* tiny sets */
     for (size_t n = 1; n <= 5; n++) {

@@ -268,6 +268,8 @@ def parse_dump(text):
             density[(int(f[1]), int(f[2]))] = int(f[3])
         elif f[0] == "meta":
             meta[(f[1], f[2])] = f[3]
+        elif f[0] == "xform":
+            meta[(f[1], "xform")] = tuple(float(v) for v in f[2:5])
     return tiles, density, meta
 
 
@@ -298,6 +300,12 @@ def test_index_vdb_holds_pass2_counts(runner, tiler_run, vdb_dump, cloud_las, tm
         per_tile[key] = per_tile.get(key, 0) + n
     assert per_tile == spilled
     assert len(density) == p["voxels"]
+    # Transforms in lattice steps: voxel (0, 0) of tile_points is the centre
+    # of tile (i0, j0), that of density the centre of density voxel (0, 0).
+    T = p["span"]
+    assert meta[("tile_points", "xform")] == (T, T * (i0 + 0.5), T * (j0 + 0.5))
+    assert meta[("density", "xform")] == (V, V / 2, V / 2)
+    assert meta[("tile_points", "gdt_world")] == "lattice"
 
 
 def test_auto_cell_and_printed_plan(runner, tiler_run, tmp_path):

@@ -2,6 +2,8 @@
 // (openvdb::io::File), independently of the tiler's code, and prints:
 //   grid NAME voxels N leaves L           for every grid in the file
 //   meta GRID NAME VALUE                  for every metadata item "gdt_*"
+//   xform GRID SIZE X Y                   voxel size and the world position of
+//                                         voxel (0, 0, 0)'s centre
 //   tile CI CJ COUNT                      every active voxel of "tile_points"
 //   density VX VY COUNT                   every active voxel of "density" (with --density)
 // Exit status: 0 ok, 3 the file cannot be read or lacks a grid, 2 usage.
@@ -52,6 +54,12 @@ int main(int argc, char **argv)
                         (unsigned long long)g->activeVoxelCount(),
                         (unsigned long long)g->baseTree().leafCount());
             print_meta(*g);
+            {
+                const openvdb::math::Transform &xf = g->transform();
+                openvdb::Vec3d o = xf.indexToWorld(openvdb::Vec3d(0.0, 0.0, 0.0));
+                std::printf("xform %s %.17g %.17g %.17g\n", g->getName().c_str(),
+                            xf.voxelSize()[0], o[0], o[1]);
+            }
             if (g->getName() == "tile_points")
                 tiles = openvdb::gridPtrCast<openvdb::Int64Grid>(g);
             else if (g->getName() == "density")
