@@ -1711,11 +1711,26 @@ fail:
     gdt_core_destroy(c.core);
     gdt_tiler_destroy(c.tiler);
     gdt_cloud_close(c.cloud);
+    /* A failed run (not an interrupted one, which says the job stays) of a
+     * job that holds no finished work leaves nothing behind: there is
+     * nothing to resume, and a failure such as a bad input or a refused
+     * option must not leave files the user did not ask for.  Its files go,
+     * and the directory too if a run of this job made it.  A journal that
+     * cannot be asked counts as work. */
+    if (st != GDT_OK && st != GDT_EINTERRUPTED && c.lock_fd >= 0) {
+        int has = 1;
+        gdt_error e3;
+        gdt_error_clear(&e3);
+        if (c.jobdb == NULL)
+            has = gdt_job_exists(c.job);
+        else if (gdt_job_has_work(c.jobdb, &has, &e3) != GDT_OK)
+            has = 1;
+        gdt_job_close(c.jobdb);
+        c.jobdb = NULL;
+        if (!has)
+            remove_job_files(c.job, 1, own_dir);
+    }
     gdt_job_close(c.jobdb);
-    /* a directory of this job left without a journal (the journal could
-     * not be created) holds nothing to resume: it goes */
-    if (st != GDT_OK && own_dir && c.lock_fd >= 0 && c.jobdb == NULL && !gdt_job_exists(c.job))
-        remove_job_files(c.job, 1, 1);
     gdt_job_unlock(c.job, c.lock_fd, 0);
     free(c.tiles_dir);
     free(c.job);

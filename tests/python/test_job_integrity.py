@@ -337,6 +337,8 @@ def test_empty_input_then_the_right_one(jobs, tmp_path, fix):
     job = tmp_path / "job"
     r = run(case.cmd(las, out, "--job", job))
     assert r.returncode == 3, f"empty input: exit {r.returncode}\n{r.stderr}"
+    # a run that finished nothing leaves nothing behind
+    assert not job.exists(), f"the failed run left {ru.listing(job)}"
     if fix == "same-path":
         shutil.copyfile(case.las, las)
     else:
@@ -346,6 +348,25 @@ def test_empty_input_then_the_right_one(jobs, tmp_path, fix):
     assert r.returncode == 0, f"{ru.shell(cmd)} after an empty input: exit {r.returncode}\n" \
                               f"{r.stderr}"
     case.assert_same(out, "the corrected rerun")
+
+
+@pytest.mark.sanitize
+def test_refused_option_leaves_no_job_files(jobs, tmp_path):
+    """A run refused after it took the job (a --cell below the lattice
+    step) removes what it made: the default job directory goes, a given
+    one is emptied of the job's files and kept."""
+    case = jobs.case
+    out = tmp_path / "out.ply"
+    r = run(case.cmd(case.las, out, "--cell", "1e-9"))
+    assert r.returncode == 2, f"--cell 1e-9: exit {r.returncode}\n{r.stderr}"
+    default = tmp_path / "out.ply.gdt-job"
+    assert not default.exists(), f"the refused run left {ru.listing(default)}"
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    r = run(case.cmd(case.las, out, "--cell", "1e-9", "--job", mine))
+    assert r.returncode == 2, r.stderr
+    assert mine.is_dir() and ru.listing(mine) == [], ru.listing(mine)
+    assert not out.exists()
 
 
 # A job directory on a tmpfs of SIZE: the run fails (exit 4); with the
