@@ -405,10 +405,9 @@ static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
 
 /* SIGINT / SIGTERM ask the run to stop at its next check (between read
  * batches, tiles and output chunks, and the steps of the start-up); a
- * second signal kills at once (SA_RESETHAND).  The handlers are installed
- * before anything else (gdt_cli_install_signal_handlers: main.c calls it
- * from .preinit_array, before the libraries' initializers), so a signal
- * kills by its default action only while the dynamic loader still runs. */
+ * second signal kills at once (SA_RESETHAND).  The gdt-tile executable
+ * installs its handlers before it loads this library (main.c), and calls
+ * gdt_cli_main_stop with their flag; gdt_cli_main installs these. */
 static volatile sig_atomic_t g_stop;
 
 static void on_signal(int sig)
@@ -441,16 +440,21 @@ void gdt_cli_install_signal_handlers(void)
 
 int gdt_cli_main(int argc, char **argv)
 {
+    gdt_cli_install_signal_handlers();
+    return gdt_cli_main_stop(argc, argv, &g_stop);
+}
+
+int gdt_cli_main_stop(int argc, char **argv, volatile sig_atomic_t *stop)
+{
     gdt_options opts;
     gdt_error err;
     gdt_status st;
 
-    gdt_cli_install_signal_handlers();
     gdt_error_clear(&err);
     st = gdt_cli_parse(&opts, argc, argv, &err);
     if (st != GDT_OK)
         goto done;
-    opts.stop = &g_stop;
+    opts.stop = stop;
     switch (opts.mode) {
     case GDT_MODE_HELP:
         gdt_cli_print_help(stdout);

@@ -17,6 +17,7 @@ No test here ever names /dev/null or another shared special file as an
 output: the special files they use are made in the test's own directory.
 """
 import os
+import shutil
 import signal
 import stat
 import subprocess
@@ -348,9 +349,8 @@ def assert_interrupted(rc, err, what):
 @pytest.mark.parametrize("delay_ms", [0, 10, 30, 50])
 @pytest.mark.parametrize("mode", ["tiled", "reference", "info"])
 def test_signal_at_start_up(gdt_bin, big_cloud, tmp_path, sig, delay_ms, mode):
-    """From the moment the program runs its first code (its handlers are
-    installed before the libraries' initializers), a signal stops every mode
-    with 130 and 'interrupted', never the default action."""
+    """From the moment the handlers are seen installed, a signal stops every
+    mode with 130 and 'interrupted', never the default action."""
     args = {"tiled": ["--tile", "1024"], "reference": ["--reference"],
             "info": ["--info"]}[mode]
     rc, err = signal_after_start([gdt_bin, big_cloud, *args, "-o", tmp_path / "o.ply"], sig,
@@ -358,6 +358,45 @@ def test_signal_at_start_up(gdt_bin, big_cloud, tmp_path, sig, delay_ms, mode):
     assert_interrupted(rc, err, f"{mode} + {sig.name} at +{delay_ms} ms")
     if rc == 130:
         assert not (tmp_path / "o.ply").exists()
+
+
+def signal_after_spawn(cmd, sig, delay, limit=60):
+    """Starts cmd, sleeps delay seconds from the moment it was spawned (no
+    look at its handlers), sends sig; returns (returncode, stderr)."""
+    p = subprocess.Popen([str(c) for c in cmd], stdout=subprocess.DEVNULL,
+                         stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(delay)
+        p.send_signal(sig)
+        err = p.communicate(timeout=limit)[1]
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    return p.returncode, err
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("delay_ms", [10, 30, 50])
+@pytest.mark.parametrize("mode", ["tiled", "reference"])
+def test_signal_while_the_libraries_load(gdt_bin, big_cloud, tmp_path, sig, delay_ms, mode):
+    """Counted from the spawn: the launcher links only the C library and
+    installs its handlers before it loads the program's module, so even a
+    signal while OpenVDB, TBB and the rest are loaded and relocated (tens of
+    milliseconds) stops the run with 130, never the default action (-2, -15)."""
+    args = {"tiled": ["--tile", "1024"], "reference": ["--reference"]}[mode]
+    rc, err = signal_after_spawn([gdt_bin, big_cloud, *args, "-o", tmp_path / "o.ply"], sig,
+                                 delay_ms / 1000.0)
+    assert_interrupted(rc, err, f"{mode} + {sig.name} at +{delay_ms} ms from the spawn")
+
+
+def test_launcher_without_its_module(gdt_bin, tmp_path):
+    """The launcher copied away from its module says what it looked for."""
+    exe = tmp_path / "gdt-tile"
+    shutil.copy(gdt_bin, exe)
+    r = run([exe, "--version"])
+    assert r.returncode == 7, r
+    assert "GDT-7003" in r.stderr and str(tmp_path / "libgdt-tile.so") in r.stderr, r.stderr
 
 
 @pytest.mark.sanitize
