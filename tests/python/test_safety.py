@@ -309,14 +309,15 @@ def handlers_installed(pid):
     return False
 
 
-def signal_after_start(cmd, sig, delay, env=None, limit=60):
-    """Starts cmd, waits until its handlers are installed, sleeps delay
-    seconds, sends sig; returns (CompletedProcess-like rc, stderr)."""
+def signal_after_start(cmd, sig, delay, env=None, limit=60, wait_handlers=True):
+    """Starts cmd, waits until its handlers are installed (unless not
+    wait_handlers: then delay counts from the spawn), sleeps delay seconds,
+    sends sig; returns (CompletedProcess-like rc, stderr)."""
     p = subprocess.Popen([str(c) for c in cmd], stdout=subprocess.DEVNULL,
                          stderr=subprocess.PIPE, text=True, env=env)
     try:
         t0 = time.monotonic()
-        while True:
+        while wait_handlers:
             state = handlers_installed(p.pid)
             if state:
                 break
@@ -360,22 +361,6 @@ def test_signal_at_start_up(gdt_bin, big_cloud, tmp_path, sig, delay_ms, mode):
         assert not (tmp_path / "o.ply").exists()
 
 
-def signal_after_spawn(cmd, sig, delay, limit=60):
-    """Starts cmd, sleeps delay seconds from the moment it was spawned (no
-    look at its handlers), sends sig; returns (returncode, stderr)."""
-    p = subprocess.Popen([str(c) for c in cmd], stdout=subprocess.DEVNULL,
-                         stderr=subprocess.PIPE, text=True)
-    try:
-        time.sleep(delay)
-        p.send_signal(sig)
-        err = p.communicate(timeout=limit)[1]
-    finally:
-        if p.poll() is None:
-            p.kill()
-            p.wait()
-    return p.returncode, err
-
-
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 @pytest.mark.parametrize("delay_ms", [10, 30, 50])
 @pytest.mark.parametrize("mode", ["tiled", "reference"])
@@ -385,8 +370,8 @@ def test_signal_while_the_libraries_load(gdt_bin, big_cloud, tmp_path, sig, dela
     signal while OpenVDB, TBB and the rest are loaded and relocated (tens of
     milliseconds) stops the run with 130, never the default action (-2, -15)."""
     args = {"tiled": ["--tile", "1024"], "reference": ["--reference"]}[mode]
-    rc, err = signal_after_spawn([gdt_bin, big_cloud, *args, "-o", tmp_path / "o.ply"], sig,
-                                 delay_ms / 1000.0)
+    rc, err = signal_after_start([gdt_bin, big_cloud, *args, "-o", tmp_path / "o.ply"], sig,
+                                 delay_ms / 1000.0, wait_handlers=False)
     assert_interrupted(rc, err, f"{mode} + {sig.name} at +{delay_ms} ms from the spawn")
 
 
