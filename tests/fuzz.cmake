@@ -5,7 +5,8 @@
 #   fuzz_job       the job-state loader (tiler/private/job.h)
 # With GDT_FUZZ=ON (clang) each is a libFuzzer binary; scripts/fuzz.sh
 # builds the seed corpora and runs them (smoke run, long campaign).  In
-# every build, the saved crash inputs tests/fuzz/regress/<target>/ are
+# every build, the saved inputs tests/fuzz/regress/<target>/ (inputs that
+# once crashed a target, and hand-made hostile ones) are
 # replayed as the test fuzz_regress_<target>: through libFuzzer in the fuzz
 # build, through a plain main() (replay_main.c) otherwise, so they also run
 # under the ASan build.
