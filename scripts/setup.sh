@@ -30,8 +30,12 @@ APT_PACKAGES=(
   build-essential cmake pkg-config python3 python3-venv
   pocl-opencl-icd ocl-icd-opencl-dev opencl-headers clinfo
   libpcl-dev libopenvdb-dev libgeographiclib-dev libsqlite3-dev libcgal-dev
-  clang libclang-rt-14-dev
 )
+# The fuzz tree needs clang, and libFuzzer with clang's sanitizer runtimes
+# (libclang-rt-14-dev, which clang only recommends).
+if [ "$FUZZ" -eq 1 ]; then
+  APT_PACKAGES+=(clang libclang-rt-14-dev)
+fi
 
 missing=()
 for p in "${APT_PACKAGES[@]}"; do
