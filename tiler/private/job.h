@@ -15,7 +15,8 @@
  * recorded checksum is verified before a file is reused.
  *
  * Message numbers: 4901 cannot open/create, 4902 SQLite write failed
- * (disk full, I/O), 6901 not a job database (or newer schema).
+ * (disk full, I/O), 6901 not a job database (or newer schema, or damaged:
+ * an existing journal must pass SQLite's quick_check when opened).
  */
 #ifndef GDT_JOB_H
 #define GDT_JOB_H
