@@ -1,22 +1,28 @@
 #!/usr/bin/env bash
 # Installs what is missing on a Debian 12 machine, then configures and builds.
 #
-#   scripts/setup.sh [--asan]
+#   scripts/setup.sh [--asan] [--fuzz]
 #
 # System packages come from apt (installed only when missing); the Python
 # test tools go into a project-local virtual environment (.venv), because
-# Debian 12's system Python refuses pip installs.  --asan also builds the
-# AddressSanitizer + UndefinedBehaviorSanitizer tree in build-asan/.
+# Debian 12's system Python refuses pip installs.  The main tree build/ is a
+# Release build.  --asan also builds the AddressSanitizer +
+# UndefinedBehaviorSanitizer tree in build-asan/ (gcc), --fuzz the clang tree
+# build-fuzz/ with the libFuzzer targets (ASan + UBSan on every library).
+# Every tree is built with -Werror (GDT_WERROR=ON): warnings are errors in
+# development and CI, not in a user's or packager's plain cmake build.
 set -euo pipefail
 
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$ROOT"
 
 ASAN=0
+FUZZ=0
 for a in "$@"; do
   case "$a" in
     --asan) ASAN=1 ;;
-    *) echo "usage: scripts/setup.sh [--asan]" >&2; exit 2 ;;
+    --fuzz) FUZZ=1 ;;
+    *) echo "usage: scripts/setup.sh [--asan] [--fuzz]" >&2; exit 2 ;;
   esac
 done
 
@@ -25,6 +31,11 @@ APT_PACKAGES=(
   pocl-opencl-icd ocl-icd-opencl-dev opencl-headers clinfo
   libpcl-dev libopenvdb-dev libgeographiclib-dev libsqlite3-dev libcgal-dev
 )
+# The fuzz tree needs clang, and libFuzzer with clang's sanitizer runtimes
+# (libclang-rt-14-dev, which clang only recommends).
+if [ "$FUZZ" -eq 1 ]; then
+  APT_PACKAGES+=(clang libclang-rt-14-dev)
+fi
 
 missing=()
 for p in "${APT_PACKAGES[@]}"; do
@@ -54,9 +65,14 @@ if ! cmp -s "$REQ" .venv/.requirements.installed 2>/dev/null; then
 fi
 
 JOBS=$(nproc 2>/dev/null || echo 2)
-cmake -S . -B build -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DGDT_WERROR=ON >/dev/null
 cmake --build build -j"$JOBS"
 if [ "$ASAN" -eq 1 ]; then
-  cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=Debug -DGDT_SANITIZE=ON >/dev/null
+  cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=Debug -DGDT_SANITIZE=ON -DGDT_WERROR=ON >/dev/null
   cmake --build build-asan -j"$JOBS"
+fi
+if [ "$FUZZ" -eq 1 ]; then
+  cmake -S . -B build-fuzz -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_C_COMPILER=clang \
+    -DCMAKE_CXX_COMPILER=clang++ -DGDT_FUZZ=ON -DGDT_WERROR=ON >/dev/null
+  cmake --build build-fuzz -j"$JOBS"
 fi

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
-# The whole test suite: set-up (packages, .venv, both builds), then CTest and
-# pytest on the release build, and the sanitizer-marked tests again on the
-# ASan+UBSan build.
+# The whole test suite: set-up (packages, .venv, the three builds), then
+# CTest and pytest on the release build, the sanitizer-marked tests again on
+# the ASan+UBSan build, and on the clang fuzz build the saved fuzz inputs and
+# a smoke run of every fuzz target (15 s each).
 #
 #   scripts/test.sh
 set -euo pipefail
@@ -9,7 +10,7 @@ set -euo pipefail
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$ROOT"
 
-scripts/setup.sh --asan
+scripts/setup.sh --asan --fuzz
 
 JOBS=$(nproc 2>/dev/null || echo 2)
 export ASAN_OPTIONS=${ASAN_OPTIONS:-abort_on_error=0:detect_leaks=1}
@@ -23,4 +24,8 @@ echo "== pytest (release build)"
 GDT_BUILD_DIR="$ROOT/build" .venv/bin/python -m pytest -q tests/python
 echo "== pytest, sanitize-marked tests (ASan+UBSan build)"
 GDT_BUILD_DIR="$ROOT/build-asan" .venv/bin/python -m pytest -q -m sanitize tests/python
+echo "== ctest, saved fuzz inputs (clang fuzz build)"
+ctest --test-dir build-fuzz --output-on-failure -L fuzz
+echo "== fuzz smoke run (clang fuzz build)"
+scripts/fuzz.sh smoke build-fuzz 15
 echo "== all tests passed"

@@ -42,11 +42,15 @@ static int vrec_cmp(const void *pa, const void *pb)
     return (a->y > b->y) - (a->y < b->y);
 }
 
-/* Copies the voxels into a new array (*out, *n).  Ownership: caller frees. */
+/* Copies the voxels into a new array (*out, *n).  Ownership: caller frees.
+ * *out and *n are set on every path (NULL and 0 on failure), so no caller
+ * can read them uninitialised. */
 static gdt_status extract(const tl_density *d, vrec **out, size_t *n, gdt_error *err)
 {
     size_t k = 0;
     vrec *v = malloc((d->map.n > 0 ? d->map.n : 1) * sizeof *v);
+    *out = NULL;
+    *n = 0;
     if (v == NULL)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory (density grid)");
     for (size_t s = 0; s < d->map.cap; s++)

@@ -86,6 +86,32 @@ static gdt_status query_int(gdt_job *j, const char *sql, int64_t *v, gdt_error *
     return st;
 }
 
+/* A damaged journal is refused before it is used: SQLite reads and even
+ * writes a database whose pages are inconsistent without an error, so a
+ * record written could read back other or missing.  quick_check walks
+ * every page once (the journal is small: one row per tile). */
+static gdt_status check_intact(gdt_job *j, gdt_error *err)
+{
+    sqlite3_stmt *s = NULL;
+    gdt_status st = GDT_OK;
+    int rc;
+    if (sqlite3_prepare_v2(j->db, "PRAGMA quick_check(1)", -1, &s, NULL) != SQLITE_OK)
+        return db_error(j, "check", err);
+    rc = sqlite3_step(s);
+    if (rc == SQLITE_ROW) {
+        const unsigned char *t = sqlite3_column_text(s, 0);
+        if (t == NULL || strcmp((const char *)t, "ok") != 0)
+            st = gdt_error_set(err, GDT_EJOB, 6901,
+                               "%s: not a usable job database (damaged: %.200s); rerun with "
+                               "--restart to discard it",
+                               j->path, t != NULL ? (const char *)t : "no result");
+    } else {
+        st = db_error(j, "check", err);
+    }
+    sqlite3_finalize(s);
+    return st;
+}
+
 /* 16 random bytes from the kernel; should it refuse, the clock, the pid and
  * an address mixed (distinct per job, which is what the id is for). */
 static void random_id(uint64_t id[2])
@@ -217,7 +243,9 @@ gdt_status gdt_job_open(gdt_job **out, const char *dir, int create, int *is_new,
         goto fail;
     }
     sqlite3_busy_timeout(j->db, 5000);
-    st = exec(j, "PRAGMA journal_mode=WAL; PRAGMA synchronous=FULL;", err);
+    st = existed ? check_intact(j, err) : GDT_OK;
+    if (st == GDT_OK)
+        st = exec(j, "PRAGMA journal_mode=WAL; PRAGMA synchronous=FULL;", err);
     /* tables, schema and id in one transaction: all of them or nothing */
     if (st == GDT_OK)
         st = exec(j, "BEGIN IMMEDIATE", err);

@@ -1805,6 +1805,13 @@ gdt_status gdt_cli_resume(const gdt_options *opts, gdt_error *err)
     NEED("inputs");
     n = (size_t)strtoull(v, NULL, 10);
 #undef NEED
+    /* Each input is a line of params, so a count beyond its length is a
+     * damaged record (and would overflow n + 1 below). */
+    if (n > strlen(params)) {
+        st = gdt_error_set(err, GDT_EJOB, 6905, "%s: job record counts %s inputs",
+                           opts->resume, v);
+        goto done;
+    }
     inputs = calloc(n + 1, sizeof *inputs);
     if (inputs == NULL) {
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");

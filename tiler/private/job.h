@@ -40,7 +40,8 @@
  *
  * Message numbers: 4901 cannot open/create, 4902 SQLite write failed
  * (disk full, I/O), 4903 the lock file cannot be created, 6901 not a job
- * database (or another schema), 6906 another run holds the job.
+ * database (or another schema, or damaged: an existing journal must pass
+ * SQLite's quick_check when opened), 6906 another run holds the job.
  */
 #ifndef GDT_JOB_H
 #define GDT_JOB_H

@@ -1,0 +1,41 @@
+# Fuzz targets (tests/fuzz/): one per reader of untrusted bytes.
+#   fuzz_las       LAS reader (gdt_source.h)
+#   fuzz_pcd       PCD reader (gdt_source.h)
+#   fuzz_plycheck  the PLY checker's reader (gdt_plycheck.h)
+#   fuzz_job       the job-state loader (tiler/private/job.h)
+# With GDT_FUZZ=ON (clang) each is a libFuzzer binary; scripts/fuzz.sh
+# builds the seed corpora and runs them (smoke run, long campaign).  In
+# every build, the saved inputs tests/fuzz/regress/<target>/ (inputs that
+# once crashed a target, and hand-made hostile ones) are
+# replayed as the test fuzz_regress_<target>: through libFuzzer in the fuzz
+# build, through a plain main() (replay_main.c) otherwise, so they also run
+# under the ASan build.
+set(GDT_FUZZ_DIR ${CMAKE_CURRENT_SOURCE_DIR}/fuzz)
+
+# gdt_fuzz_target(name SOURCES file... [DEFINES def...])
+function(gdt_fuzz_target name)
+  cmake_parse_arguments(F "" "" "SOURCES;DEFINES" ${ARGN})
+  set(srcs ${F_SOURCES} ${GDT_FUZZ_DIR}/fuzz_input.c)
+  if(GDT_FUZZ)
+    set(exe fuzz_${name})
+    add_executable(${exe} ${srcs})
+    target_link_options(${exe} PRIVATE -fsanitize=fuzzer)
+    # -runs=0 with folders: every saved input once, no mutation.
+    set(cmd ${exe} -runs=0 ${GDT_FUZZ_DIR}/regress/${name})
+  else()
+    set(exe fuzz_${name}_replay)
+    add_executable(${exe} ${srcs} ${GDT_FUZZ_DIR}/replay_main.c)
+    set(cmd ${exe} ${GDT_FUZZ_DIR}/regress/${name})
+  endif()
+  target_link_libraries(${exe} PRIVATE gdt_tiler gdt_merge gdt_core gdt_io)
+  target_include_directories(${exe} PRIVATE ${GDT_FUZZ_DIR})
+  target_compile_definitions(${exe} PRIVATE ${F_DEFINES})
+  gdt_target_flags(${exe})
+  add_test(NAME fuzz_regress_${name} COMMAND ${cmd})
+  set_tests_properties(fuzz_regress_${name} PROPERTIES LABELS "fuzz")
+endfunction()
+
+gdt_fuzz_target(las SOURCES ${GDT_FUZZ_DIR}/fuzz_source.c DEFINES GDT_FUZZ_FORMAT=1)
+gdt_fuzz_target(pcd SOURCES ${GDT_FUZZ_DIR}/fuzz_source.c DEFINES GDT_FUZZ_FORMAT=2)
+gdt_fuzz_target(plycheck SOURCES ${GDT_FUZZ_DIR}/fuzz_plycheck.c)
+gdt_fuzz_target(job SOURCES ${GDT_FUZZ_DIR}/fuzz_job.c)
