@@ -17,6 +17,8 @@ CREATE TABLE meta(key TEXT PRIMARY KEY, value TEXT NOT NULL);
 CREATE TABLE stage(name TEXT PRIMARY KEY, done INTEGER NOT NULL);
 CREATE TABLE tile(k INTEGER PRIMARY KEY, file TEXT NOT NULL, size INTEGER NOT NULL,
                   checksum INTEGER NOT NULL);
+CREATE TABLE pfile(k INTEGER NOT NULL, kind INTEGER NOT NULL, size INTEGER NOT NULL,
+                   checksum INTEGER NOT NULL, PRIMARY KEY(k, kind));
 """
 
 
@@ -24,7 +26,8 @@ def write_job(job, params):
     job.mkdir()
     db = sqlite3.connect(job / "job.db")
     db.executescript(SCHEMA)
-    db.execute("INSERT INTO meta VALUES ('schema', '1')")
+    db.execute("INSERT INTO meta VALUES ('schema', '2')")
+    db.execute("INSERT INTO meta VALUES ('id', ?)", ("0123456789abcdef" * 2,))
     db.execute("INSERT INTO meta VALUES ('params', ?)", (params,))
     db.commit()
     db.close()
