@@ -469,6 +469,7 @@ static gdt_status setup_run(gdt_core *c, gcd_run *r, const gdt_ipt *pts, size_t 
                             int min_grid, gdt_core_stats *st, gdt_error *err)
 {
     int32_t *tmp = NULL;
+    void *mapped = NULL;
     int64_t span;
 
     memset(r, 0, sizeof *r);
@@ -533,8 +534,9 @@ static gdt_status setup_run(gdt_core *c, gcd_run *r, const gdt_ipt *pts, size_t 
     /* the points as int32 pairs, written where the buffer is mapped (its
      * own memory on a CPU device: no staging copy) */
     if (gcd_buf_need(c, GCD_PTS_IN(c), 8 * n, err) != GDT_OK ||
-        gdt_ocl_map_write(c->ocl, GCD_PTS_IN(c)->b, 8 * n, (void **)&tmp, err) != GDT_OK)
+        gdt_ocl_map_write(c->ocl, GCD_PTS_IN(c)->b, 8 * n, &mapped, err) != GDT_OK)
         return err->status;
+    tmp = mapped;
     for (size_t i = 0; i < n; i++) {
         tmp[2 * i] = (int32_t)pts[i].x;
         tmp[2 * i + 1] = (int32_t)pts[i].y;

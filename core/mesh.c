@@ -23,12 +23,17 @@ void gdt_mesh_free(gdt_mesh *m)
     gdt_mesh_init(m);
 }
 
-static int grow(void **p, size_t count, size_t size)
+/* Resizes the array whose pointer is at pp (the address of a pointer of any
+ * object type); the pointer is read and written with memcpy, not through a
+ * void ** lvalue, which strict aliasing would let the optimiser ignore. */
+static int grow(void *pp, size_t count, size_t size)
 {
-    void *q = realloc(*p, count * size);
+    void *p, *q;
+    memcpy(&p, pp, sizeof p);
+    q = realloc(p, count * size);
     if (q == NULL)
         return -1;
-    *p = q;
+    memcpy(pp, &q, sizeof q);
     return 0;
 }
 
@@ -42,16 +47,16 @@ gdt_status gdt_mesh_reserve(gdt_mesh *m, size_t nverts, size_t ntris, int with_i
     if (nverts > m->cap_verts || (with_ids && m->ids == NULL)) {
         size_t cap = nverts > m->cap_verts ? nverts : m->cap_verts;
         size_t alloc = cap > 0 ? cap : 1;
-        if (grow((void **)&m->pts, alloc, sizeof *m->pts) != 0)
+        if (grow(&m->pts, alloc, sizeof *m->pts) != 0)
             goto oom;
-        if ((with_ids || m->ids != NULL) && grow((void **)&m->ids, alloc, sizeof *m->ids) != 0)
+        if ((with_ids || m->ids != NULL) && grow(&m->ids, alloc, sizeof *m->ids) != 0)
             goto oom;
         m->cap_verts = cap;
     }
     if (ntris > m->cap_tris) {
-        if (grow((void **)&m->tri, 3 * ntris, sizeof *m->tri) != 0)
+        if (grow(&m->tri, 3 * ntris, sizeof *m->tri) != 0)
             goto oom;
-        if (grow((void **)&m->opp, 3 * ntris, sizeof *m->opp) != 0)
+        if (grow(&m->opp, 3 * ntris, sizeof *m->opp) != 0)
             goto oom;
         m->cap_tris = ntris;
     }

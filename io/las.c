@@ -282,26 +282,28 @@ static gdt_status las_locate_points(const char *path, const las_header *h, uint6
 }
 
 /* Keeps the payload of a CRS record (first one of each kind wins).  len has
- * been checked against the file and against the record kind's limit. */
+ * been checked against the file and against the record kind's limit.  The
+ * new buffer is stored through a pointer of its field's own type: geokeys is
+ * unsigned char *, ascii and wkt are char *, and a store through an
+ * lvalue of the other pointer type is one the optimiser may assume never
+ * happened (the pointers are not character types, so no aliasing
+ * exception covers them). */
 static gdt_status las_keep_payload(int fd, const char *path, unsigned record_id, uint64_t off,
                                    size_t len, const char *what, las_crs_payloads *pl,
                                    gdt_error *err)
 {
-    unsigned char **slot = NULL;
-    size_t *slot_len = NULL;
+    int have;
     gdt_status st;
 
-    if (record_id == 34735) {
-        slot = &pl->geokeys;
-        slot_len = &pl->geokeys_len;
-    } else if (record_id == 34737) {
-        slot = (unsigned char **)&pl->ascii;
-        slot_len = &pl->ascii_len;
-    } else if (record_id == 2112) {
-        slot = (unsigned char **)&pl->wkt;
-        slot_len = &pl->wkt_len;
-    }
-    if (slot == NULL || *slot != NULL)
+    if (record_id == 34735)
+        have = pl->geokeys != NULL;
+    else if (record_id == 34737)
+        have = pl->ascii != NULL;
+    else if (record_id == 2112)
+        have = pl->wkt != NULL;
+    else
+        return GDT_OK;
+    if (have)
         return GDT_OK;
     unsigned char *p = malloc(len + 1);
     if (p == NULL)
@@ -312,8 +314,16 @@ static gdt_status las_keep_payload(int fd, const char *path, unsigned record_id,
         return st;
     }
     p[len] = '\0';
-    *slot = p;
-    *slot_len = len;
+    if (record_id == 34735) {
+        pl->geokeys = p;
+        pl->geokeys_len = len;
+    } else if (record_id == 34737) {
+        pl->ascii = (char *)p;
+        pl->ascii_len = len;
+    } else {
+        pl->wkt = (char *)p;
+        pl->wkt_len = len;
+    }
     return GDT_OK;
 }
 

@@ -348,8 +348,10 @@ gdt_status gdt_ply_create(gdt_ply_writer **out, const char *path, const gdt_ply_
     w->path = strdup(path);
     w->dir_path = dir_of(path);
     w->tmp_path = malloc(len + 32);
-    if (posix_memalign((void **)&w->buf, GDT_DIO_BLOCK, GDT_PLY_BUFFER_BYTES) != 0)
-        w->buf = NULL;
+    {
+        void *buf = NULL;
+        w->buf = posix_memalign(&buf, GDT_DIO_BLOCK, GDT_PLY_BUFFER_BYTES) == 0 ? buf : NULL;
+    }
     if (w->path == NULL || w->dir_path == NULL || w->tmp_path == NULL || w->buf == NULL) {
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         goto fail;

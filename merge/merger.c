@@ -64,9 +64,9 @@ static double now_s(void)
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
-static int grow(void **p, size_t *cap, size_t need, size_t elem)
+static int grow(void *pp, size_t *cap, size_t need, size_t elem)
 {
-    return gdt_merge_grow(p, cap, need, elem, 256);
+    return gdt_merge_grow(pp, cap, need, elem, 256);
 }
 
 static uint64_t mix(uint64_t k)
@@ -219,7 +219,7 @@ static gdt_status no_memory(gdt_error *err)
 /* Appends the directed edge a -> b (band indices) to the walls handed on. */
 static int hand_on(gdt_merger *m, uint32_t a, uint32_t b)
 {
-    if (grow((void **)&m->next, &m->cap_next, m->nnext + 1, sizeof *m->next) != 0)
+    if (grow(&m->next, &m->cap_next, m->nnext + 1, sizeof *m->next) != 0)
         return -1;
     m->next[m->nnext].a = m->w[a].id;
     m->next[m->nnext].b = m->w[b].id;
@@ -262,8 +262,8 @@ gdt_status gdt_merger_round(gdt_merger *m, const gdt_seam *row, int64_t y_next, 
             goto fail;
         }
     }
-    if (grow((void **)&m->w, &m->cap_w, m->nw + row->nv, sizeof *m->w) != 0 ||
-        grow((void **)&m->wall, &m->cap_wall, m->nwall + row->ne, sizeof *m->wall) != 0) {
+    if (grow(&m->w, &m->cap_w, m->nw + row->nv, sizeof *m->w) != 0 ||
+        grow(&m->wall, &m->cap_wall, m->nwall + row->ne, sizeof *m->wall) != 0) {
         st = no_memory(err);
         goto fail;
     }
@@ -290,7 +290,7 @@ gdt_status gdt_merger_round(gdt_merger *m, const gdt_seam *row, int64_t y_next, 
         return GDT_OK;
     }
 
-    if (grow((void **)&m->pts, &m->cap_pts, m->nw + 1, sizeof *m->pts) != 0) {
+    if (grow(&m->pts, &m->cap_pts, m->nw + 1, sizeof *m->pts) != 0) {
         st = no_memory(err);
         goto fail;
     }
@@ -306,11 +306,11 @@ gdt_status gdt_merger_round(gdt_merger *m, const gdt_seam *row, int64_t y_next, 
     m->st.t_triangulate += now_s() - t0;
     t0 = now_s();
 
-    if (grow((void **)&m->slot, &m->cap_slot, 3 * nt + 1, 1) != 0 ||
-        grow((void **)&m->tri, &m->cap_tri, nt + 1, 1) != 0 ||
-        grow((void **)&m->keep, &m->cap_keep, m->nw + 1, 1) != 0 ||
-        grow((void **)&m->stack, &m->cap_stack, nt + 1, sizeof *m->stack) != 0 ||
-        grow((void **)&m->wall_slot, &m->cap_wall_slot, m->nwall + 1, sizeof *m->wall_slot) != 0 ||
+    if (grow(&m->slot, &m->cap_slot, 3 * nt + 1, 1) != 0 ||
+        grow(&m->tri, &m->cap_tri, nt + 1, 1) != 0 ||
+        grow(&m->keep, &m->cap_keep, m->nw + 1, 1) != 0 ||
+        grow(&m->stack, &m->cap_stack, nt + 1, sizeof *m->stack) != 0 ||
+        grow(&m->wall_slot, &m->cap_wall_slot, m->nwall + 1, sizeof *m->wall_slot) != 0 ||
         edge_map_reset(&m->em, 3 * nt) != 0) {
         st = no_memory(err);
         goto fail;
@@ -410,7 +410,7 @@ gdt_status gdt_merger_round(gdt_merger *m, const gdt_seam *row, int64_t y_next, 
         memset(m->keep, 1, m->nw);
     m->st.covered += ncov;
 
-    if (grow((void **)&m->faces, &m->cap_faces, 3 * nf + 3, sizeof *m->faces) != 0) {
+    if (grow(&m->faces, &m->cap_faces, 3 * nf + 3, sizeof *m->faces) != 0) {
         st = no_memory(err);
         goto fail;
     }

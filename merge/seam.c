@@ -16,9 +16,9 @@ void gdt_seam_free(gdt_seam *s)
     memset(s, 0, sizeof *s);
 }
 
-static int grow(void **p, size_t *cap, size_t need, size_t elem)
+static int grow(void *pp, size_t *cap, size_t need, size_t elem)
 {
-    return gdt_merge_grow(p, cap, need, elem, 1024);
+    return gdt_merge_grow(pp, cap, need, elem, 1024);
 }
 
 static int cmp_edge(const void *pa, const void *pb)
@@ -54,7 +54,7 @@ gdt_status gdt_seam_extract(gdt_seam *s, const gdt_mesh *m, const uint8_t *cert,
                 in_u[v[(i + 2) % 3]] = 1;
             }
             if (!nb_cert) {
-                if (grow((void **)&s->e, &s->cap_e, s->ne + 1, sizeof *s->e) != 0) {
+                if (grow(&s->e, &s->cap_e, s->ne + 1, sizeof *s->e) != 0) {
                     st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
                     goto fail;
                 }
@@ -79,7 +79,7 @@ gdt_status gdt_seam_extract(gdt_seam *s, const gdt_mesh *m, const uint8_t *cert,
                                (long long)x, (long long)y);
             goto fail;
         }
-        if (grow((void **)&s->v, &s->cap_v, s->nv + 1, sizeof *s->v) != 0) {
+        if (grow(&s->v, &s->cap_v, s->nv + 1, sizeof *s->v) != 0) {
             st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
             goto fail;
         }

@@ -75,7 +75,12 @@ int main(int argc, char **argv)
                 path, dlerror());
         return 7;
     }
-    *(void **)&entry = dlsym(h, GDT_CLI_ENTRY_SYMBOL);
+    {
+        /* a data pointer to a function pointer: POSIX guarantees the two
+         * have one representation */
+        void *sym = dlsym(h, GDT_CLI_ENTRY_SYMBOL);
+        memcpy(&entry, &sym, sizeof entry);
+    }
     if (entry == NULL) {
         fprintf(stderr, "gdt-tile: error GDT-7003 (internal): %s: no entry point %s\n", path,
                 GDT_CLI_ENTRY_SYMBOL);

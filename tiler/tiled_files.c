@@ -89,12 +89,14 @@ gdt_status tr_write_direct(int fd, int *direct, const unsigned char *buf, size_t
 
 gdt_status tr_dread_open(tr_dread *r, const char *path, size_t cap, gdt_error *err)
 {
+    void *buf = NULL;
     memset(r, 0, sizeof *r);
     r->fd = -1;
     r->path = strdup(path);
-    if (r->path == NULL || cap == 0 || cap % GDT_DIO_BLOCK != 0 ||
-        posix_memalign((void **)&r->buf, GDT_DIO_BLOCK, cap) != 0) {
-        r->buf = NULL;
+    if (r->path != NULL && cap != 0 && cap % GDT_DIO_BLOCK == 0 &&
+        posix_memalign(&buf, GDT_DIO_BLOCK, cap) == 0)
+        r->buf = buf;
+    if (r->buf == NULL) {
         tr_dread_close(r);
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     }

@@ -130,15 +130,21 @@ static int stopped(const tr_ctx *c)
     return c->opts->stop != NULL && *c->opts->stop != 0;
 }
 
-static int reserve(void **p, size_t *cap, size_t need, size_t elem)
+/* Grows the array whose pointer is at pp (the address of a pointer of any
+ * object type) to need elements of elem bytes.  The pointer is read and
+ * written with memcpy, never through a void ** lvalue: a store through a
+ * pointer lvalue of another type is one the optimiser may assume does not
+ * touch the caller's pointer (strict aliasing). */
+static int reserve(void *pp, size_t *cap, size_t need, size_t elem)
 {
-    void *q;
+    void *p, *q;
     if (need <= *cap)
         return 0;
-    q = realloc(*p, need * elem);
+    memcpy(&p, pp, sizeof p);
+    q = realloc(p, need * elem);
     if (q == NULL)
         return -1;
-    *p = q;
+    memcpy(pp, &q, sizeof q);
     *cap = need;
     return 0;
 }
@@ -259,7 +265,7 @@ static gdt_status sort_faces(tr_ctx *c, gdt_mesh *m, size_t nf, uint32_t base,
     size_t nv = m->nverts, k = 0;
     uint32_t *tmp = (uint32_t *)(void *)m->tri, *sorted = (uint32_t *)(void *)out;
 
-    if (reserve((void **)&c->count, &c->cap_count, nv + 1, sizeof *c->count) != 0)
+    if (reserve(&c->count, &c->cap_count, nv + 1, sizeof *c->count) != 0)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     memset(c->count, 0, (nv + 1) * sizeof *c->count);
     for (size_t t = 0; t < m->ntris; t++) {
@@ -356,7 +362,7 @@ static gdt_status core_tile(tr_ctx *c, uint64_t k, tr_slot *sl, gdt_error *err)
         c->s.max_tile_points = n;
     if (nh > c->s.max_halo_points)
         c->s.max_halo_points = nh;
-    if (reserve((void **)&sl->lh, &sl->cap_lh, nh + 1, sizeof *sl->lh) != 0)
+    if (reserve(&sl->lh, &sl->cap_lh, nh + 1, sizeof *sl->lh) != 0)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     for (size_t i = 0; i < nh; i++) {
         sl->lh[i].x = c->halo.pts[i].x - d->local_x0;
@@ -428,7 +434,7 @@ static gdt_status post_tile_run(tr_ctx *c, tr_slot *sl, gdt_error *err)
     r.open[GDT_SIDE_SOUTH] = d->local_y0 <= pl->min_y;
     r.open[GDT_SIDE_EAST] = d->local_x0 + d->local_extent - 1 >= pl->max_x;
     r.open[GDT_SIDE_NORTH] = d->local_y0 + d->local_extent - 1 >= pl->max_y;
-    if (reserve((void **)&c->cert, &c->cap_cert, m->ntris + 1, 1) != 0)
+    if (reserve(&c->cert, &c->cap_cert, m->ntris + 1, 1) != 0)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     st = gdt_certify_tile(c->certifier, m, sl->lh, sl->nh, &r, c->cert, &c->s.cert, err);
     c->s.t_certify += gdt_now() - t0;
@@ -481,7 +487,7 @@ static gdt_status post_tile_run(tr_ctx *c, tr_slot *sl, gdt_error *err)
     free(path);
     if (st != GDT_OK)
         return st;
-    if (reserve((void **)&c->pending, &c->cap_pending, c->npending + 1 + 64,
+    if (reserve(&c->pending, &c->cap_pending, c->npending + 1 + 64,
                 sizeof *c->pending) != 0)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     c->pending[c->npending].k = k;
@@ -717,10 +723,10 @@ static gdt_status read_seam(tr_ctx *c, uint64_t k, gdt_error *err)
         goto fail;
     }
     /* growth by at least the current capacity: amortised doubling */
-    if (reserve((void **)&c->fbuf, &c->cap_fbuf, 24 * (size_t)TR_CHUNK, 1) != 0 ||
-        reserve((void **)&s->v, &s->cap_v, s->nv + (size_t)nv + (s->cap_v > 0 ? s->cap_v : 1024),
+    if (reserve(&c->fbuf, &c->cap_fbuf, 24 * (size_t)TR_CHUNK, 1) != 0 ||
+        reserve(&s->v, &s->cap_v, s->nv + (size_t)nv + (s->cap_v > 0 ? s->cap_v : 1024),
                 sizeof *s->v) != 0 ||
-        reserve((void **)&s->e, &s->cap_e, s->ne + (size_t)ne + (s->cap_e > 0 ? s->cap_e : 1024),
+        reserve(&s->e, &s->cap_e, s->ne + (size_t)ne + (s->cap_e > 0 ? s->cap_e : 1024),
                 sizeof *s->e) != 0) {
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         goto fail;
@@ -1022,7 +1028,7 @@ static void text_add(tr_text *t, const char *fmt, ...)
     va_start(ap, fmt);
     n = vsnprintf(NULL, 0, fmt, ap);
     va_end(ap);
-    if (n < 0 || reserve((void **)&t->s, &t->cap, t->len + (size_t)n + 1 + 256, 1) != 0) {
+    if (n < 0 || reserve(&t->s, &t->cap, t->len + (size_t)n + 1 + 256, 1) != 0) {
         t->failed = 1;
         return;
     }
@@ -1711,13 +1717,13 @@ fail:
     gdt_core_destroy(c.core);
     gdt_tiler_destroy(c.tiler);
     gdt_cloud_close(c.cloud);
-    /* A failed run (not an interrupted one, which says the job stays) of a
-     * job that holds no finished work leaves nothing behind: there is
-     * nothing to resume, and a failure such as a bad input or a refused
-     * option must not leave files the user did not ask for.  Its files go,
-     * and the directory too if a run of this job made it.  A journal that
-     * cannot be asked counts as work. */
-    if (st != GDT_OK && st != GDT_EINTERRUPTED && c.lock_fd >= 0) {
+    /* A run refused for its input or its options, of a job that holds no
+     * finished work, leaves nothing behind: there is nothing to resume, and
+     * the corrected command is another job.  Its files go, and the
+     * directory too if a run of this job made it.  An interrupted run or
+     * one stopped by the disk or the device keeps its job: the same command
+     * resumes it.  A journal that cannot be asked counts as work. */
+    if ((st == GDT_EINPUT || st == GDT_EUSAGE) && c.lock_fd >= 0) {
         int has = 1;
         gdt_error e3;
         gdt_error_clear(&e3);

@@ -2,11 +2,12 @@
 #include "grow.h"
 
 #include <stdlib.h>
+#include <string.h>
 
-int gdt_merge_grow(void **p, size_t *cap, size_t need, size_t elem, size_t first)
+int gdt_merge_grow(void *pp, size_t *cap, size_t need, size_t elem, size_t first)
 {
     size_t c = *cap > 0 ? *cap : (first > 0 ? first : 1);
-    void *q;
+    void *p, *q;
     if (need <= *cap)
         return 0;
     while (c < need) {
@@ -14,10 +15,11 @@ int gdt_merge_grow(void **p, size_t *cap, size_t need, size_t elem, size_t first
             return -1;
         c *= 2;
     }
-    q = realloc(*p, c * elem);
+    memcpy(&p, pp, sizeof p);
+    q = realloc(p, c * elem);
     if (q == NULL)
         return -1;
-    *p = q;
+    memcpy(pp, &q, sizeof q);
     *cap = c;
     return 0;
 }

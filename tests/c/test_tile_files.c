@@ -37,7 +37,10 @@ static void one_file(const char *dir, size_t len, int start_direct, uint64_t *se
 
     gdt_error_clear(&err);
     snprintf(path, sizeof path, "%s/f_%zu_%d", dir, len, start_direct);
-    if (back == NULL || posix_memalign((void **)&buf, GDT_DIO_BLOCK, len + 1) != 0) {
+    void *aligned = NULL;
+    if (back != NULL && posix_memalign(&aligned, GDT_DIO_BLOCK, len + 1) == 0)
+        buf = aligned;
+    if (buf == NULL) {
         CHECK(0, "%s", "out of memory");
         free(back);
         return;
