@@ -64,7 +64,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     gdt_seam s;
     gdt_error err;
     gdt_status st;
-    FILE *f;
+    FILE *f = NULL;
 
     if (scratch == NULL && (scratch = malloc(24 * (size_t)TR_CHUNK)) == NULL)
         gdt_fuzz_die("scratch buffer");
