@@ -16,7 +16,7 @@ set -euo pipefail
 
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 # FUZZ_TARGETS="las pcd" narrows a run to some targets.
-read -r -a TARGETS <<<"${FUZZ_TARGETS:-las pcd plycheck job}"
+read -r -a TARGETS <<<"${FUZZ_TARGETS:-las pcd plycheck job tri}"
 
 usage() {
   sed -n '5,8p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//' >&2
@@ -24,10 +24,11 @@ usage() {
 }
 
 # -max_len of each target: the largest seed it gets (make_corpus.py cuts
-# real samples to 16 KiB; a small job.db is a few SQLite pages).
+# real samples to 16 KiB; a small job.db is a few SQLite pages; the tile
+# files of a small job are kept up to 64 KiB).
 max_len() {
   case "$1" in
-    job) echo 65536 ;;
+    job|tri) echo 65536 ;;
     *) echo 16384 ;;
   esac
 }

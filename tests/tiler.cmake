@@ -12,6 +12,10 @@ add_test(NAME tiler COMMAND test_tiler ${CMAKE_CURRENT_BINARY_DIR}/tiler-work)
 # size, read back in pieces of many sizes.
 gdt_add_test_exe(test_tile_files ${CMAKE_CURRENT_SOURCE_DIR}/c/test_tile_files.c)
 add_test(NAME tile_files COMMAND test_tile_files ${CMAKE_CURRENT_BINARY_DIR})
+# The parser of a .tri file's header and seam section: verdicts and
+# message numbers of valid, foreign, overflowing and out-of-range files.
+gdt_add_test_exe(test_tri_seam ${CMAKE_CURRENT_SOURCE_DIR}/c/test_tri_seam.c)
+add_test(NAME tile_files_tri COMMAND test_tri_seam)
 
 # The tile files' checksum and the input fingerprint hash see damage.
 gdt_add_test_exe(test_hash ${CMAKE_CURRENT_SOURCE_DIR}/c/test_hash.c)

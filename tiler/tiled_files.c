@@ -3,6 +3,7 @@
 #include "private/tiled_files.h"
 
 #include <errno.h>
+#include <stdint.h>
 #include <inttypes.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -31,9 +32,30 @@ gdt_status tr_tile_path(const char *tiles_dir, const gdt_tile_desc *d, const cha
     return *out == NULL ? gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory") : GDT_OK;
 }
 
-gdt_status tr_open_tri(const char *tiles_dir, const gdt_tile_desc *d, uint64_t base, FILE **f,
-                       unsigned char hdr[TR_HEADER], uint64_t *size, char **path,
-                       gdt_error *err)
+tr_tri_verdict tr_tri_check_header(const unsigned char hdr[TR_HEADER], uint64_t size,
+                                   const tr_tri_expect *ex, uint64_t *nf, uint64_t *nv,
+                                   uint64_t *ne)
+{
+    *nf = tr_get_u64(hdr + 24);
+    *nv = tr_get_u64(hdr + 32);
+    *ne = tr_get_u64(hdr + 40);
+    if (memcmp(hdr, TR_MAGIC, 8) != 0 || tr_get_u64(hdr + 8) != ex->base ||
+        tr_get_u64(hdr + 16) != ex->points || ex->points > UINT64_MAX - ex->base)
+        return TR_TRI_FOREIGN;
+    /* no overflow in the sum: with 12 nf, 24 nv and 16 ne each at most
+     * size, and size at most 2^62, it is at most 64 + 3 size < 2^64 */
+    if (size < TR_HEADER || size > UINT64_MAX / 4 || *nf > size / 12 || *nv > size / 24 ||
+        *ne > size / 16 || TR_HEADER + 12 * *nf + 24 * *nv + 16 * *ne != size ||
+        *nv > ex->points)
+        return TR_TRI_SIZE;
+    if (ex->job_id != NULL &&
+        (tr_get_u64(hdr + 48) != ex->job_id[0] || tr_get_u64(hdr + 56) != ex->job_id[1]))
+        return TR_TRI_JOB;
+    return TR_TRI_FITS;
+}
+
+gdt_status tr_open_tri(const char *tiles_dir, const gdt_tile_desc *d, FILE **f, uint64_t *size,
+                       char **path, gdt_error *err)
 {
     struct stat sb;
     gdt_status st = tr_tile_path(tiles_dir, d, "tri", path, err);
@@ -44,17 +66,99 @@ gdt_status tr_open_tri(const char *tiles_dir, const gdt_tile_desc *d, uint64_t b
     *f = fopen(*path, "rb");
     if (*f == NULL || fstat(fileno(*f), &sb) != 0) {
         st = gdt_error_set(err, GDT_EIO, 4805, "%s: cannot open: %s", *path, strerror(errno));
-    } else if (fread(hdr, 1, TR_HEADER, *f) != TR_HEADER || memcmp(hdr, TR_MAGIC, 8) != 0 ||
-               tr_get_u64(hdr + 8) != base || tr_get_u64(hdr + 16) != d->points) {
-        st = gdt_error_set(err, GDT_EJOB, 6801, "%s: not the tile file this run wrote", *path);
-    } else {
-        *size = (uint64_t)sb.st_size;
-        return GDT_OK;
+        if (*f != NULL)
+            fclose(*f);
+        *f = NULL;
+        return st;
     }
-    if (*f != NULL)
-        fclose(*f);
-    *f = NULL;
-    return st;
+    *size = (uint64_t)sb.st_size;
+    return GDT_OK;
+}
+
+/* Grows *p (elements of elem bytes, *cap of them) to hold need; at least
+ * doubles, so that appending tile after tile is amortised linear.
+ * returns 0, or -1 when out of memory (then *p is unchanged). */
+static int grow(void *pp, size_t *cap, size_t need, size_t elem)
+{
+    size_t n = *cap > 0 ? *cap : 1024;
+    void *p, *q;
+    if (need <= *cap)
+        return 0;
+    if (need > SIZE_MAX / elem - n)
+        return -1;
+    n += need;
+    /* the pointer moves by memcpy, not through a void ** lvalue (strict
+     * aliasing would let the optimiser ignore that store) */
+    memcpy(&p, pp, sizeof p);
+    q = realloc(p, n * elem);
+    if (q == NULL)
+        return -1;
+    memcpy(pp, &q, sizeof q);
+    *cap = n;
+    return 0;
+}
+
+gdt_status tr_tri_read_seam(FILE *f, uint64_t size, const tr_tri_expect *ex, gdt_seam *s,
+                            unsigned char *scratch, const char *path, gdt_error *err)
+{
+    unsigned char hdr[TR_HEADER];
+    uint64_t nf = 0, nv = 0, ne = 0, lo = ex->base, hi = ex->base + ex->points;
+    tr_tri_verdict v = TR_TRI_FOREIGN;
+
+    if (fseeko(f, 0, SEEK_SET) != 0)
+        return gdt_error_set(err, GDT_EIO, 4805, "%s: cannot seek: %s", path, strerror(errno));
+    if (fread(hdr, 1, TR_HEADER, f) == TR_HEADER)
+        v = tr_tri_check_header(hdr, size, ex, &nf, &nv, &ne);
+    if (v == TR_TRI_FOREIGN || v == TR_TRI_JOB)
+        return gdt_error_set(err, GDT_EJOB, 6801, "%s: not the tile file this run wrote", path);
+    if (v == TR_TRI_SIZE)
+        return gdt_error_set(err, GDT_EJOB, 6802,
+                             "%s: %" PRIu64 " bytes do not match its header (%" PRIu64
+                             " faces, %" PRIu64 " seam vertices, %" PRIu64 " barrier edges)",
+                             path, size, nf, nv, ne);
+    /* the size check bounds the counts and the offset by size, a file's size */
+    if (fseeko(f, (off_t)(TR_HEADER + 12 * nf), SEEK_SET) != 0)
+        return gdt_error_set(err, GDT_EIO, 4805, "%s: cannot seek: %s", path, strerror(errno));
+    if (nv > SIZE_MAX - s->nv || ne > SIZE_MAX - s->ne ||
+        grow(&s->v, &s->cap_v, s->nv + (size_t)nv, sizeof *s->v) != 0 ||
+        grow(&s->e, &s->cap_e, s->ne + (size_t)ne, sizeof *s->e) != 0)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    for (uint64_t done = 0; done < nv;) {
+        size_t m = nv - done < TR_CHUNK ? (size_t)(nv - done) : TR_CHUNK;
+        if (fread(scratch, 24, m, f) != m)
+            return gdt_error_set(err, GDT_EIO, 4805, "%s: read failed", path);
+        for (size_t i = 0; i < m; i++) {
+            gdt_seam_vertex *sv = &s->v[s->nv];
+            sv->id = tr_get_u64(scratch + 24 * i);
+            sv->x = (int64_t)tr_get_u64(scratch + 24 * i + 8);
+            sv->y = (int64_t)tr_get_u64(scratch + 24 * i + 16);
+            if (sv->id < lo || sv->id >= hi || sv->x < 0 || sv->y < 0 ||
+                sv->x > GDT_COORD_MAX || sv->y > GDT_COORD_MAX)
+                return gdt_error_set(err, GDT_EJOB, 6802,
+                                     "%s: seam vertex %" PRIu64 " is not one of the tile's "
+                                     "vertices in the merge frame",
+                                     path, done + i);
+            s->nv++;
+        }
+        done += m;
+    }
+    for (uint64_t done = 0; done < ne;) {
+        size_t m = ne - done < TR_CHUNK ? (size_t)(ne - done) : TR_CHUNK;
+        if (fread(scratch, 16, m, f) != m)
+            return gdt_error_set(err, GDT_EIO, 4805, "%s: read failed", path);
+        for (size_t i = 0; i < m; i++) {
+            gdt_seam_edge *e = &s->e[s->ne];
+            e->a = tr_get_u64(scratch + 16 * i);
+            e->b = tr_get_u64(scratch + 16 * i + 8);
+            if (e->a < lo || e->a >= hi || e->b < lo || e->b >= hi)
+                return gdt_error_set(err, GDT_EJOB, 6802,
+                                     "%s: barrier edge %" PRIu64 " names another tile's vertex",
+                                     path, done + i);
+            s->ne++;
+        }
+        done += m;
+    }
+    return GDT_OK;
 }
 
 gdt_status tr_interrupted(const char *job, const char *where, gdt_error *err)

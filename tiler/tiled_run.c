@@ -637,7 +637,6 @@ static gdt_status reuse_tile(tr_ctx *c, uint64_t k, uint64_t size, uint64_t sum,
     gdt_tile_desc d;
     char *path = NULL;
     FILE *f = NULL;
-    const unsigned char *p;
     const char *why = NULL;
     uint64_t nf, nv, ne;
     gdt_status st = gdt_tiler_tile_info(c->tiler, k, &d, err);
@@ -663,15 +662,12 @@ static gdt_status reuse_tile(tr_ctx *c, uint64_t k, uint64_t size, uint64_t sum,
         why = "damaged or not this job's (its checksum differs from the one recorded)";
     if (f != NULL)
         fclose(f);
-    p = c->fbuf;
     if (why == NULL) {
-        nf = tr_get_u64(p + 24);
-        nv = tr_get_u64(p + 32);
-        ne = tr_get_u64(p + 40);
-        if (memcmp(p, TR_MAGIC, 8) != 0 || tr_get_u64(p + 8) != c->base[k] ||
-            tr_get_u64(p + 16) != d.points || TR_HEADER + 12 * nf + 24 * nv + 16 * ne != size)
+        tr_tri_expect ex = {c->base[k], d.points, c->job_id};
+        tr_tri_verdict v = tr_tri_check_header(c->fbuf, size, &ex, &nf, &nv, &ne);
+        if (v == TR_TRI_FOREIGN || v == TR_TRI_SIZE)
             why = "its header does not fit the tile";
-        else if (tr_get_u64(p + 48) != c->job_id[0] || tr_get_u64(p + 56) != c->job_id[1])
+        else if (v == TR_TRI_JOB)
             why = "its header names another job";
     }
     if (why != NULL) {
@@ -687,94 +683,28 @@ static gdt_status reuse_tile(tr_ctx *c, uint64_t k, uint64_t size, uint64_t sum,
 }
 
 /* Appends the seam section of tile k's .tri file (seam vertices and barrier
- * edges) to c->seam.  The counts of the header are checked against the
- * file's size before anything is allocated, every id against the tile's
- * vertex range and every coordinate against the merge frame.
+ * edges) to c->seam, through tr_tri_read_seam: the counts of the header are
+ * checked against the file's size before anything is allocated, every id
+ * against the tile's vertex range and every coordinate against the merge
+ * frame.
  * returns: GDT_EIO 4805 (open or read), GDT_EJOB 6801 (not the file this
  * run wrote), 6802 (its size or content does not match its header), 7001. */
 static gdt_status read_seam(tr_ctx *c, uint64_t k, gdt_error *err)
 {
     gdt_tile_desc d;
-    unsigned char hdr[TR_HEADER];
     char *path = NULL;
     FILE *f = NULL;
-    uint64_t nf, nv, ne, size = 0, lo = c->base[k], hi;
-    gdt_seam *s = &c->seam;
+    uint64_t size = 0;
     gdt_status st = gdt_tiler_tile_info(c->tiler, k, &d, err);
 
     if (st == GDT_OK)
-        st = tr_open_tri(c->tiles_dir, &d, lo, &f, hdr, &size, &path, err);
-    if (st != GDT_OK)
-        goto fail;
-    hi = lo + d.points;
-    nf = tr_get_u64(hdr + 24);
-    nv = tr_get_u64(hdr + 32);
-    ne = tr_get_u64(hdr + 40);
-    if (nf > size / 12 || nv > size / 24 || ne > size / 16 ||
-        TR_HEADER + 12 * nf + 24 * nv + 16 * ne != size || nv > d.points) {
-        st = gdt_error_set(err, GDT_EJOB, 6802,
-                           "%s: %" PRIu64 " bytes do not match its header (%" PRIu64
-                           " faces, %" PRIu64 " seam vertices, %" PRIu64 " barrier edges)",
-                           path, size, nf, nv, ne);
-        goto fail;
-    }
-    if (fseeko(f, (off_t)(TR_HEADER + 12 * nf), SEEK_SET) != 0) {
-        st = gdt_error_set(err, GDT_EIO, 4805, "%s: cannot seek: %s", path, strerror(errno));
-        goto fail;
-    }
-    /* growth by at least the current capacity: amortised doubling */
-    if (reserve(&c->fbuf, &c->cap_fbuf, 24 * (size_t)TR_CHUNK, 1) != 0 ||
-        reserve(&s->v, &s->cap_v, s->nv + (size_t)nv + (s->cap_v > 0 ? s->cap_v : 1024),
-                sizeof *s->v) != 0 ||
-        reserve(&s->e, &s->cap_e, s->ne + (size_t)ne + (s->cap_e > 0 ? s->cap_e : 1024),
-                sizeof *s->e) != 0) {
+        st = tr_open_tri(c->tiles_dir, &d, &f, &size, &path, err);
+    if (st == GDT_OK && reserve(&c->fbuf, &c->cap_fbuf, 24 * (size_t)TR_CHUNK, 1) != 0)
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-        goto fail;
+    if (st == GDT_OK) {
+        tr_tri_expect ex = {c->base[k], d.points, c->job_id};
+        st = tr_tri_read_seam(f, size, &ex, &c->seam, c->fbuf, path, err);
     }
-    for (uint64_t done = 0; done < nv;) {
-        size_t m = nv - done < TR_CHUNK ? (size_t)(nv - done) : TR_CHUNK;
-        if (fread(c->fbuf, 24, m, f) != m) {
-            st = gdt_error_set(err, GDT_EIO, 4805, "%s: read failed", path);
-            goto fail;
-        }
-        for (size_t i = 0; i < m; i++) {
-            gdt_seam_vertex *v = &s->v[s->nv];
-            v->id = tr_get_u64(c->fbuf + 24 * i);
-            v->x = (int64_t)tr_get_u64(c->fbuf + 24 * i + 8);
-            v->y = (int64_t)tr_get_u64(c->fbuf + 24 * i + 16);
-            if (v->id < lo || v->id >= hi || v->x < 0 || v->y < 0 || v->x > GDT_COORD_MAX ||
-                v->y > GDT_COORD_MAX) {
-                st = gdt_error_set(err, GDT_EJOB, 6802,
-                                   "%s: seam vertex %" PRIu64 " is not one of the tile's "
-                                   "vertices in the merge frame",
-                                   path, done + i);
-                goto fail;
-            }
-            s->nv++;
-        }
-        done += m;
-    }
-    for (uint64_t done = 0; done < ne;) {
-        size_t m = ne - done < TR_CHUNK ? (size_t)(ne - done) : TR_CHUNK;
-        if (fread(c->fbuf, 16, m, f) != m) {
-            st = gdt_error_set(err, GDT_EIO, 4805, "%s: read failed", path);
-            goto fail;
-        }
-        for (size_t i = 0; i < m; i++) {
-            gdt_seam_edge *e = &s->e[s->ne];
-            e->a = tr_get_u64(c->fbuf + 16 * i);
-            e->b = tr_get_u64(c->fbuf + 16 * i + 8);
-            if (e->a < lo || e->a >= hi || e->b < lo || e->b >= hi) {
-                st = gdt_error_set(err, GDT_EJOB, 6802,
-                                   "%s: barrier edge %" PRIu64 " names another tile's vertex",
-                                   path, done + i);
-                goto fail;
-            }
-            s->ne++;
-        }
-        done += m;
-    }
-fail:
     if (f != NULL)
         fclose(f);
     free(path);

@@ -4,7 +4,7 @@
   make_corpus.py BUILD OUT [--data DIR]
 
 BUILD is a build folder (its gdt-tile and pcd_write_pcl are used), OUT the
-folder that receives one subfolder per target (las, pcd, plycheck, job),
+folder that receives one subfolder per target (las, pcd, plycheck, job, tri),
 emptied first.  Seeds, each small enough for the targets' -max_len:
   las       the real samples of DIR (default ../shared/data) up to 16 KiB
             whole, larger ones cut to their first 16 KiB (header, VLRs and
@@ -16,6 +16,7 @@ emptied first.  Seeds, each small enough for the targets' -max_len:
   plycheck  meshes gdt-tile writes for small clouds (reference and tiled),
             collinear and tiny clouds (no faces)
   job       the job.db of small tiled runs kept with --keep-job
+  tri       the tile files (tiles/*.tri) of those runs, up to 64 KiB each
 The samples are copied into the build tree at test time, never into the
 repository.  Needs numpy (the generators); run it with the project's .venv.
 Exit status 0, or 1 when a generator or gdt-tile fails.
@@ -108,7 +109,11 @@ def tiled(build, cloud, job, ply, cell):
          "--job", job, "--keep-job", "-q"])
 
 
-def ply_and_job_seeds(plyout, jobout, build, tmp):
+# The tri target's -max_len (scripts/fuzz.sh): larger tile files are left out.
+TRI_MAX = 65536
+
+
+def ply_and_job_seeds(plyout, jobout, triout, build, tmp):
     gdt = build / "tiler" / "gdt-tile"
     clouds = []
     for n, kind in ((60, "uniform"), (120, "lidar"), (90, "grid")):
@@ -127,6 +132,9 @@ def ply_and_job_seeds(plyout, jobout, build, tmp):
         tiled(build, c, job, ply, cell)
         shutil.copyfile(ply, plyout / ply.name)
         shutil.copyfile(job / "job.db", jobout / f"{c.stem}.db")
+        for tri in sorted((job / "tiles").glob("*.tri")):
+            if tri.stat().st_size <= TRI_MAX:
+                shutil.copyfile(tri, triout / f"{c.stem}_{tri.name}")
 
 
 def main(argv=None):
@@ -136,7 +144,7 @@ def main(argv=None):
     ap.add_argument("--data", type=pathlib.Path, default=ROOT.parent / "shared" / "data")
     a = ap.parse_args(argv)
     build = a.build.resolve()
-    dirs = {t: a.out / t for t in ("las", "pcd", "plycheck", "job")}
+    dirs = {t: a.out / t for t in ("las", "pcd", "plycheck", "job", "tri")}
     for d in dirs.values():
         shutil.rmtree(d, ignore_errors=True)
         d.mkdir(parents=True)
@@ -146,7 +154,7 @@ def main(argv=None):
         tmp = pathlib.Path(t)
         las_seeds(dirs["las"], a.data, tmp)
         pcd_seeds(dirs["pcd"], build, a.data)
-        ply_and_job_seeds(dirs["plycheck"], dirs["job"], build, tmp)
+        ply_and_job_seeds(dirs["plycheck"], dirs["job"], dirs["tri"], build, tmp)
     for t, d in dirs.items():
         files = list(d.iterdir())
         print(f"{t}: {len(files)} seeds, largest {max(f.stat().st_size for f in files)} bytes")

@@ -10,6 +10,7 @@
 
 #include "gdt_direct_io.h"
 #include "gdt_error.h"
+#include "gdt_seam.h"
 #include "gdt_tiler.h"
 #include "private/tiler_io.h"
 
@@ -56,16 +57,54 @@ char *tr_path_join(const char *a, const char *b);
 gdt_status tr_tile_path(const char *tiles_dir, const gdt_tile_desc *d, const char *ext,
                         char **out, gdt_error *err);
 
-/* Opens tile k's .tri file (tiles_dir, d from gdt_tiler_tile_info) and
- * checks its header against the tile: magic, vertex base `base`, d's point
- * count.  On success *f is positioned after the header (close it with
- * fclose), hdr holds the header, *size the file's size and *path its name
- * (free it; also set on failure, NULL if out of memory).
- * returns: GDT_EIO 4805 (cannot open), GDT_EJOB 6801 (not the file this run
- * wrote), GDT_EINTERNAL 7001. */
-gdt_status tr_open_tri(const char *tiles_dir, const gdt_tile_desc *d, uint64_t base, FILE **f,
-                       unsigned char hdr[TR_HEADER], uint64_t *size, char **path,
-                       gdt_error *err);
+/* What a reader expects of a tile's .tri file: the header must carry the
+ * tile's vertex base and point count, and job_id[0..1] when job_id is not
+ * NULL. */
+typedef struct tr_tri_expect {
+    uint64_t base;          /* id of the tile's first vertex */
+    uint64_t points;        /* the tile's point count */
+    const uint64_t *job_id; /* 2 words, or NULL: not checked */
+} tr_tri_expect;
+
+/* The verdicts of tr_tri_check_header, in the order it tests them. */
+typedef enum tr_tri_verdict {
+    TR_TRI_FITS,    /* the header fits the tile and the file's size */
+    TR_TRI_FOREIGN, /* magic, base or point count is not the tile's */
+    TR_TRI_SIZE,    /* the counts do not add up to the file's size */
+    TR_TRI_JOB      /* the header names another job */
+} tr_tri_verdict;
+
+/* Checks the header hdr (TR_HEADER bytes) of a .tri file of size bytes:
+ * TR_HEADER + 12 nf + 24 nv + 16 ne == size, computed without overflow
+ * (each count is first bounded by size), and at most one seam vertex per
+ * point.  The counts go to *nf, *nv, *ne (also on failure: for messages).
+ * A tile whose base + points overflows is foreign: no run numbers its
+ * vertices so. */
+tr_tri_verdict tr_tri_check_header(const unsigned char hdr[TR_HEADER], uint64_t size,
+                                   const tr_tri_expect *ex, uint64_t *nf, uint64_t *nv,
+                                   uint64_t *ne);
+
+/* Opens tile d's .tri file (tiles_dir, d from gdt_tiler_tile_info) for
+ * tr_tri_read_seam: *f (close it with fclose), *size its size, *path its
+ * name (free it; also set on failure, NULL if out of memory).
+ * returns: GDT_EIO 4805 (cannot open), GDT_EINTERNAL 7001. */
+gdt_status tr_open_tri(const char *tiles_dir, const gdt_tile_desc *d, FILE **f, uint64_t *size,
+                       char **path, gdt_error *err);
+
+/* The one parser of a .tri file's seam section: reads the header of f (a
+ * file of size bytes, read from its start) and checks it against ex, then
+ * appends the seam vertices and barrier edges to s (grown as needed; the
+ * entries it had are kept).  Every vertex id and edge end must lie in
+ * [ex->base, ex->base + ex->points) and every coordinate in the merge
+ * frame [0, GDT_COORD_MAX].  scratch holds 24 * TR_CHUNK bytes.  On
+ * failure s may hold some of the file's entries after its own.  path names
+ * f in messages.
+ * returns: GDT_OK; GDT_EIO 4805 (seek or read failed); GDT_EJOB 6801 (not
+ * the tile file this run wrote: TR_TRI_FOREIGN, TR_TRI_JOB or a short
+ * header), 6802 (its size or content does not match its header);
+ * GDT_EINTERNAL 7001. */
+gdt_status tr_tri_read_seam(FILE *f, uint64_t size, const tr_tri_expect *ex, gdt_seam *s,
+                            unsigned char *scratch, const char *path, gdt_error *err);
 
 /* Direct I/O for the large tile files, which are written once and read
  * once (gdt_direct_io.h): whole blocks bypass the page cache where the file
