@@ -153,13 +153,22 @@ def test_core_runner_against_reference(device_ok, gcd_run, runner, kind):
 
 
 @pytest.mark.parametrize("spec,name", [("99", "CL_DEVICE_NOT_FOUND"),
-                                       ("7:3", "CL_DEVICE_NOT_FOUND"),
-                                       ("x", "CL_INVALID_VALUE")])
+                                       ("7:3", "CL_DEVICE_NOT_FOUND")])
 def test_device_errors_exit_5(device_ok, single_tile, runner, data_dir, tmp_path, spec, name):
     r = runner([single_tile, data_dir / "100-points.las", "-o", tmp_path / "o.ply",
                 "--device", spec])
     assert r.returncode == 5, r.stderr
     assert name in r.stderr and "GDT-51" in r.stderr
+    assert not (tmp_path / "o.ply").exists()
+
+
+def test_malformed_device_spec_exit_2(single_tile, runner, data_dir, tmp_path):
+    """A spec that is no device spec at all is a usage error, found when the
+    options are parsed, before any OpenCL call."""
+    r = runner([single_tile, data_dir / "100-points.las", "-o", tmp_path / "o.ply",
+                "--device", "x"])
+    assert r.returncode == 2, r.stderr
+    assert "GDT-2110" in r.stderr
     assert not (tmp_path / "o.ply").exists()
 
 
