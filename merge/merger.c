@@ -7,7 +7,7 @@
 #include <time.h>
 
 #include "gdt_predicates.h"
-#include "private/grow.h"
+#include "gdt_grow.h"
 
 /* Per slot of DT(W_r). */
 #define SLOT_WALL 1u   /* the directed edge of this slot is a wall */
@@ -66,7 +66,7 @@ static double now_s(void)
 
 static int grow(void *pp, size_t *cap, size_t need, size_t elem)
 {
-    return gdt_merge_grow(pp, cap, need, elem, 256);
+    return gdt_grow(pp, cap, need, elem, 256);
 }
 
 static uint64_t mix(uint64_t k)

@@ -5,7 +5,7 @@
 #include <string.h>
 
 #include "gdt_predicates.h"
-#include "private/grow.h"
+#include "gdt_grow.h"
 
 void gdt_seam_free(gdt_seam *s)
 {
@@ -18,7 +18,7 @@ void gdt_seam_free(gdt_seam *s)
 
 static int grow(void *pp, size_t *cap, size_t need, size_t elem)
 {
-    return gdt_merge_grow(pp, cap, need, elem, 1024);
+    return gdt_grow(pp, cap, need, elem, 1024);
 }
 
 static int cmp_edge(const void *pa, const void *pb)

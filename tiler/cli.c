@@ -405,43 +405,15 @@ static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
 
 /* SIGINT / SIGTERM ask the run to stop at its next check (between read
  * batches, tiles and output chunks, and the steps of the start-up); a
- * second signal kills at once (SA_RESETHAND).  The gdt-tile executable
- * installs its handlers before it loads this library (main.c), and calls
- * gdt_cli_main_stop with their flag; gdt_cli_main installs these. */
-static volatile sig_atomic_t g_stop;
-
-static void on_signal(int sig)
-{
-    g_stop = sig;
-}
-
+ * second signal kills at once (SA_RESETHAND).  The handlers belong to the
+ * gdt-tile executable (main.c), which installs them before it loads this
+ * library and hands their flag to gdt_cli_main_stop. */
 gdt_status gdt_cli_check_stop(const gdt_options *opts, const char *where, gdt_error *err)
 {
     if (opts->stop == NULL || *opts->stop == 0)
         return GDT_OK;
     return gdt_error_set(err, GDT_EINTERRUPTED, 1303,
                          "stopped by a signal during %s; nothing was written", where);
-}
-
-void gdt_cli_install_signal_handlers(void)
-{
-    static volatile sig_atomic_t installed;
-    struct sigaction sa;
-    if (installed)
-        return;
-    installed = 1;
-    memset(&sa, 0, sizeof sa);
-    sa.sa_handler = on_signal;
-    sigemptyset(&sa.sa_mask);
-    sa.sa_flags = SA_RESTART | SA_RESETHAND;
-    sigaction(SIGINT, &sa, NULL);
-    sigaction(SIGTERM, &sa, NULL);
-}
-
-int gdt_cli_main(int argc, char **argv)
-{
-    gdt_cli_install_signal_handlers();
-    return gdt_cli_main_stop(argc, argv, &g_stop);
 }
 
 int gdt_cli_main_stop(int argc, char **argv, volatile sig_atomic_t *stop)

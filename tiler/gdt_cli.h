@@ -62,15 +62,10 @@ void gdt_options_free(gdt_options *opts);
 /* Prints the full help text (usage, options with defaults, exit codes). */
 void gdt_cli_print_help(FILE *stream);
 
-/* Installs the SIGINT/SIGTERM handlers that set the stop flag of the runs
- * (once; later calls do nothing).  gdt_cli_main calls it first. */
-void gdt_cli_install_signal_handlers(void);
-
 /* The whole program: parse, run the mode, print errors, return the exit
- * code.  gdt_cli_main installs the handlers itself; gdt_cli_main_stop
- * takes the flag of handlers its caller installed (the gdt-tile launcher,
- * which does so before the libraries are even loaded). */
-int gdt_cli_main(int argc, char **argv);
+ * code.  stop is the flag of the SIGINT/SIGTERM handlers the caller
+ * installed (the gdt-tile launcher, main.c, does so before the libraries
+ * are even loaded); a nonzero value stops the run at its next check. */
 int gdt_cli_main_stop(int argc, char **argv, volatile sig_atomic_t *stop);
 
 #ifdef __cplusplus

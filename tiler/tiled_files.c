@@ -11,6 +11,8 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "gdt_grow.h"
+
 char *tr_path_join(const char *a, const char *b)
 {
     size_t la = strlen(a), lb = strlen(b);
@@ -75,29 +77,6 @@ gdt_status tr_open_tri(const char *tiles_dir, const gdt_tile_desc *d, FILE **f, 
     return GDT_OK;
 }
 
-/* Grows *p (elements of elem bytes, *cap of them) to hold need; at least
- * doubles, so that appending tile after tile is amortised linear.
- * returns 0, or -1 when out of memory (then *p is unchanged). */
-static int grow(void *pp, size_t *cap, size_t need, size_t elem)
-{
-    size_t n = *cap > 0 ? *cap : 1024;
-    void *p, *q;
-    if (need <= *cap)
-        return 0;
-    if (need > SIZE_MAX / elem - n)
-        return -1;
-    n += need;
-    /* the pointer moves by memcpy, not through a void ** lvalue (strict
-     * aliasing would let the optimiser ignore that store) */
-    memcpy(&p, pp, sizeof p);
-    q = realloc(p, n * elem);
-    if (q == NULL)
-        return -1;
-    memcpy(pp, &q, sizeof q);
-    *cap = n;
-    return 0;
-}
-
 gdt_status tr_tri_read_seam(FILE *f, uint64_t size, const tr_tri_expect *ex, gdt_seam *s,
                             unsigned char *scratch, const char *path, gdt_error *err)
 {
@@ -120,8 +99,8 @@ gdt_status tr_tri_read_seam(FILE *f, uint64_t size, const tr_tri_expect *ex, gdt
     if (fseeko(f, (off_t)(TR_HEADER + 12 * nf), SEEK_SET) != 0)
         return gdt_error_set(err, GDT_EIO, 4805, "%s: cannot seek: %s", path, strerror(errno));
     if (nv > SIZE_MAX - s->nv || ne > SIZE_MAX - s->ne ||
-        grow(&s->v, &s->cap_v, s->nv + (size_t)nv, sizeof *s->v) != 0 ||
-        grow(&s->e, &s->cap_e, s->ne + (size_t)ne, sizeof *s->e) != 0)
+        gdt_grow(&s->v, &s->cap_v, s->nv + (size_t)nv, sizeof *s->v, 1024) != 0 ||
+        gdt_grow(&s->e, &s->cap_e, s->ne + (size_t)ne, sizeof *s->e, 1024) != 0)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     for (uint64_t done = 0; done < nv;) {
         size_t m = nv - done < TR_CHUNK ? (size_t)(nv - done) : TR_CHUNK;

@@ -18,6 +18,7 @@
 #include "gdt_certify.h"
 #include "gdt_cloud.h"
 #include "gdt_core.h"
+#include "gdt_grow.h"
 #include "gdt_mesh.h"
 #include "gdt_ply.h"
 #include "gdt_plycheck.h"
@@ -130,23 +131,11 @@ static int stopped(const tr_ctx *c)
     return c->opts->stop != NULL && *c->opts->stop != 0;
 }
 
-/* Grows the array whose pointer is at pp (the address of a pointer of any
- * object type) to need elements of elem bytes.  The pointer is read and
- * written with memcpy, never through a void ** lvalue: a store through a
- * pointer lvalue of another type is one the optimiser may assume does not
- * touch the caller's pointer (strict aliasing). */
+/* Grows an array to at least need elements (gdt_grow.h: doubling, the
+ * pointer moved without a void ** cast). */
 static int reserve(void *pp, size_t *cap, size_t need, size_t elem)
 {
-    void *p, *q;
-    if (need <= *cap)
-        return 0;
-    memcpy(&p, pp, sizeof p);
-    q = realloc(p, need * elem);
-    if (q == NULL)
-        return -1;
-    memcpy(pp, &q, sizeof q);
-    *cap = need;
-    return 0;
+    return gdt_grow(pp, cap, need, elem, need);
 }
 
 /* reserve for a buffer of direct I/O (aligned to GDT_DIO_BLOCK); the content

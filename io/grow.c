@@ -1,10 +1,10 @@
-/* grow.c — see grow.h. */
-#include "grow.h"
+/* grow.c — see gdt_grow.h. */
+#include "gdt_grow.h"
 
 #include <stdlib.h>
 #include <string.h>
 
-int gdt_merge_grow(void *pp, size_t *cap, size_t need, size_t elem, size_t first)
+int gdt_grow(void *pp, size_t *cap, size_t need, size_t elem, size_t first)
 {
     size_t c = *cap > 0 ? *cap : (first > 0 ? first : 1);
     void *p, *q;

@@ -1,6 +1,6 @@
-/* grow.h — growable arrays of the merge module. */
-#ifndef GDT_MERGE_GROW_H
-#define GDT_MERGE_GROW_H
+/* gdt_grow.h — growable arrays: the one helper every module uses. */
+#ifndef GDT_GROW_H
+#define GDT_GROW_H
 
 #include <stddef.h>
 
@@ -10,6 +10,6 @@
  * read and written with memcpy, not through a void ** lvalue, which strict
  * aliasing would let the optimiser ignore.  On failure the pointer and
  * *cap are unchanged.  returns 0, or -1 when out of memory. */
-int gdt_merge_grow(void *pp, size_t *cap, size_t need, size_t elem, size_t first);
+int gdt_grow(void *pp, size_t *cap, size_t need, size_t elem, size_t first);
 
 #endif
