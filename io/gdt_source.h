@@ -27,10 +27,25 @@ typedef enum gdt_format {
     GDT_FORMAT_PCD
 } gdt_format;
 
-/* One point as stored in the file. */
+/* Point attribute flags (gdt_src_point.flags), as LAS stores them. */
+enum {
+    GDT_PT_SYNTHETIC = 1u << 0, /* created by a process other than the scan */
+    GDT_PT_KEYPOINT = 1u << 1,  /* model key point: keep when thinning */
+    GDT_PT_WITHHELD = 1u << 2,  /* to be treated as deleted (LAS spec) */
+    GDT_PT_OVERLAP = 1u << 3    /* formats 6-10: overlap of flight lines */
+};
+
+/* One point as stored in the file.  The attributes are those of the LAS
+ * record (formats 0-5: class is the low 5 bits of the classification byte,
+ * the flags its top 3 bits; formats 6-10: the full class byte and the four
+ * class flags); they are zero for formats without them (PCD). */
 typedef struct gdt_src_point {
     double x, y, z;     /* CRS units; for LAS x = X * scale_x + offset_x (in double) */
     int32_t X, Y, Z;    /* LAS record integers (exact); 0 for formats without a lattice */
+    uint8_t cls;        /* ASPRS classification code */
+    uint8_t ret;        /* return number (formats 0-5: 0..7, 6-10: 0..15) */
+    uint8_t nret;       /* number of returns of the pulse */
+    uint8_t flags;      /* GDT_PT_* */
 } gdt_src_point;
 
 /* What the file's header says, after validation.  Strings are owned by the

@@ -10,8 +10,10 @@
  *          from a header value that has not been checked against the file.
  *   read:  the point records are streamed through one buffer of
  *          opts.buffer_bytes; a record may straddle refills.  Only the first
- *          12 bytes (X, Y, Z as int32, the same in every format 0–10) are
- *          decoded; the rest of the record, extra bytes included, is skipped.
+ *          LAS_HEAD_BYTES bytes (X, Y, Z as int32, the same in every format
+ *          0–10, then the return and class bytes) are decoded
+ *          (las_record_to_point); the rest of the record, extra bytes
+ *          included, is skipped.
  *
  * Messages: GDT-31xx bad input, GDT-41xx I/O, GDT-3150.. warnings.
  */
@@ -34,7 +36,10 @@
 #define LAS_VLR_HEADER 54u
 #define LAS_EVLR_HEADER 60u
 #define LAS_WKT_MAX ((uint64_t)1 << 20) /* largest WKT EVLR we keep */
-#define LAS_XYZ_BYTES 12u
+/* Bytes of a record las_record_to_point looks at: 0-11 X Y Z, 12-13
+ * intensity, formats 0-5: 14 returns, 15 class and flags; 6-10: 14 returns,
+ * 15 flags, 16 class.  Every format's record is at least 20 bytes. */
+#define LAS_HEAD_BYTES 17u
 
 #define LAS_GE_WAVEFORM_INTERNAL 0x2u /* global encoding: waveform data after the points */
 #define LAS_GE_WKT 0x10u              /* global encoding (1.4): the CRS is WKT */
@@ -70,6 +75,7 @@ typedef struct las_impl {
     uint64_t file_pos, points_end;
     uint64_t next_point, point_count;
     unsigned record_length;
+    unsigned point_format;
     double scale[3], offset[3];
     gdt_status failed; /* status of an earlier failed read, else GDT_OK */
     char *wkt;         /* OGC WKT of the file, NUL-terminated, or NULL */
@@ -488,11 +494,34 @@ static gdt_status las_take(gdt_source *src, las_impl *im, unsigned char *dst, si
     return GDT_OK;
 }
 
+/* Converts the first LAS_HEAD_BYTES bytes of a record of point format
+ * format to a point. */
+static void las_record_to_point(const las_impl *im, const unsigned char *rec, gdt_src_point *p)
+{
+    p->X = gdt_le_get_i32(rec);
+    p->Y = gdt_le_get_i32(rec + 4);
+    p->Z = gdt_le_get_i32(rec + 8);
+    p->x = (double)p->X * im->scale[0] + im->offset[0];
+    p->y = (double)p->Y * im->scale[1] + im->offset[1];
+    p->z = (double)p->Z * im->scale[2] + im->offset[2];
+    if (im->point_format >= 6) {
+        p->ret = rec[14] & 0x0Fu;
+        p->nret = rec[14] >> 4;
+        p->flags = rec[15] & 0x0Fu; /* synthetic, key point, withheld, overlap */
+        p->cls = rec[16];
+    } else {
+        p->ret = rec[14] & 0x07u;
+        p->nret = (rec[14] >> 3) & 0x07u;
+        p->flags = rec[15] >> 5; /* synthetic, key point, withheld */
+        p->cls = rec[15] & 0x1Fu;
+    }
+}
+
 static gdt_status las_read(gdt_source *src, gdt_src_point *out, size_t cap, size_t *n,
                            gdt_error *err)
 {
     las_impl *im = src->impl;
-    unsigned char xyz[LAS_XYZ_BYTES];
+    unsigned char head[LAS_HEAD_BYTES];
     gdt_status st = GDT_OK;
 
     *n = 0;
@@ -507,20 +536,14 @@ static gdt_status las_read(gdt_source *src, gdt_src_point *out, size_t cap, size
             rec = im->buf + im->buf_pos;
             im->buf_pos += im->record_length;
         } else {
-            st = las_take(src, im, xyz, LAS_XYZ_BYTES, err);
+            st = las_take(src, im, head, LAS_HEAD_BYTES, err);
             if (st == GDT_OK)
-                st = las_take(src, im, NULL, im->record_length - LAS_XYZ_BYTES, err);
+                st = las_take(src, im, NULL, im->record_length - LAS_HEAD_BYTES, err);
             if (st != GDT_OK)
                 goto fail;
-            rec = xyz;
+            rec = head;
         }
-        gdt_src_point *p = &out[*n];
-        p->X = gdt_le_get_i32(rec);
-        p->Y = gdt_le_get_i32(rec + 4);
-        p->Z = gdt_le_get_i32(rec + 8);
-        p->x = (double)p->X * im->scale[0] + im->offset[0];
-        p->y = (double)p->Y * im->scale[1] + im->offset[1];
-        p->z = (double)p->Z * im->scale[2] + im->offset[2];
+        las_record_to_point(im, rec, &out[*n]);
         (*n)++;
         im->next_point++;
     }
@@ -642,6 +665,7 @@ gdt_status gdt_las_open(gdt_source *src, gdt_error *err)
     im->points_end = points_end;
     im->point_count = h.point_count;
     im->record_length = h.record_length;
+    im->point_format = h.format;
     memcpy(im->scale, h.scale, sizeof im->scale);
     memcpy(im->offset, h.offset, sizeof im->offset);
     las_payloads_free(&pl);

@@ -995,6 +995,7 @@ static gdt_status pcd_read(gdt_source *src, gdt_src_point *buf, size_t cap, size
         buf[*n].y = p[1];
         buf[*n].z = p[2];
         buf[*n].X = buf[*n].Y = buf[*n].Z = 0;
+        buf[*n].cls = buf[*n].ret = buf[*n].nret = buf[*n].flags = 0;
         (*n)++;
     }
     if (r->next == r->npoints && !r->finished) {
