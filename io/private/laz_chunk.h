@@ -79,6 +79,40 @@ gdt_status gdt_laz_vlr_parse(const char *path, const unsigned char *payload, siz
                              unsigned point_format, unsigned record_length, gdt_laz_vlr *out,
                              gdt_error *err);
 
+/* The chunk table: where each chunk starts and how many points it holds.
+ * The point data of a chunked LAZ file starts with an int64 file offset of
+ * the table (-1 when the writer could not seek back: the offset is then in
+ * the file's last 8 bytes); the first chunk follows those 8 bytes.
+ * Invariants after gdt_laz_table_read: nchunks >= 1 when point_count > 0;
+ * start[0] = points_start + 8; start[i+1] = start[i] + bytes[i];
+ * start[nchunks-1] + bytes[nchunks-1] = data_end <= table offset;
+ * sum(count) = point_count (the header's count, which wins over a table
+ * that claims more: the surplus chunks are dropped with a warning), every
+ * count >= 1.  Arrays are owned; free with gdt_laz_table_free. */
+typedef struct gdt_laz_table {
+    uint64_t nchunks;
+    uint64_t *start;  /* file offset of chunk i */
+    uint64_t *bytes;  /* compressed bytes of chunk i */
+    uint64_t *count;  /* points in chunk i */
+    uint64_t data_end;
+    int present;      /* 0: no usable table (the caller scans the chunks
+                         in order, using gdt_laz_chunk_used); then only
+                         data_end (the end of the point data) is set */
+} gdt_laz_table;
+
+/* Reads and checks the chunk table of the file open as fd.  points_start is
+ * the header's offset to the point data, file_end the end of the region the
+ * points may use (the EVLR start or the file size), point_count the
+ * header's count.  A missing or unreadable table is not an error for a
+ * fixed chunk size: present = 0 and a warning through log (may be NULL);
+ * for variable chunks it is GDT_EINPUT (the counts are only in the table).
+ * A table that contradicts the file (chunks past file_end, zero counts,
+ * counts that disagree with the fixed chunk size) is GDT_EINPUT 39xx. */
+gdt_status gdt_laz_table_read(gdt_laz_table *t, const gdt_laz_vlr *vlr, int fd,
+                              const char *path, uint64_t points_start, uint64_t file_end,
+                              uint64_t point_count, gdt_log *log, gdt_error *err);
+void gdt_laz_table_free(gdt_laz_table *t);
+
 /* The fields a run needs.  Layered chunks (formats 6-10) decode only the
  * layers these need and skip the others by their byte counts; in the
  * records returned, the bytes of fields not decoded are zero.  Pointwise
