@@ -78,9 +78,23 @@ typedef struct gdt_source_info {
 
 typedef struct gdt_source gdt_source;
 
+/* Point fields a reader must fill (gdt_source_opts.need); readers of
+ * formats that store fields separately (LAZ point formats 6-10) skip the
+ * others, which are then zero. */
+enum {
+    GDT_SRC_NEED_XYZ = 1u << 0,   /* x, y, z, X, Y, Z: always filled */
+    GDT_SRC_NEED_CLASS = 1u << 1, /* cls */
+    GDT_SRC_NEED_FLAGS = 1u << 2, /* ret, nret, flags */
+    GDT_SRC_NEED_ATTRS = GDT_SRC_NEED_CLASS | GDT_SRC_NEED_FLAGS
+};
+
 typedef struct gdt_source_opts {
     gdt_log *log;             /* warnings go here; may be NULL */
     size_t buffer_bytes;      /* read-buffer size; 0 = default (1 MiB). Tests use tiny ones. */
+    unsigned need;            /* GDT_SRC_NEED_* bits; 0 = every field */
+    int threads;              /* decoder threads for compressed inputs; <= 1: none
+                                 (the caller's thread decodes).  The points and their
+                                 order never depend on it. */
 } gdt_source_opts;
 
 /* Opens path, sniffs its format from its content (not its name), reads and
