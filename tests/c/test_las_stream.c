@@ -101,7 +101,7 @@ static int write_file(const char *path, int32_t (*xyz)[3])
 
 static void read_back(const char *path, int32_t (*xyz)[3], size_t buffer_bytes, size_t chunk)
 {
-    gdt_source_opts opts = {NULL, buffer_bytes};
+    gdt_source_opts opts = {.log = NULL, .buffer_bytes = buffer_bytes};
     gdt_error err;
     gdt_source *src = NULL;
     gdt_src_point *buf = calloc(chunk, sizeof *buf);
@@ -150,7 +150,7 @@ static void read_back(const char *path, int32_t (*xyz)[3], size_t buffer_bytes, 
 
 static void shrink_while_reading(const char *path)
 {
-    gdt_source_opts opts = {NULL, 64};
+    gdt_source_opts opts = {.log = NULL, .buffer_bytes = 64};
     gdt_error err;
     gdt_source *src = NULL;
     gdt_src_point buf[16];
