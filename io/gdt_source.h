@@ -52,7 +52,8 @@ typedef struct gdt_src_point {
  * source and live until gdt_source_close. */
 typedef struct gdt_source_info {
     gdt_format format;
-    char format_name[16];      /* "LAS", "PCD" */
+    char format_name[16];      /* "LAS", "LAZ", "PCD" */
+    int compressed;            /* 1: decoding costs far more than reading (LAZ) */
     char version[16];          /* "1.4", "0.7" */
     char encoding[32];         /* LAS: "point format 3"; PCD: "ascii" / "binary" / "binary_compressed" */
     uint64_t point_count;      /* header count, verified against the file size where possible */
