@@ -216,7 +216,8 @@ def test_formats_match_laspy(tool, tmp_path, fmt, chunks):
 
 # Version 1 items: lazrs's POINT10, GPSTIME11 and WAVEPACKET13 agree with
 # LASzip; its RGB12 and BYTE version 1 encoders do not (LASzip and lazrs
-# itself fail on their output), so no file here has those.
+# itself fail on their output), so no file here has those; tests/c/test_laz_v1.c
+# checks them against chunks encoded as LASzip's writer defines them.
 @pytest.mark.parametrize("fmt", [0, 1, 4])
 def test_version1_items(tool, tmp_path, fmt):
     las = build_las(fmt, 1200, seed=fmt + 77, extra=False)
