@@ -184,8 +184,16 @@ gdt_status gdt_laz_table_read(gdt_laz_table *t, const gdt_laz_vlr *vlr, int fd,
                                    path, i, (unsigned)prev_bytes, pos, data_end);
                 goto fail;
             }
-            if (cnt > point_count - points)
+            if (cnt > point_count - points) {
+                /* The last chunk of fixed size is short; a variable one
+                 * that holds more than the header counts is cut. */
+                if (variable)
+                    gdt_log_warn(log, 3917,
+                                 "%s: LAZ chunk table: chunk %" PRIu64 " holds %" PRIu64
+                                 " points, past the header's %" PRIu64 "; reading %" PRIu64,
+                                 path, i, cnt, point_count, point_count - points);
                 cnt = point_count - points;
+            }
             t->start[i] = pos;
             t->bytes[i] = prev_bytes;
             t->count[i] = cnt;

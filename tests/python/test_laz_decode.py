@@ -298,6 +298,25 @@ def test_missing_table_variable_chunks_fails(tool, tmp_path):
     assert b"GDT-3910" in r.stderr
 
 
+@pytest.mark.parametrize("chunks, count, warning", [
+    (100, 650, None),            # the last chunk read in part
+    (100, 550, b"GDT-3916"),     # a chunk too many in the table
+    ([100, 50, 150], 200, b"GDT-3917"),  # a variable chunk cut
+])
+def test_header_count_wins(tool, tmp_path, chunks, count, warning):
+    las = build_las(3, 700 if chunks == 100 else 300, seed=21)
+    path = write_laz(tmp_path / "full.laz", las, chunks)
+    b = bytearray(path.read_bytes())
+    struct.pack_into("<I", b, 107, count)
+    short = tmp_path / "short.laz"
+    short.write_bytes(bytes(b))
+    r = decode(tool, short)
+    assert r.returncode == 0, r.stderr.decode()
+    assert r.stdout == las.points.array.tobytes()[:count * las.header.point_format.size]
+    if warning:
+        assert warning in r.stderr, r.stderr.decode()
+
+
 @pytest.mark.parametrize("fmt", [0, 3, 5])
 def test_truncated_chunk_names_it(tool, tmp_path, fmt):
     las = build_las(fmt, 700, seed=8)
