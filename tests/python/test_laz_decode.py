@@ -298,6 +298,23 @@ def test_missing_table_variable_chunks_fails(tool, tmp_path):
     assert b"GDT-3910" in r.stderr
 
 
+@pytest.mark.parametrize("chunks, rc, code", [(50, 0, b"GDT-3911"), ([100, 200], 3, b"GDT-3910")])
+def test_unknown_table_version(tool, tmp_path, chunks, rc, code):
+    """A table of another version is no table: fixed chunks are scanned."""
+    las = build_las(2, 300, seed=13)
+    path = write_laz(tmp_path / "full.laz", las, chunks)
+    b = bytearray(path.read_bytes())
+    (offset,) = struct.unpack_from("<I", b, 96)
+    (table,) = struct.unpack_from("<q", b, offset)
+    struct.pack_into("<I", b, table, 1)
+    bad = tmp_path / "v1table.laz"
+    bad.write_bytes(bytes(b))
+    r = decode(tool, bad)
+    assert r.returncode == rc and code in r.stderr, r.stderr.decode()
+    if rc == 0:
+        assert r.stdout == las.points.array.tobytes()
+
+
 @pytest.mark.parametrize("chunks, count, warning", [
     (100, 650, None),            # the last chunk read in part
     (100, 550, b"GDT-3916"),     # a chunk too many in the table
