@@ -315,6 +315,26 @@ def test_unknown_table_version(tool, tmp_path, chunks, rc, code):
         assert r.stdout == las.points.array.tobytes()
 
 
+@pytest.mark.parametrize("chunks, field, rc, code", [
+    ([100, 200], "table", 0, b"GDT-3916"),  # 2^32 - 1 chunks claimed: the header's fill 2
+    (50, "header", 3, b"GDT-3913"),         # 2^32 - 1 points claimed: cannot fit
+])
+def test_huge_counts_cost_nothing(tool, tmp_path, chunks, field, rc, code):
+    """Counts far past the file are neither allocated for nor decoded."""
+    las = build_las(0, 300, seed=14)
+    path = write_laz(tmp_path / "full.laz", las, chunks)
+    b = bytearray(path.read_bytes())
+    (offset,) = struct.unpack_from("<I", b, 96)
+    (table,) = struct.unpack_from("<q", b, offset)
+    struct.pack_into("<I", b, table + 4 if field == "table" else 107, 0xFFFFFFFF)
+    bad = tmp_path / "huge.laz"
+    bad.write_bytes(bytes(b))
+    r = run([str(tool("laz_decode")), str(bad)], text=False, timeout=20)
+    assert r.returncode == rc and code in r.stderr, r.stderr.decode()
+    if rc == 0:
+        assert r.stdout == las.points.array.tobytes()
+
+
 @pytest.mark.parametrize("chunks, count, warning", [
     (100, 650, None),            # the last chunk read in part
     (100, 550, b"GDT-3916"),     # a chunk too many in the table
