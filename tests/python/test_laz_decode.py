@@ -2,8 +2,8 @@
 
 Fixtures are LAZ files written at test time with lazrs (fixed chunks of 1,
 7 and 50000 points, variable chunks, version 1 and 2 items, point formats
-0-5 with extra bytes of several sizes, empty and one-point files) from
-seeded random but realistic points.  Every decoded record must equal, byte
+0-5 with extra bytes of several sizes, empty and one-point files) and with
+LASzip (laspy's laszip back-end), from seeded random but realistic points.  Every decoded record must equal, byte
 for byte, what laspy decodes with both its lazrs and its laszip back-ends
 (and the records that were compressed).  Then the damaged files: a missing
 table, truncated and corrupt chunks, bad VLRs.
@@ -209,6 +209,17 @@ def test_formats_match_laspy(tool, tmp_path, fmt, chunks):
     las = build_las(fmt, n, seed=fmt * 10 + 1)
     ch = var_chunks(n, fmt) if chunks == "variable" else chunks
     path = write_laz(tmp_path / f"f{fmt}.laz", las, ch)
+    expect = las.points.array.tobytes()
+    assert oracle_records(path) == expect
+    check_same(tool, path, expect)
+
+
+@pytest.mark.parametrize("fmt", range(6))
+def test_laszip_written(tool, tmp_path, fmt):
+    """Files LASzip's own encoder writes (through laspy's laszip back-end)."""
+    las = build_las(fmt, 3000, seed=fmt + 500)
+    path = tmp_path / f"lz{fmt}.laz"
+    las.write(str(path), laz_backend=LASZIP)
     expect = las.points.array.tobytes()
     assert oracle_records(path) == expect
     check_same(tool, path, expect)
