@@ -257,6 +257,17 @@ def test_tiny_files(tool, tmp_path, n):
     check_same(tool, path, expect)
 
 
+def test_need_is_all_for_pointwise_chunks(tool, tmp_path):
+    """Pointwise chunks share one stream: every field is decoded whatever
+    the fields asked for; an unknown field is a usage error."""
+    las = build_las(3, 500, seed=17)
+    path = write_laz(tmp_path / "p.laz", las, 100)
+    for need in ("xyz", "xyz,class", "flags", "all"):
+        r = decode(tool, path, "--need", need)
+        assert r.returncode == 0 and r.stdout == las.points.array.tobytes(), need
+    assert decode(tool, path, "--need", "colour").returncode == 2
+
+
 def test_autzen_matches_las(tool, data_dir):
     laz, las = data_dir / "autzen_trim.laz", data_dir / "autzen_trim.las"
     if not laz.exists() or not las.exists():
