@@ -320,6 +320,24 @@ def test_missing_table_variable_chunks_fails(tool, tmp_path):
     assert b"GDT-3910" in r.stderr
 
 
+@pytest.mark.parametrize("trailer", [True, False])
+def test_table_offset_in_trailer(tool, tmp_path, trailer):
+    """An offset word of -1: the table's offset is the file's last 8 bytes
+    (a writer that could not seek back); without them the chunks are
+    scanned."""
+    las = build_las(1, 400, seed=19)
+    path = write_laz(tmp_path / "full.laz", las, 50)
+    b = bytearray(path.read_bytes())
+    (offset,) = struct.unpack_from("<I", b, 96)
+    (table,) = struct.unpack_from("<q", b, offset)
+    struct.pack_into("<q", b, offset, -1)
+    b += struct.pack("<q", table if trailer else 2**40)
+    moved = tmp_path / "trailer.laz"
+    moved.write_bytes(bytes(b))
+    r = check_same(tool, moved, las.points.array.tobytes())
+    assert (b"GDT-3911" in r.stderr) != trailer, r.stderr.decode()
+
+
 @pytest.mark.parametrize("chunks, rc, code", [(50, 0, b"GDT-3911"), ([100, 200], 3, b"GDT-3910")])
 def test_unknown_table_version(tool, tmp_path, chunks, rc, code):
     """A table of another version is no table: fixed chunks are scanned."""
