@@ -22,7 +22,8 @@
 typedef enum opt_id {
     OPT_OUTPUT, OPT_TILE, OPT_CELL, OPT_HALO, OPT_JOB, OPT_RESTART, OPT_RESUME, OPT_DEVICE,
     OPT_THREADS, OPT_MEM, OPT_QUANTUM, OPT_DUP, OPT_CHECK, OPT_JSON, OPT_QUIET, OPT_VERBOSE,
-    OPT_INFO, OPT_REFERENCE, OPT_SINGLE, OPT_KEEP_JOB, OPT_HELP, OPT_VERSION
+    OPT_INFO, OPT_REFERENCE, OPT_SINGLE, OPT_KEEP_JOB, OPT_HELP, OPT_VERSION,
+    OPT_KEEP_CLASS, OPT_DROP_CLASS, OPT_RETURNS, OPT_KEEP_WITHHELD
 } opt_id;
 
 /* The option table: every option once, with its argument, default and help. */
@@ -58,6 +59,15 @@ static const opt_spec OPTIONS[] = {
      "lattice step for float and projected input, CRS units"},
     {OPT_DUP, "--dup", NULL, "first|min-z|max-z", "first",
      "which z to keep for points with the same (x, y)"},
+    {OPT_KEEP_CLASS, "--keep-class", NULL, "LIST", NULL,
+     "keep only LAS points of these classes: ASPRS codes 0..255, e.g. 2 or 2,9 or 3-5"},
+    {OPT_DROP_CLASS, "--drop-class", NULL, "LIST", NULL,
+     "drop LAS points of these classes (not together with --keep-class)"},
+    {OPT_RETURNS, "--returns", NULL, "all|first|last|single", "all",
+     "which LAS returns to keep (first: return 1, last: return = number of returns, "
+     "single: one return)"},
+    {OPT_KEEP_WITHHELD, "--keep-withheld", NULL, NULL, NULL,
+     "keep LAS points flagged withheld (dropped by default: the LAS spec deletes them)"},
     {OPT_CHECK, "--check", NULL, NULL, NULL, "validate the written mesh exactly"},
     {OPT_JSON, "--json", NULL, "FILE", NULL, "write a machine-readable run summary"},
     {OPT_QUIET, "--quiet", "-q", NULL, NULL, "no progress and no warnings on stderr"},
@@ -274,6 +284,13 @@ static gdt_status apply(gdt_options *opts, const opt_spec *o, const char *val, g
     case OPT_KEEP_JOB: opts->keep_job = 1; break;
     case OPT_HELP: opts->mode = GDT_MODE_HELP; break;
     case OPT_VERSION: if (opts->mode != GDT_MODE_HELP) opts->mode = GDT_MODE_VERSION; break;
+    case OPT_KEEP_CLASS:
+    case OPT_DROP_CLASS:
+        st = gdt_filter_parse_classes(&opts->filter, o->id == OPT_KEEP_CLASS ? 1 : -1, o->lng,
+                                      val, err);
+        break;
+    case OPT_RETURNS: st = gdt_filter_parse_returns(&opts->filter, val, err); break;
+    case OPT_KEEP_WITHHELD: opts->filter.keep_withheld = 1; break;
     }
     return st;
 }
@@ -390,6 +407,10 @@ static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
     if (opts->mode == GDT_MODE_RESUME && (opts->job != NULL || opts->restart))
         return gdt_error_set(err, GDT_EUSAGE, 2107,
                              "--resume DIR names the job itself (no --job, no --restart)");
+    if (opts->mode == GDT_MODE_RESUME && !gdt_filter_is_default(&opts->filter))
+        return gdt_error_set(err, GDT_EUSAGE, 2306,
+                             "--resume DIR filters the points as its job recorded (no "
+                             "--keep-class, --drop-class, --returns or --keep-withheld)");
     if (opts->mode == GDT_MODE_RESUME && opts->output != NULL)
         return gdt_error_set(err, GDT_EUSAGE, 2108,
                              "--resume DIR writes the output its job recorded (no -o)");
