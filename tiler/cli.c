@@ -73,7 +73,8 @@ static const opt_spec OPTIONS[] = {
     {OPT_QUIET, "--quiet", "-q", NULL, NULL, "no progress and no warnings on stderr"},
     {OPT_VERBOSE, "--verbose", "-v", NULL, NULL, "more detail (predicate counters, stages)"},
     {OPT_INFO, "--info", NULL, NULL, NULL,
-     "describe the inputs (format, counts, bounds, CRS, lattice, duplicates) and stop; "
+     "describe the inputs (format, counts, bounds, CRS, lattice, duplicates; LAS classes, "
+     "returns and flags) and stop; "
      "with --tile/--cell/--halo also the tile plan"},
     {OPT_REFERENCE, "--reference", NULL, NULL, NULL,
      "triangulate in memory with the CPU reference (one tile; for testing)"},

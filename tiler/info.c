@@ -4,7 +4,10 @@
  *
  * Headers are printed as read; then one streaming pass over all points
  * (bounded buffers; duplicates counted out of core within the memory budget)
- * gives the true counts and the lattice bounds. */
+ * gives the true counts and the lattice bounds.  The same pass gives each LAS
+ * input's attribute census (classes, returns, flags of every record) and the
+ * filter's counts; the cloud's counts, bounds and duplicates are those of the
+ * points the filter keeps. */
 #include "private/cli_modes.h"
 #include "private/filter_report.h"
 #include "private/json_out.h"
