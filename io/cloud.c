@@ -705,6 +705,27 @@ static size_t filter_chunk(gdt_cloud *c, size_t got)
     return kept;
 }
 
+/* After the first pass over input i: a note with its counts; after the last
+ * input, a warning when the filter kept none of the points read. */
+static void report_filter(gdt_cloud *c, size_t i)
+{
+    const gdt_filter_counts *k = &c->in[i].counts;
+    gdt_log_note(c->opts.log,
+                 "%s: %" PRIu64 " records, %" PRIu64 " kept (dropped: %" PRIu64
+                 " by class, %" PRIu64 " by return, %" PRIu64 " withheld)",
+                 c->in[i].path, k->read, k->kept, k->drop_class, k->drop_return,
+                 k->drop_withheld);
+    if (i + 1 == c->nin) {
+        gdt_filter_counts t = gdt_cloud_total_counts(c);
+        char d[1200];
+        gdt_filter_describe(&c->filter, d, sizeof d);
+        if (t.read > 0 && t.kept == 0)
+            gdt_log_warn(c->opts.log, 3431,
+                         "the point filter (%s) kept none of the %" PRIu64 " points read", d,
+                         t.read);
+    }
+}
+
 gdt_status gdt_cloud_read(gdt_cloud *cloud, gdt_point *buf, size_t cap, size_t *n,
                           gdt_error *err)
 {
@@ -737,6 +758,8 @@ gdt_status gdt_cloud_read(gdt_cloud *cloud, gdt_point *buf, size_t cap, size_t *
             }
             gdt_source_close(cloud->src);
             cloud->src = NULL;
+            if (cloud->pass == 0)
+                report_filter(cloud, cloud->cur);
             cloud->cur++;
             continue;
         }

@@ -57,7 +57,8 @@
  * equal), 3460 (header bounds not lon/lat), 3461 (a point cannot be
  * projected); warnings 3420 (LAS input snapped onto a foreign lattice), 3421
  * (geographic datum is not WGS 84), 3430 (class filter naming classes
- * above 31 with a LAS input of point format 0-5); 7001 (out of memory), 7401 (bad
+ * above 31 with a LAS input of point format 0-5), 3431 (the filter kept no
+ * point at all, at the end of the first pass); 7001 (out of memory), 7401 (bad
  * arguments to gdt_points_dedup), 7402 (gdt_cloud_read without a buffer),
  * 7461 (unexpected exception in the projection).
  *

@@ -385,6 +385,18 @@ def test_high_class_with_legacy_format_warns(gdt_bin, tmp_path):
     assert r.returncode == 0 and "GDT-3430" not in r.stderr, r.stderr
 
 
+@pytest.mark.parametrize("mode", sorted(MODES))
+def test_a_filter_that_keeps_nothing_warns(gdt_bin, tmp_path, mode):
+    """Nothing kept: an empty mesh, and a warning naming the filter."""
+    src = make_las(tmp_path / "fmt3.las", "fmt3")
+    s, err = mesh(gdt_bin, [src], tmp_path / "e.ply", mode, "--keep-class", "30")
+    assert "GDT-3431" in err and "keep-class 30 returns all" in err, err
+    assert err.count("GDT-3431") == 1, err
+    assert s["filter"]["points_kept"] == 0 and s["filter"]["points_read"] == NPTS
+    s, err = mesh(gdt_bin, [src], tmp_path / "f.ply", mode, "--keep-class", "2")
+    assert "GDT-3431" not in err, err
+
+
 # ------------------------------------------------------------------ jobs
 
 def test_changed_filter_on_a_job_is_exit_6_unless_restart(gdt_bin, tmp_path):
