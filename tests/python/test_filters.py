@@ -299,6 +299,72 @@ def test_counts_per_input_and_total(gdt_bin, tmp_path):
         assert s["filter"][k] == cnts[0][k] + cnts[1][k]
 
 
+@pytest.mark.parametrize("mode", sorted(MODES))
+def test_whole_read_chunks_dropped(gdt_bin, tmp_path, mode):
+    """Runs of thousands of dropped records (whole read chunks, at the start,
+    inside and at the end of the file): the ordinals and the mesh are still
+    those of the filtered file."""
+    n = 20000
+    rng = np.random.default_rng(8)
+    cells = rng.choice(400 * 400, size=n, replace=False)
+    hdr = laspy.LasHeader(point_format=1, version="1.2")
+    hdr.scales = [0.01, 0.01, 0.01]
+    hdr.offsets = [0.0, 0.0, 0.0]
+    las = laspy.LasData(hdr)
+    las.X = (cells % 400) * 50 + rng.integers(0, 20, n)
+    las.Y = (cells // 400) * 50 + rng.integers(0, 20, n)
+    las.Z = rng.integers(0, 1000, n)
+    cls = np.full(n, 2)
+    cls[:9000] = 1          # the first two chunks and more
+    cls[12000:17000] = 5
+    cls[19000:] = 6
+    las.classification = cls
+    las.number_of_returns = np.ones(n, dtype=np.uint8)
+    las.return_number = np.ones(n, dtype=np.uint8)
+    src = tmp_path / "runs.las"
+    las.write(str(src))
+    _, a = attrs(src)
+    mask, cnt = oracle(a, keep=[2])
+    pre = write_subset(src, mask, tmp_path / "pre.las")
+    s, _ = mesh(gdt_bin, [src], tmp_path / "f.ply", mode, "--keep-class", "2")
+    mesh(gdt_bin, [pre], tmp_path / "p.ply", mode)
+    assert body(tmp_path / "f.ply") == body(tmp_path / "p.ply")
+    assert {k: s["filter"][k] for k in cnt} == cnt and cnt["points_kept"] == 5000
+
+
+def test_dropped_records_are_not_checked_and_indices_stay_the_files(gdt_bin, tmp_path):
+    """A record whose coordinate is outside the lattice range fails the run
+    (GDT-3402) with its index in the file, after dropped records too; a
+    dropped one is never looked at, as in the filtered file."""
+    a = make_las(tmp_path / "a.las", "fmt1")
+    hdr = laspy.LasHeader(point_format=1, version="1.2")
+    hdr.scales = [54321.125, 54321.125, 0.01]   # no integer multiple of 0.01: snapped
+    hdr.offsets = [0.0, 0.0, 0.0]
+    las = laspy.LasData(hdr)
+    m = 12
+    las.X = np.arange(m) * 3
+    las.Y = np.arange(m) * 7 % 5
+    las.Z = np.arange(m)
+    las.X[[2, 7]] = 2_000_000_000  # 1.1e14 CRS units: 1.1e16 steps of 0.01 > 2^53
+    cls = np.full(m, 2)
+    cls[[1, 2, 3, 4]] = 7
+    las.classification = cls
+    b = tmp_path / "b.las"
+    las.write(str(b))
+    out = tmp_path / "x.ply"
+    r = run([gdt_bin, a, b, "--reference", "-o", out, "--keep-withheld"])
+    assert r.returncode == 3 and "GDT-3402" in r.stderr and f"{b}: point 2:" in r.stderr, \
+        r.stderr
+    r = run([gdt_bin, a, b, "--reference", "-o", out, "--keep-withheld", "--drop-class", "7"])
+    assert r.returncode == 3 and "GDT-3402" in r.stderr and f"{b}: point 7:" in r.stderr, \
+        r.stderr
+    cls[7] = 7
+    las.classification = cls
+    las.write(str(b))
+    r = run([gdt_bin, a, b, "--reference", "-o", out, "--keep-withheld", "--drop-class", "7"])
+    assert r.returncode == 0, r.stderr
+
+
 def test_single_tile_filters_too(gdt_bin, tmp_path):
     """--single-tile reads through the same filter."""
     src = make_las(tmp_path / "fmt6.las", "fmt6")
