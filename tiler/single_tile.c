@@ -132,6 +132,13 @@ gdt_status gdt_cli_single_tile(const gdt_options *opts, gdt_error *err)
     st = gdt_memcloud_load(&mc, opts, &log, "--single-tile", err);
     if (st == GDT_OK)
         st = gdt_cli_check_stop(opts, "the reading", err);
+    if (st == GDT_OK && mc.read > (uint64_t)opts->tile * (uint64_t)opts->tile / 2)
+        st = gdt_error_set(err, GDT_EUSAGE, 2109,
+                           "--single-tile: the filter keeps %zu points, more than one tile "
+                           "of %d x %d texels takes (%llu); use a larger --tile or the "
+                           "tiled pipeline (without --single-tile)",
+                           mc.read, opts->tile, opts->tile,
+                           (unsigned long long)opts->tile * (unsigned long long)opts->tile / 2);
     if (st != GDT_OK)
         goto fail;
     s.points_read = mc.read;

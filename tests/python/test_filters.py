@@ -382,6 +382,23 @@ def test_single_tile_filters_too(gdt_bin, tmp_path):
     assert {k: f[k] for k in cnt} == cnt
 
 
+def test_single_tile_limit_counts_the_kept_points(gdt_bin, data_dir, tmp_path):
+    """--single-tile --tile 256 takes 32,768 points: autzen's 110,000 are
+    refused before the reading, its 26,107 ground points are taken, its
+    83,893 unassigned ones refused after it."""
+    src = data_dir / "autzen_trim.las"
+    out = tmp_path / "x.ply"
+    r = run([gdt_bin, src, "--single-tile", "--tile", "256", "-o", out])
+    assert r.returncode == 2 and "GDT-2102" in r.stderr, r.stderr
+    r = run([gdt_bin, src, "--single-tile", "--tile", "256", "-o", out, "--keep-class", "1"])
+    assert r.returncode == 2 and "GDT-2109" in r.stderr and "83893 points" in r.stderr, \
+        r.stderr
+    assert not out.exists()
+    r = run([gdt_bin, src, "--single-tile", "--tile", "256", "-o", out, "--keep-class", "2"])
+    assert r.returncode == 0, r.stderr
+    assert "26107 points (110000 read" in r.stderr
+
+
 def test_withheld_dropped_by_default_kept_on_request(gdt_bin, tmp_path):
     """No option: the withheld points are gone; --keep-withheld: all kept."""
     src = make_las(tmp_path / "fmt1.las", "fmt1")
