@@ -63,9 +63,9 @@ static const opt_spec OPTIONS[] = {
      "keep only LAS points of these classes: ASPRS codes 0..255, e.g. 2 or 2,9 or 3-5"},
     {OPT_DROP_CLASS, "--drop-class", NULL, "LIST", NULL,
      "drop LAS points of these classes (not together with --keep-class)"},
-    {OPT_RETURNS, "--returns", NULL, "all|first|last|single", "all",
-     "which LAS returns to keep (first: return 1, last: return = number of returns, "
-     "single: one return)"},
+    {OPT_RETURNS, "--returns", NULL, "WHICH", "all",
+     "LAS returns to keep: all, first (return 1), last (return = number of returns), "
+     "single (one-return pulses)"},
     {OPT_KEEP_WITHHELD, "--keep-withheld", NULL, NULL, NULL,
      "keep LAS points flagged withheld (dropped by default: the LAS spec deletes them)"},
     {OPT_CHECK, "--check", NULL, NULL, NULL, "validate the written mesh exactly"},
