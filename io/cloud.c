@@ -718,11 +718,12 @@ static void report_filter(gdt_cloud *c, size_t i)
     if (i + 1 == c->nin) {
         gdt_filter_counts t = gdt_cloud_total_counts(c);
         char d[1200];
-        gdt_filter_describe(&c->filter, d, sizeof d);
-        if (t.read > 0 && t.kept == 0)
+        if (t.read > 0 && t.kept == 0) {
+            gdt_filter_describe(&c->filter, d, sizeof d);
             gdt_log_warn(c->opts.log, 3431,
                          "the point filter (%s) kept none of the %" PRIu64 " points read", d,
                          t.read);
+        }
     }
 }
 
