@@ -12,8 +12,13 @@
  *  - replay (opts.replay_dir set) holds the records of the compressed inputs
  *    pass 0 read to their end; while input cur streams from it, replaying is
  *    1 and src is NULL.  Pass 0 writes input cur to it while recording is 1.
+ *  - cur_read counts the records of input cur (what its header counts);
+ *    next_ord counts the points kept by the filter, so ordinals have no gaps.
+ *    in[i].counts (and census) describe the records of input i read in this
+ *    pass: after a whole pass they are the same in every pass.
  */
 #include "gdt_cloud.h"
+#include "gdt_filter.h"
 #include "private/cloud_lattice.h"
 #include "private/crs.h"
 #include "private/replay.h"
@@ -38,6 +43,8 @@ typedef struct cloud_input {
     char *wkt;
     char *desc;
     gdt_cloud_input_map map;
+    gdt_filter_counts counts; /* this pass so far */
+    gdt_las_census *census;   /* this pass so far; opts.census only */
 } cloud_input;
 
 struct gdt_cloud {
@@ -54,8 +61,10 @@ struct gdt_cloud {
     unsigned long pass;
     gdt_log quiet;
     gdt_src_point *sbuf;
+    uint32_t *sidx;   /* after filtering: sbuf[k] was record cur_read + sidx[k] of the chunk */
     double *px, *py;
     size_t scap;
+    gdt_point_filter filter;
     gdt_error failed; /* sticky read error; status GDT_OK when none */
     gdt_replay *replay;
     struct timespec *mtime; /* per input: modification time when pass 0 read it */
@@ -439,6 +448,32 @@ static gdt_status plan_planar(gdt_cloud *c, size_t ref, gdt_error *err)
     return GDT_OK;
 }
 
+/* The filter against input ci: class and return tests need LAS
+ * attributes; a class list naming codes above 31 is worth a warning for a
+ * legacy format, which cannot hold them. */
+static gdt_status check_filter(gdt_cloud *c, cloud_input *ci, gdt_error *err)
+{
+    const gdt_point_filter *f = &c->filter;
+    if (ci->info.format != GDT_FORMAT_LAS && gdt_filter_uses_attributes(f))
+        return gdt_error_set(err, GDT_EUSAGE, 2305,
+                             "%s: a %s file has no point classes or return numbers; "
+                             "--keep-class, --drop-class and --returns apply to LAS input only",
+                             ci->path, ci->info.format_name);
+    if (ci->info.format == GDT_FORMAT_LAS && ci->info.point_format <= 5 &&
+        gdt_filter_names_high_class(f))
+        gdt_log_warn(c->opts.log, 3430,
+                     "%s: point format %u stores classes 0-31 only; the classes above 31 "
+                     "named by %s match none of its points",
+                     ci->path, ci->info.point_format,
+                     f->class_mode > 0 ? "--keep-class" : "--drop-class");
+    if (c->opts.census) {
+        ci->census = calloc(1, sizeof *ci->census);
+        if (ci->census == NULL)
+            return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    }
+    return GDT_OK;
+}
+
 gdt_status gdt_cloud_open(gdt_cloud **out, const char *const *paths, size_t npaths,
                           const gdt_cloud_opts *opts, gdt_error *err)
 {
@@ -459,6 +494,9 @@ gdt_status gdt_cloud_open(gdt_cloud **out, const char *const *paths, size_t npat
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     if (opts != NULL)
         c->opts = *opts;
+    if (c->opts.filter != NULL)
+        c->filter = *c->opts.filter;
+    c->opts.filter = NULL; /* the copy above is the cloud's */
     if (c->opts.quantum == 0.0)
         c->opts.quantum = GDT_CLOUD_DEFAULT_QUANTUM;
     gdt_error_clear(&c->failed);
@@ -494,6 +532,9 @@ gdt_status gdt_cloud_open(gdt_cloud **out, const char *const *paths, size_t npat
             goto fail;
         }
         c->info.point_count += ci->info.point_count;
+        st = check_filter(c, ci, err);
+        if (st != GDT_OK)
+            goto fail;
     }
     st = check_crs(c, &ref, err);
     if (st != GDT_OK)
@@ -506,6 +547,11 @@ gdt_status gdt_cloud_open(gdt_cloud **out, const char *const *paths, size_t npat
         goto fail;
     c->scap = CLOUD_CHUNK;
     c->sbuf = malloc(c->scap * sizeof *c->sbuf);
+    c->sidx = malloc(c->scap * sizeof *c->sidx);
+    if (c->sidx == NULL) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        goto fail;
+    }
     if (c->info.projected) {
         c->px = malloc(c->scap * sizeof *c->px);
         c->py = malloc(c->scap * sizeof *c->py);
@@ -592,6 +638,8 @@ static gdt_status open_current(gdt_cloud *c, gdt_error *err)
     memset(&so, 0, sizeof so);
     so.log = c->pass == 0 ? c->opts.log : &c->quiet;
     so.buffer_bytes = c->opts.buffer_bytes;
+    so.need = c->opts.census ? GDT_SRC_NEED_XYZ | GDT_SRC_NEED_ATTRS
+                             : gdt_filter_need(&c->filter);
     st = gdt_source_open(&c->src, ci->path, &so, err);
     if (st != GDT_OK)
         return st;
@@ -650,7 +698,7 @@ static gdt_status bad_point(const gdt_cloud *c, uint64_t idx, gdt_snap_result r,
                          path, idx, axis, v, axis);
 }
 
-/* Converts got source records into out[0..got). */
+/* Converts the got filtered records of sbuf into out[0..got). */
 static gdt_status convert(gdt_cloud *c, size_t got, gdt_point *out, gdt_error *err)
 {
     const cloud_input *ci = &c->in[c->cur];
@@ -670,12 +718,12 @@ static gdt_status convert(gdt_cloud *c, size_t got, gdt_point *out, gdt_error *e
         if (gdt_crs_utm_forward(&c->utm, c->px, c->py, got, c->px, c->py, &bad, &local) !=
             GDT_OK)
             return gdt_error_set(err, local.status, local.code, "%s: point %" PRIu64 ": %s",
-                                 ci->path, c->cur_read + bad, local.msg);
+                                 ci->path, c->cur_read + c->sidx[bad], local.msg);
     }
     for (size_t i = 0; i < got; i++) {
         const gdt_src_point *s = &c->sbuf[i];
         gdt_point *p = &out[i];
-        const uint64_t idx = c->cur_read + i;
+        const uint64_t idx = c->cur_read + c->sidx[i];
         if (!isfinite(s->z))
             return bad_point(c, idx, GDT_SNAP_NONFINITE, 'z', s->z, err);
         switch (m->kind) {
@@ -708,11 +756,61 @@ static gdt_status convert(gdt_cloud *c, size_t got, gdt_point *out, gdt_error *e
     return GDT_OK;
 }
 
+/* Applies the filter to the got records of sbuf: the kept ones move to the
+ * front in file order, sidx[k] their place in the chunk; counts (and the
+ * census) take every record.  Returns the number kept. */
+static size_t filter_chunk(gdt_cloud *c, size_t got)
+{
+    cloud_input *ci = &c->in[c->cur];
+    gdt_filter_counts *k = &ci->counts;
+    size_t kept = 0;
+    for (size_t i = 0; i < got; i++) {
+        const gdt_src_point *p = &c->sbuf[i];
+        if (ci->census != NULL)
+            gdt_las_census_add(ci->census, p);
+        switch (gdt_filter_test(&c->filter, p)) {
+        case GDT_KEEP:
+            if (kept != i)
+                c->sbuf[kept] = *p;
+            c->sidx[kept++] = (uint32_t)i;
+            break;
+        case GDT_DROP_WITHHELD: k->drop_withheld++; break;
+        case GDT_DROP_CLASS: k->drop_class++; break;
+        case GDT_DROP_RETURN: k->drop_return++; break;
+        }
+    }
+    k->read += got;
+    k->kept += kept;
+    return kept;
+}
+
+/* After the first pass over input i: a note with its counts; after the last
+ * input, a warning when the filter kept none of the points read. */
+static void report_filter(gdt_cloud *c, size_t i)
+{
+    const gdt_filter_counts *k = &c->in[i].counts;
+    gdt_log_note(c->opts.log,
+                 "%s: %" PRIu64 " records, %" PRIu64 " kept (dropped: %" PRIu64
+                 " by class, %" PRIu64 " by return, %" PRIu64 " withheld)",
+                 c->in[i].path, k->read, k->kept, k->drop_class, k->drop_return,
+                 k->drop_withheld);
+    if (i + 1 == c->nin) {
+        gdt_filter_counts t = gdt_cloud_total_counts(c);
+        char d[1200];
+        if (t.read > 0 && t.kept == 0) {
+            gdt_filter_describe(&c->filter, d, sizeof d);
+            gdt_log_warn(c->opts.log, 3431,
+                         "the point filter (%s) kept none of the %" PRIu64 " points read", d,
+                         t.read);
+        }
+    }
+}
+
 gdt_status gdt_cloud_read(gdt_cloud *cloud, gdt_point *buf, size_t cap, size_t *n,
                           gdt_error *err)
 {
     gdt_status st;
-    size_t got = 0;
+    size_t got = 0, kept;
 
     *n = 0;
     if (cloud->failed.status != GDT_OK)
@@ -744,6 +842,8 @@ gdt_status gdt_cloud_read(gdt_cloud *cloud, gdt_point *buf, size_t cap, size_t *
                 goto fail;
             }
             end_current(cloud, 1);
+            if (cloud->pass == 0)
+                report_filter(cloud, cloud->cur);
             cloud->cur++;
             continue;
         }
@@ -753,12 +853,15 @@ gdt_status gdt_cloud_read(gdt_cloud *cloud, gdt_point *buf, size_t cap, size_t *
                                ci->path, ci->info.point_count);
             goto fail;
         }
-        st = convert(cloud, got, buf, &cloud->failed);
+        kept = filter_chunk(cloud, got);
+        st = convert(cloud, kept, buf, &cloud->failed);
         if (st != GDT_OK)
             goto fail;
         cloud->cur_read += got;
-        cloud->next_ord += got;
-        *n = got;
+        if (kept == 0)
+            continue; /* *n == 0 would mean the end */
+        cloud->next_ord += kept;
+        *n = kept;
         return GDT_OK;
     }
     return GDT_OK;
@@ -776,9 +879,35 @@ gdt_status gdt_cloud_rewind(gdt_cloud *cloud, gdt_error *err)
     cloud->cur_read = 0;
     cloud->next_ord = 0;
     cloud->pass++;
+    for (size_t i = 0; i < cloud->nin; i++) {
+        memset(&cloud->in[i].counts, 0, sizeof cloud->in[i].counts);
+        if (cloud->in[i].census != NULL)
+            memset(cloud->in[i].census, 0, sizeof *cloud->in[i].census);
+    }
     gdt_error_clear(&cloud->failed);
     return GDT_OK;
 }
+
+const gdt_filter_counts *gdt_cloud_input_counts(const gdt_cloud *cloud, size_t i)
+{
+    return i < cloud->nin ? &cloud->in[i].counts : NULL;
+}
+
+gdt_filter_counts gdt_cloud_total_counts(const gdt_cloud *cloud)
+{
+    gdt_filter_counts t;
+    memset(&t, 0, sizeof t);
+    for (size_t i = 0; i < cloud->nin; i++)
+        gdt_filter_counts_add(&t, &cloud->in[i].counts);
+    return t;
+}
+
+const gdt_las_census *gdt_cloud_input_census(const gdt_cloud *cloud, size_t i)
+{
+    return i < cloud->nin ? cloud->in[i].census : NULL;
+}
+
+const gdt_point_filter *gdt_cloud_filter(const gdt_cloud *cloud) { return &cloud->filter; }
 
 void gdt_cloud_close(gdt_cloud *cloud)
 {
@@ -791,10 +920,12 @@ void gdt_cloud_close(gdt_cloud *cloud)
         free(cloud->in[i].path);
         free(cloud->in[i].wkt);
         free(cloud->in[i].desc);
+        free(cloud->in[i].census);
     }
     free(cloud->in);
     free(cloud->crs_desc);
     free(cloud->sbuf);
+    free(cloud->sidx);
     free(cloud->px);
     free(cloud->py);
     free(cloud);

@@ -34,6 +34,13 @@
  * vertex order.  (A reader may drop records it defines as invalid, such as
  * PCD points with NaN coordinates; they get no ordinal.)
  *
+ * Filter (gdt_filter.h, opts.filter): each record is tested as it is read,
+ * before its coordinates are checked or mapped; a dropped record gets no
+ * ordinal and is never checked, so a filtered cloud streams exactly what
+ * the cloud of a file holding only the kept records streams.  Every pass
+ * filters the same way.  Class and return tests on an input without LAS
+ * attributes (PCD) are refused at open (GDT_EUSAGE 2305).
+ *
  * Diagnostics: readers' warnings reach opts.log during the first pass over
  * each input; headers are read quietly at open and later passes (after
  * gdt_cloud_rewind) are quiet, so each warning is given once.
@@ -41,14 +48,17 @@
  * Memory: one read buffer (opts.buffer_bytes) and one open input at a time,
  * whatever the number or size of the inputs.
  *
- * Message numbers: 2401 (no input, bad quantum); 3401 (coordinate not
+ * Message numbers: 2401 (no input, bad quantum), 2305 (class or return
+ * filter with an input without those attributes); 3401 (coordinate not
  * finite), 3402 (lattice integer out of range), 3404 (LAS point count
  * differs from the header), 3405 (input changed since open), 3406 (a cloud
  * wider than 2^31 - 1 lattice steps, gdt_cloud_check_span), 3410 (different
  * CRSs), 3411 (geographic with projected), 3412 (CRSs that cannot be shown
  * equal), 3460 (header bounds not lon/lat), 3461 (a point cannot be
  * projected); warnings 3420 (LAS input snapped onto a foreign lattice), 3421
- * (geographic datum is not WGS 84); 7001 (out of memory), 7401 (bad
+ * (geographic datum is not WGS 84), 3430 (class filter naming classes
+ * above 31 with a LAS input of point format 0-5), 3431 (the filter kept no
+ * point at all, at the end of the first pass); 7001 (out of memory), 7401 (bad
  * arguments to gdt_points_dedup), 7402 (gdt_cloud_read without a buffer),
  * 7461 (unexpected exception in the projection).
  *
@@ -61,6 +71,7 @@
 #include <stdint.h>
 
 #include "gdt_error.h"
+#include "gdt_filter.h"
 #include "gdt_source.h"
 
 #ifdef __cplusplus
@@ -103,6 +114,9 @@ typedef struct gdt_cloud_opts {
                                here, and later passes read them back instead
                                of decoding again (same points, same bytes);
                                NULL: every pass decodes */
+    const gdt_point_filter *filter; /* copied at open; NULL = the default filter (every
+                                       point but the LAS withheld ones) */
+    int census;            /* 1: keep a gdt_las_census of each input (--info) */
 } gdt_cloud_opts;
 
 #define GDT_CLOUD_DEFAULT_QUANTUM 0.001
@@ -123,7 +137,8 @@ typedef struct gdt_cloud_input_map {
 typedef struct gdt_cloud_info {
     size_t ninputs;
     uint64_t point_count;        /* sum of the inputs' verified header counts (an upper
-                                    bound when a reader drops invalid records) */
+                                    bound when a reader drops invalid records or the
+                                    filter drops points) */
     gdt_lattice lattice;
     int lattice_native;          /* 1: a LAS int32 lattice is used as is */
     size_t lattice_input;        /* when lattice_native: the input defining it */
@@ -161,8 +176,20 @@ const gdt_cloud_input_map *gdt_cloud_input_map_of(const gdt_cloud *cloud, size_t
  * returns the first error again until gdt_cloud_rewind. */
 gdt_status gdt_cloud_read(gdt_cloud *cloud, gdt_point *buf, size_t cap, size_t *n,
                           gdt_error *err);
+/* Records read from input i (i < ninputs) in this pass so far, and what
+ * the filter did with them; after a whole pass, the input's totals. */
+const gdt_filter_counts *gdt_cloud_input_counts(const gdt_cloud *cloud, size_t i);
+/* The sum over the inputs of gdt_cloud_input_counts. */
+gdt_filter_counts gdt_cloud_total_counts(const gdt_cloud *cloud);
+/* The attributes of the records of input i read in this pass (every record,
+ * kept or not); NULL unless opts.census. */
+const gdt_las_census *gdt_cloud_input_census(const gdt_cloud *cloud, size_t i);
+/* The cloud's filter (the default one when opts.filter was NULL). */
+const gdt_point_filter *gdt_cloud_filter(const gdt_cloud *cloud);
+
 /* Starts again from the first point of the first input (second pass); the
- * stream that follows is identical to the first one. */
+ * stream that follows is identical to the first one.  The counts and
+ * census start again from zero. */
 gdt_status gdt_cloud_rewind(gdt_cloud *cloud, gdt_error *err);
 /* cloud may be NULL. */
 void gdt_cloud_close(gdt_cloud *cloud);

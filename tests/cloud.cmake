@@ -12,3 +12,5 @@ gdt_add_test_exe(test_cloud_stream ${CMAKE_CURRENT_SOURCE_DIR}/c/test_cloud_stre
 add_test(NAME cloud_stream COMMAND test_cloud_stream ${CMAKE_CURRENT_BINARY_DIR})
 gdt_add_test_exe(test_replay ${CMAKE_CURRENT_SOURCE_DIR}/c/test_replay.c)
 add_test(NAME replay COMMAND test_replay ${CMAKE_CURRENT_BINARY_DIR})
+gdt_add_test_exe(test_filter ${CMAKE_CURRENT_SOURCE_DIR}/c/test_filter.c)
+add_test(NAME filter COMMAND test_filter)

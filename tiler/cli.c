@@ -22,7 +22,8 @@
 typedef enum opt_id {
     OPT_OUTPUT, OPT_TILE, OPT_CELL, OPT_HALO, OPT_JOB, OPT_RESTART, OPT_RESUME, OPT_DEVICE,
     OPT_THREADS, OPT_MEM, OPT_QUANTUM, OPT_DUP, OPT_CHECK, OPT_JSON, OPT_QUIET, OPT_VERBOSE,
-    OPT_INFO, OPT_REFERENCE, OPT_SINGLE, OPT_KEEP_JOB, OPT_HELP, OPT_VERSION
+    OPT_INFO, OPT_REFERENCE, OPT_SINGLE, OPT_KEEP_JOB, OPT_HELP, OPT_VERSION,
+    OPT_KEEP_CLASS, OPT_DROP_CLASS, OPT_RETURNS, OPT_KEEP_WITHHELD
 } opt_id;
 
 /* The option table: every option once, with its argument, default and help. */
@@ -58,12 +59,22 @@ static const opt_spec OPTIONS[] = {
      "lattice step for float and projected input, CRS units"},
     {OPT_DUP, "--dup", NULL, "first|min-z|max-z", "first",
      "which z to keep for points with the same (x, y)"},
+    {OPT_KEEP_CLASS, "--keep-class", NULL, "LIST", NULL,
+     "keep only LAS points of these classes: ASPRS codes 0..255, e.g. 2 or 2,9 or 3-5"},
+    {OPT_DROP_CLASS, "--drop-class", NULL, "LIST", NULL,
+     "drop LAS points of these classes (not together with --keep-class)"},
+    {OPT_RETURNS, "--returns", NULL, "WHICH", "all",
+     "LAS returns to keep: all, first (return 1), last (return = number of returns), "
+     "single (one-return pulses)"},
+    {OPT_KEEP_WITHHELD, "--keep-withheld", NULL, NULL, NULL,
+     "keep LAS points flagged withheld (dropped by default: the LAS spec deletes them)"},
     {OPT_CHECK, "--check", NULL, NULL, NULL, "validate the written mesh exactly"},
     {OPT_JSON, "--json", NULL, "FILE", NULL, "write a machine-readable run summary"},
     {OPT_QUIET, "--quiet", "-q", NULL, NULL, "no progress and no warnings on stderr"},
     {OPT_VERBOSE, "--verbose", "-v", NULL, NULL, "more detail (predicate counters, stages)"},
     {OPT_INFO, "--info", NULL, NULL, NULL,
-     "describe the inputs (format, counts, bounds, CRS, lattice, duplicates) and stop; "
+     "describe the inputs (format, counts, bounds, CRS, lattice, duplicates; LAS classes, "
+     "returns and flags) and stop; "
      "with --tile/--cell/--halo also the tile plan"},
     {OPT_REFERENCE, "--reference", NULL, NULL, NULL,
      "triangulate in memory with the CPU reference (one tile; for testing)"},
@@ -274,6 +285,13 @@ static gdt_status apply(gdt_options *opts, const opt_spec *o, const char *val, g
     case OPT_KEEP_JOB: opts->keep_job = 1; break;
     case OPT_HELP: opts->mode = GDT_MODE_HELP; break;
     case OPT_VERSION: if (opts->mode != GDT_MODE_HELP) opts->mode = GDT_MODE_VERSION; break;
+    case OPT_KEEP_CLASS:
+    case OPT_DROP_CLASS:
+        st = gdt_filter_parse_classes(&opts->filter, o->id == OPT_KEEP_CLASS ? 1 : -1, o->lng,
+                                      val, err);
+        break;
+    case OPT_RETURNS: st = gdt_filter_parse_returns(&opts->filter, val, err); break;
+    case OPT_KEEP_WITHHELD: opts->filter.keep_withheld = 1; break;
     }
     return st;
 }
@@ -354,7 +372,9 @@ void gdt_options_free(gdt_options *opts)
 }
 
 /* --single-tile: the inputs' header point counts must add up to at most
- * N^2/2 (half the texels of the tile's grid). */
+ * N^2/2 (half the texels of the tile's grid).  With a class or return
+ * filter the header counts are only an upper bound: the points kept are
+ * checked after the reading instead (gdt_cli_single_tile). */
 static gdt_status check_one_tile(const gdt_options *opts, gdt_error *err)
 {
     uint64_t total = 0, limit = (uint64_t)opts->tile * (uint64_t)opts->tile / 2;
@@ -369,7 +389,7 @@ static gdt_status check_one_tile(const gdt_options *opts, gdt_error *err)
         total += gdt_source_get_info(src)->point_count;
         gdt_source_close(src);
     }
-    if (total > limit)
+    if (total > limit && !gdt_filter_uses_attributes(&opts->filter))
         return gdt_error_set(err, GDT_EUSAGE, 2102,
                              "--single-tile: the inputs hold %llu points, more than one tile "
                              "of %d x %d texels takes (%llu); use a larger --tile or the "
@@ -390,6 +410,10 @@ static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
     if (opts->mode == GDT_MODE_RESUME && (opts->job != NULL || opts->restart))
         return gdt_error_set(err, GDT_EUSAGE, 2107,
                              "--resume DIR names the job itself (no --job, no --restart)");
+    if (opts->mode == GDT_MODE_RESUME && !gdt_filter_is_default(&opts->filter))
+        return gdt_error_set(err, GDT_EUSAGE, 2306,
+                             "--resume DIR filters the points as its job recorded (no "
+                             "--keep-class, --drop-class, --returns or --keep-withheld)");
     if (opts->mode == GDT_MODE_RESUME && opts->output != NULL)
         return gdt_error_set(err, GDT_EUSAGE, 2108,
                              "--resume DIR writes the output its job recorded (no -o)");

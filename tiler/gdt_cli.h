@@ -13,6 +13,7 @@
 
 #include "gdt_cloud.h"
 #include "gdt_error.h"
+#include "gdt_filter.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -47,6 +48,7 @@ typedef struct gdt_options {
     uint64_t mem_budget;     /* --mem-budget bytes; 0 = automatic */
     double quantum;          /* --quantum Q (CRS units) */
     gdt_dup_policy dup;      /* --dup */
+    gdt_point_filter filter; /* --keep-class, --drop-class, --returns, --keep-withheld */
     int check;               /* --check */
     const char *json;        /* --json FILE */
     int verbosity;           /* -q = -1, default 0, -v = 1 (-vv = 2) */

@@ -4,8 +4,12 @@
  *
  * Headers are printed as read; then one streaming pass over all points
  * (bounded buffers; duplicates counted out of core within the memory budget)
- * gives the true counts and the lattice bounds. */
+ * gives the true counts and the lattice bounds.  The same pass gives each LAS
+ * input's attribute census (classes, returns, flags of every record) and the
+ * filter's counts; the cloud's counts, bounds and duplicates are those of the
+ * points the filter keeps. */
 #include "private/cli_modes.h"
+#include "private/filter_report.h"
 #include "private/json_out.h"
 
 #include <inttypes.h>
@@ -15,6 +19,7 @@
 
 #include "gdt_cloud.h"
 #include "gdt_dupcount.h"
+#include "gdt_filter.h"
 #include "gdt_tiler.h"
 
 #define INFO_CHUNK 65536
@@ -107,6 +112,46 @@ fail:
     return st;
 }
 
+/* "label v: n, v: n" for the nonzero n of h[0..16). */
+static void print_hist(FILE *out, const char *label, const uint64_t h[16])
+{
+    const char *sep = " ";
+    fputs(label, out);
+    for (unsigned v = 0; v < 16; v++)
+        if (h[v] != 0) {
+            fprintf(out, "%s%u: %" PRIu64, sep, v, h[v]);
+            sep = ", ";
+        }
+    fputc('\n', out);
+}
+
+/* The attributes of input i's records (LAS only) and what the filter kept. */
+static void print_census(FILE *out, const gdt_cloud *cloud, size_t i)
+{
+    const gdt_las_census *c = gdt_cloud_input_census(cloud, i);
+    const gdt_filter_counts *k = gdt_cloud_input_counts(cloud, i);
+    const gdt_point_filter *f = gdt_cloud_filter(cloud);
+    char ftext[160];
+
+    fprintf(out, "attributes of input %zu: %s\n", i + 1, gdt_cloud_input_path(cloud, i));
+    if (c != NULL && gdt_cloud_input_info(cloud, i)->format == GDT_FORMAT_LAS) {
+        fprintf(out, "  records      : %" PRIu64 "\n", c->records);
+        for (unsigned k2 = 0; k2 < 256; k2++)
+            if (c->cls[k2] != 0)
+                fprintf(out, "  class %-3u    : %" PRIu64 " (%s)\n", k2, c->cls[k2],
+                        gdt_asprs_class_name(k2));
+        print_hist(out, "  return no.   :", c->ret);
+        print_hist(out, "  returns/pulse:", c->nret);
+        fprintf(out, "  flags        : withheld %" PRIu64 ", synthetic %" PRIu64
+                     ", key point %" PRIu64 ", overlap %" PRIu64 "\n",
+                c->withheld, c->synthetic, c->keypoint, c->overlap);
+    } else {
+        fprintf(out, "  records      : %" PRIu64 " (no LAS attributes)\n", k->read);
+    }
+    gdt_filter_counts_text(f, k, ftext, sizeof ftext);
+    fprintf(out, "  kept         : %" PRIu64 "%s\n", k->kept, ftext);
+}
+
 static void print_cloud(FILE *out, const gdt_cloud_info *ci, const info_stats *s)
 {
     const gdt_lattice *L = &ci->lattice;
@@ -132,6 +177,47 @@ static void print_cloud(FILE *out, const gdt_cloud_info *ci, const info_stats *s
             s->dups.duplicates, s->dups.max_multiplicity);
 }
 
+/* "name": [{"<what>": v, "points": n}, ...] for the nonzero n of h[0..16). */
+static void hist_json(gdt_json *j, const char *name, const char *what, const uint64_t h[16])
+{
+    gdt_json_begin_array(j, name);
+    for (unsigned v = 0; v < 16; v++)
+        if (h[v] != 0) {
+            gdt_json_begin_object(j, NULL);
+            gdt_json_uint(j, what, v);
+            gdt_json_uint(j, "points", h[v]);
+            gdt_json_end_object(j);
+        }
+    gdt_json_end_array(j);
+}
+
+/* The members "records", "classes", "return_numbers", "numbers_of_returns"
+ * and "flags" of a LAS input's object. */
+static void census_json(gdt_json *j, const gdt_las_census *c, const gdt_source_info *si)
+{
+    if (c == NULL || si->format != GDT_FORMAT_LAS)
+        return;
+    gdt_json_uint(j, "records", c->records);
+    gdt_json_begin_array(j, "classes");
+    for (unsigned k = 0; k < 256; k++)
+        if (c->cls[k] != 0) {
+            gdt_json_begin_object(j, NULL);
+            gdt_json_uint(j, "class", k);
+            gdt_json_string(j, "name", gdt_asprs_class_name(k));
+            gdt_json_uint(j, "points", c->cls[k]);
+            gdt_json_end_object(j);
+        }
+    gdt_json_end_array(j);
+    hist_json(j, "return_numbers", "return", c->ret);
+    hist_json(j, "numbers_of_returns", "returns", c->nret);
+    gdt_json_begin_object(j, "flags");
+    gdt_json_uint(j, "withheld", c->withheld);
+    gdt_json_uint(j, "synthetic", c->synthetic);
+    gdt_json_uint(j, "key_point", c->keypoint);
+    gdt_json_uint(j, "overlap", c->overlap);
+    gdt_json_end_object(j);
+}
+
 static gdt_status write_json(const char *path, gdt_cloud *cloud, const info_stats *s,
                              const gdt_tile_plan *plan, gdt_error *err)
 {
@@ -152,9 +238,11 @@ static gdt_status write_json(const char *path, gdt_cloud *cloud, const info_stat
         gdt_json_uint(&j, "points", si->point_count);
         gdt_json_string(&j, "crs", si->crs_desc != NULL ? si->crs_desc : "");
         gdt_json_int(&j, "epsg", si->epsg);
+        census_json(&j, gdt_cloud_input_census(cloud, i), si);
         gdt_json_end_object(&j);
     }
     gdt_json_end_array(&j);
+    gdt_filter_report_json(&j, cloud);
     gdt_json_uint(&j, "points", s->points);
     gdt_json_uint(&j, "distinct_xy", s->dups.distinct);
     gdt_json_uint(&j, "duplicates", s->dups.duplicates);
@@ -215,6 +303,8 @@ gdt_status gdt_cli_info(const gdt_options *opts, gdt_error *err)
     memset(&co, 0, sizeof co);
     co.log = &log;
     co.quantum = opts->quantum;
+    co.filter = &opts->filter;
+    co.census = 1;
     st = gdt_cloud_open(&cloud, opts->inputs, opts->ninputs, &co, err);
     if (st != GDT_OK)
         goto fail;
@@ -232,6 +322,8 @@ gdt_status gdt_cli_info(const gdt_options *opts, gdt_error *err)
         st = gdt_cli_check_stop(opts, "the reading", err);
     if (st != GDT_OK)
         goto fail;
+    for (size_t i = 0; i < gdt_cloud_get_info(cloud)->ninputs; i++)
+        print_census(stdout, cloud, i);
     print_cloud(stdout, gdt_cloud_get_info(cloud), &s);
     /* The tile plan (pass 1 of the tiler) when a tiling option is given. */
     if (opts->tile_set || opts->cell > 0 || opts->halo >= 0) {

@@ -6,6 +6,7 @@
 #include <string.h>
 
 #include "gdt_ply.h"
+#include "private/filter_report.h"
 #include "private/run_stats.h"
 
 #define MC_CHUNK 65536
@@ -58,6 +59,7 @@ gdt_status gdt_memcloud_load(gdt_memcloud *mc, const gdt_options *opts, gdt_log 
     memset(&co, 0, sizeof co);
     co.log = log;
     co.quantum = opts->quantum;
+    co.filter = &opts->filter;
     st = gdt_cloud_open(&mc->cloud, opts->inputs, opts->ninputs, &co, err);
     if (st == GDT_OK)
         st = read_all(mc, mode, err);
@@ -110,12 +112,17 @@ gdt_status gdt_memcloud_write(const gdt_memcloud *mc, const gdt_options *opts,
     int64_t *canon = malloc((mesh->ntris > 0 ? 3 * mesh->ntris : 1) * sizeof *canon);
     double *xyz = malloc(3 * MC_CHUNK * sizeof *xyz);
     int32_t *tri = malloc(3 * MC_CHUNK * sizeof *tri);
+    char filter[GDT_FILTER_COMMENT_MAX];
+    const char *comments[1] = {filter};
     gdt_status st;
 
     memset(&meta, 0, sizeof meta);
     meta.lattice = ci->lattice;
     meta.epsg = ci->epsg;
     meta.crs_wkt = ci->crs_wkt;
+    gdt_filter_report_comment(mc->cloud, filter, sizeof filter);
+    meta.comments = comments;
+    meta.ncomments = 1;
     if (xyz == NULL || tri == NULL || canon == NULL) {
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         goto fail;
@@ -187,5 +194,6 @@ gdt_status gdt_memcloud_json_head(gdt_json *j, const gdt_memcloud *mc, const gdt
     gdt_json_uint(j, "duplicates_merged", mc->read - mc->kept);
     gdt_json_uint(j, "faces", faces);
     gdt_json_string(j, "crs", ci->crs_desc);
+    gdt_filter_report_json(j, mc->cloud);
     return GDT_OK;
 }

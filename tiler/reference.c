@@ -68,6 +68,8 @@ gdt_status gdt_cli_reference(const gdt_options *opts, gdt_error *err)
     gdt_log log;
     gdt_mesh mesh;
     ref_summary s;
+    gdt_filter_counts fc;
+    char ftext[160];
     double t0;
     gdt_status st;
 
@@ -104,11 +106,13 @@ gdt_status gdt_cli_reference(const gdt_options *opts, gdt_error *err)
         if (st != GDT_OK)
             goto fail;
     }
+    fc = gdt_cloud_total_counts(mc.cloud);
+    gdt_filter_counts_text(&opts->filter, &fc, ftext, sizeof ftext);
     if (opts->verbosity >= 0)
         fprintf(stderr,
-                "gdt-tile: %s: %" PRIu64 " points, %" PRIu64 " vertices (%" PRIu64
+                "gdt-tile: %s: %" PRIu64 " points%s, %" PRIu64 " vertices (%" PRIu64
                 " duplicates merged), %" PRIu64 " faces%s\n",
-                opts->output, s.points_read, s.vertices, s.duplicates_merged, s.faces,
+                opts->output, s.points_read, ftext, s.vertices, s.duplicates_merged, s.faces,
                 s.checked ? ", checked exactly" : "");
     gdt_log_note(&log,
                  "predicates: orient2d %" PRIu64 ", incircle %" PRIu64 " (%" PRIu64

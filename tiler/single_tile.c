@@ -114,6 +114,8 @@ gdt_status gdt_cli_single_tile(const gdt_options *opts, gdt_error *err)
     gdt_log log;
     gdt_mesh mesh;
     st_summary s;
+    gdt_filter_counts fc;
+    char ftext[160];
     unsigned faults = 0;
     double t0;
     gdt_status st;
@@ -130,6 +132,13 @@ gdt_status gdt_cli_single_tile(const gdt_options *opts, gdt_error *err)
     st = gdt_memcloud_load(&mc, opts, &log, "--single-tile", err);
     if (st == GDT_OK)
         st = gdt_cli_check_stop(opts, "the reading", err);
+    if (st == GDT_OK && mc.read > (uint64_t)opts->tile * (uint64_t)opts->tile / 2)
+        st = gdt_error_set(err, GDT_EUSAGE, 2109,
+                           "--single-tile: the filter keeps %zu points, more than one tile "
+                           "of %d x %d texels takes (%llu); use a larger --tile or the "
+                           "tiled pipeline (without --single-tile)",
+                           mc.read, opts->tile, opts->tile,
+                           (unsigned long long)opts->tile * (unsigned long long)opts->tile / 2);
     if (st != GDT_OK)
         goto fail;
     s.points_read = mc.read;
@@ -173,11 +182,13 @@ gdt_status gdt_cli_single_tile(const gdt_options *opts, gdt_error *err)
         if (st != GDT_OK)
             goto fail;
     }
+    fc = gdt_cloud_total_counts(mc.cloud);
+    gdt_filter_counts_text(&opts->filter, &fc, ftext, sizeof ftext);
     if (opts->verbosity >= 0)
         fprintf(stderr,
-                "gdt-tile: %s: %" PRIu64 " points, %" PRIu64 " vertices (%" PRIu64
+                "gdt-tile: %s: %" PRIu64 " points%s, %" PRIu64 " vertices (%" PRIu64
                 " duplicates merged), %" PRIu64 " faces on %s (%s path)%s\n",
-                opts->output, s.points_read, s.vertices, s.duplicates_merged, s.faces, s.device,
+                opts->output, s.points_read, ftext, s.vertices, s.duplicates_merged, s.faces, s.device,
                 s.cs.path, s.checked ? ", checked exactly" : "");
     gdt_log_note(&log,
                  "tile %dx%d texels of %" PRId64 " lattice steps: %s; phases %.3f %.3f %.3f %.3f "

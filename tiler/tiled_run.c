@@ -24,6 +24,7 @@
 #include "gdt_plycheck.h"
 #include "gdt_seam.h"
 #include "gdt_tiler.h"
+#include "private/filter_report.h"
 #include "private/job.h"
 #include "private/json_out.h"
 #include "private/outpaths.h"
@@ -860,6 +861,7 @@ static gdt_status write_summary(const tr_ctx *c, gdt_error *err)
     gdt_json_string(&j, "output", c->opts->output);
     gdt_json_string(&j, "device", s->device);
     gdt_json_uint(&j, "points_read", s->points_read);
+    gdt_filter_report_json(&j, c->cloud);
     gdt_json_uint(&j, "vertices", s->vertices);
     gdt_json_uint(&j, "faces", s->faces);
     gdt_json_uint(&j, "tiles", s->tiles);
@@ -973,8 +975,11 @@ static void text_abs(tr_text *t, const char *key, const char *path)
 static gdt_status build_params(const gdt_options *o, char **out, gdt_error *err)
 {
     tr_text t = {NULL, 0, 0, 0};
+    char filter[GDT_FILTER_COMMENT_MAX];
     text_add(&t, "tile=%d\ncell=%.17g\nhalo=%ld\ndup=%d\nquantum=%.17g\n", o->tile, o->cell,
              o->halo, (int)o->dup, o->quantum);
+    gdt_filter_describe(&o->filter, filter, sizeof filter);
+    text_add(&t, "filter=%s\n", filter);
     text_add(&t, "inputs=%zu\n", o->ninputs);
     for (size_t i = 0; i < o->ninputs; i++) {
         if (strchr(o->inputs[i], '\n') != NULL) {
@@ -1324,6 +1329,10 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     uint64_t ntiles, hull;
     int done = 0, created = 0, own_dir = 0;
     double t_start = gdt_now(), t0;
+    /* the PLY header's filter line: lives until the writer is done */
+    char filter_comment[GDT_FILTER_COMMENT_MAX], ftext[160];
+    const char *filter_comments[1] = {filter_comment};
+    gdt_filter_counts fcounts;
     gdt_status st;
 
     memset(&c, 0, sizeof c);
@@ -1369,6 +1378,7 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     co.log = &c.log;
     co.quantum = opts->quantum;
     co.replay_dir = c.job; /* LAZ is decoded once, in pass 1 */
+    co.filter = &opts->filter;
     st = gdt_cloud_open(&c.cloud, opts->inputs, opts->ninputs, &co, err);
     if (st != GDT_OK)
         goto fail;
@@ -1470,6 +1480,9 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
         os.meta.lattice = ci->lattice;
         os.meta.epsg = ci->epsg;
         os.meta.crs_wkt = ci->crs_wkt;
+        gdt_filter_report_comment(c.cloud, filter_comment, sizeof filter_comment);
+        os.meta.comments = filter_comments;
+        os.meta.ncomments = 1;
         os.tiler = c.tiler;
         os.tiles_dir = c.tiles_dir;
         os.job = c.job;
@@ -1585,12 +1598,14 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
         if (st != GDT_OK)
             goto fail;
     }
+    fcounts = gdt_cloud_total_counts(c.cloud);
+    gdt_filter_counts_text(&opts->filter, &fcounts, ftext, sizeof ftext);
     if (opts->verbosity >= 0)
         fprintf(stderr,
-                "gdt-tile: %s: %" PRIu64 " points, %" PRIu64 " vertices, %" PRIu64
+                "gdt-tile: %s: %" PRIu64 " points%s, %" PRIu64 " vertices, %" PRIu64
                 " faces in %" PRIu64 " tiles (%.1f%% certified, %" PRIu64
                 " seam vertices) on %s, %.2f s%s%s\n",
-                opts->output, c.s.points_read, c.s.vertices, c.s.faces, c.s.tiles,
+                opts->output, c.s.points_read, ftext, c.s.vertices, c.s.faces, c.s.tiles,
                 c.s.faces > 0 ? 100.0 * (double)c.s.certified / (double)c.s.faces : 100.0,
                 c.s.merge.seam_vertices, c.s.device, c.s.t_total,
                 c.s.resumed ? ", resumed" : "", c.s.checked ? ", checked exactly" : "");
@@ -1728,6 +1743,12 @@ gdt_status gdt_cli_resume(const gdt_options *opts, gdt_error *err)
     o.dup = (gdt_dup_policy)atoi(v);
     NEED("quantum");
     o.quantum = strtod(v, NULL);
+    NEED("filter");
+    if (gdt_filter_from_description(&o.filter, v) != 0) {
+        st = gdt_error_set(err, GDT_EJOB, 6905, "%s: job record has a bad filter '%s'",
+                           opts->resume, v);
+        goto done;
+    }
     NEED("inputs");
     n = (size_t)strtoull(v, NULL, 10);
 #undef NEED

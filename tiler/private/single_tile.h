@@ -13,7 +13,8 @@
  * order, so the bytes depend only on the point set and the input order) and
  * the --json summary (device, path taken and why, per-phase times and
  * counts).
- * returns: GDT_OK; GDT_EINPUT (the readers' errors, 3401 when the cloud
+ * returns: GDT_OK; GDT_EUSAGE 2109 (the points the filter kept are more
+ *   than half the tile's texels); GDT_EINPUT (the readers' errors, 3401 when the cloud
  *   spans more than 2^31-1 lattice steps on an axis, 3602 duplicate points
  *   cannot happen after the merge); GDT_EDEVICE 51xx (OpenCL, with the
  *   error name: exit 5); GDT_EIO; GDT_EINTERNAL (7601 floating-point
