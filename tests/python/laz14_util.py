@@ -4,12 +4,14 @@ and byte-level access to the chunks (layer sizes, item versions) for the
 corruption tests.  Used by test_laz14_decode.py.
 """
 import io
+import pathlib
 import struct
 
 import laspy
 import lazrs
 import numpy as np
 
+DATA = pathlib.Path(__file__).resolve().parent / "data"
 EXTRA = [("eb_u8", "u1"), ("eb_i32", "i4")]
 
 def make_las(fmt, n, seed, channels=4, extra=True, channel_base=0):
