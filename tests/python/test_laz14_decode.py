@@ -201,11 +201,27 @@ def test_truncated_file(runner, tool, tmp_path):
     start = lu.chunk_start(data, 3)
     bad = tmp_path / "bad.laz"
     # the last chunk cut in the middle of its layer sizes, then in a layer
-    for cut in (start + las.header.point_format.size + 10, start + 300):
+    for cut, code in ((start + las.header.point_format.size + 10, "GDT-3941"),
+                      (start + 300, "GDT-3943")):
         bad.write_bytes(data[:cut])
         r = runner([tool("laz_decode"), "--need", "all", bad], text=False)
         assert r.returncode == 3, r.stderr
-        assert "GDT-3" in r.stderr.decode()
+        err = r.stderr.decode()
+        assert code in err and "chunk 3" in err, err
+
+
+def test_count_below_table(runner, tool, tmp_path):
+    """A chunk whose count says fewer points than the table gives it."""
+    las, path = corrupt_case(tmp_path)
+    data = bytearray(path.read_bytes())
+    struct.pack_into("<I", data, lu.chunk_start(bytes(data), 1) + las.header.point_format.size,
+                     499)
+    bad = tmp_path / "bad.laz"
+    bad.write_bytes(bytes(data))
+    r = runner([tool("laz_decode"), "--need", "xyz", bad], text=False)
+    assert r.returncode == 3, r.stderr
+    err = r.stderr.decode()
+    assert "GDT-3942" in err and "chunk 1" in err, err
 
 
 def test_random_corruption_never_crashes(runner, tool, tmp_path):
