@@ -135,16 +135,16 @@ static inline void enc_int(enc *e, gdt_laz_intdec *ic, int32_t pred, int32_t rea
         c1 >>= 1;
         k++;
     }
-    enc_symbol(e, &ic->mbits[ctx], k);
+    enc_symbol(e, gdt_laz_intdec_kmodel(ic, ctx), k);
     if (k == 0) {
         enc_bit(e, &ic->mcorr0, (uint32_t)c);
     } else if (k < 32) {
         uint32_t u = c < 0 ? (uint32_t)c + ((1u << k) - 1) : (uint32_t)c - 1;
         if (k <= ic->bits_high) {
-            enc_symbol(e, &ic->mcorr[k], u);
+            enc_symbol(e, gdt_laz_intdec_cmodel(ic, k), u);
         } else {
             unsigned k1 = k - ic->bits_high;
-            enc_symbol(e, &ic->mcorr[k], u >> k1);
+            enc_symbol(e, gdt_laz_intdec_cmodel(ic, k), u >> k1);
             enc_bits(e, k1, u & ((1u << k1) - 1));
         }
     }
