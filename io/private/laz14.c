@@ -983,7 +983,6 @@ gdt_status gdt_laz14_start(gdt_laz14 *z, const unsigned char *data, size_t avail
     size_t head = (size_t)z->record_length + 4 + 4 * (size_t)z->nlayers;
     uint64_t pos;
     uint32_t count;
-    p14_point first;
 
     z->data = data;
     z->npoints = npoints;
@@ -1039,7 +1038,16 @@ gdt_status gdt_laz14_start(gdt_laz14 *z, const unsigned char *data, size_t avail
                              path, chunk_index, npoints);
 
     z->gen++;
-    p14_parse(&first, data);
+    return GDT_OK;
+}
+
+/* Puts the first point's channel contexts in use: done when the second
+ * point is decoded, so one-point chunks never reset a model. */
+static gdt_status chunk_contexts(gdt_laz14 *z, gdt_error *err)
+{
+    p14_point first;
+
+    p14_parse(&first, z->data);
     z->cur = first.channel;
     if (p14_ctx_start(z, &z->p14[z->cur], &first, err) != GDT_OK)
         return GDT_EINTERNAL;
@@ -1047,7 +1055,7 @@ gdt_status gdt_laz14_start(gdt_laz14 *z, const unsigned char *data, size_t avail
         for (unsigned k = 0; k < z->nitems; k++) {
             x_item *it = &z->items[k];
             it->cur = z->cur;
-            if (x_ctx_start(z, it, it->cur, data + it->offset, err) != GDT_OK)
+            if (x_ctx_start(z, it, it->cur, z->data + it->offset, err) != GDT_OK)
                 return GDT_EINTERNAL;
         }
     }
@@ -1092,9 +1100,13 @@ gdt_status gdt_laz14_read(gdt_laz14 *z, unsigned char *records, size_t n, gdt_er
         if (!z->want_all)
             memset(r, 0, rl);
         if (z->pos == 0) {
-            p14_put(z, r, &z->p14[z->cur].last);
+            p14_point first;
+            p14_parse(&first, z->data);
+            p14_put(z, r, &first);
             if (z->want_rest)
                 memcpy(r + 30, z->data + 30, rl - 30);
+            if (z->npoints > 1 && chunk_contexts(z, err) != GDT_OK)
+                return GDT_EINTERNAL;
         } else {
             if (p14_read(z, r, &context, err) != GDT_OK)
                 return GDT_EINTERNAL;
