@@ -4,7 +4,7 @@
   make_corpus.py BUILD OUT [--data DIR]
 
 BUILD is a build folder (its gdt-tile and pcd_write_pcl are used), OUT the
-folder that receives one subfolder per target (las, pcd, plycheck, job, tri),
+folder that receives one subfolder per target (las, pcd, plycheck, job, tri, laz),
 emptied first.  Seeds, each small enough for the targets' -max_len:
   las       the real samples of DIR (default ../shared/data) up to 16 KiB
             whole, larger ones cut to their first 16 KiB (header, VLRs and
@@ -17,6 +17,9 @@ emptied first.  Seeds, each small enough for the targets' -max_len:
             collinear and tiny clouds (no faces)
   job       the job.db of small tiled runs kept with --keep-job
   tri       the tile files (tiles/*.tri) of those runs, up to 64 KiB each
+  laz       the first chunk of each real LAZ sample of formats 0-5, framed
+            for fuzz_laz (format, item version and extra bytes, points),
+            whole and cut
 The samples are copied into the build tree at test time, never into the
 repository.  Needs numpy (the generators); run it with the project's .venv.
 Exit status 0, or 1 when a generator or gdt-tile fails.
@@ -77,6 +80,26 @@ def las_seeds(out, data, tmp):
         gen_cloud(out / f"gen_{name}.las", n, "--seed", len(name), *extra)
     for kind in ("collinear", "duplicates", "one", "extreme"):
         gen_degenerate(out / f"deg_{kind}.las", kind, 50, "las")
+
+
+def laz_seeds(out, data):
+    """fuzz_laz inputs: 4 framing bytes, then a chunk's first bytes."""
+    # one point of format 0: its raw record and the coder's 4 bytes
+    (out / "one_point.bin").write_bytes(bytes(4 + 20 + 4))
+    base = {0: 20, 1: 28, 2: 26, 3: 34, 4: 57, 5: 63}
+    for f in sorted(data.glob("*.laz")):
+        b = f.read_bytes()
+        if len(b) < 227:
+            continue
+        fmt, rl = b[104] & 0x3F, int.from_bytes(b[105:107], "little")
+        offset = int.from_bytes(b[96:100], "little")
+        if fmt not in base or not 0 <= rl - base[fmt] < 8:
+            continue
+        count = min(int.from_bytes(b[107:111], "little"), 4096)
+        frame = bytes([fmt, (rl - base[fmt]) << 1]) + max(count - 1, 0).to_bytes(2, "little")
+        chunk = b[offset + 8:offset + 8 + CUT - 4]
+        (out / f"real_{f.stem}.bin").write_bytes(frame + chunk)
+        (out / f"cut_{f.stem}.bin").write_bytes(frame + chunk[:len(chunk) // 3])
 
 
 def pcd_seeds(out, build, data):
@@ -144,7 +167,7 @@ def main(argv=None):
     ap.add_argument("--data", type=pathlib.Path, default=ROOT.parent / "shared" / "data")
     a = ap.parse_args(argv)
     build = a.build.resolve()
-    dirs = {t: a.out / t for t in ("las", "pcd", "plycheck", "job", "tri")}
+    dirs = {t: a.out / t for t in ("las", "pcd", "plycheck", "job", "tri", "laz")}
     for d in dirs.values():
         shutil.rmtree(d, ignore_errors=True)
         d.mkdir(parents=True)
@@ -155,6 +178,7 @@ def main(argv=None):
         las_seeds(dirs["las"], a.data, tmp)
         pcd_seeds(dirs["pcd"], build, a.data)
         ply_and_job_seeds(dirs["plycheck"], dirs["job"], dirs["tri"], build, tmp)
+        laz_seeds(dirs["laz"], a.data)
     for t, d in dirs.items():
         files = list(d.iterdir())
         print(f"{t}: {len(files)} seeds, largest {max(f.stat().st_size for f in files)} bytes")

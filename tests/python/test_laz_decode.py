@@ -298,6 +298,62 @@ def test_missing_table_variable_chunks_fails(tool, tmp_path):
     assert b"GDT-3910" in r.stderr
 
 
+@pytest.mark.parametrize("chunks, rc, code", [(50, 0, b"GDT-3911"), ([100, 200], 3, b"GDT-3910")])
+def test_unknown_table_version(tool, tmp_path, chunks, rc, code):
+    """A table of another version is no table: fixed chunks are scanned."""
+    las = build_las(2, 300, seed=13)
+    path = write_laz(tmp_path / "full.laz", las, chunks)
+    b = bytearray(path.read_bytes())
+    (offset,) = struct.unpack_from("<I", b, 96)
+    (table,) = struct.unpack_from("<q", b, offset)
+    struct.pack_into("<I", b, table, 1)
+    bad = tmp_path / "v1table.laz"
+    bad.write_bytes(bytes(b))
+    r = decode(tool, bad)
+    assert r.returncode == rc and code in r.stderr, r.stderr.decode()
+    if rc == 0:
+        assert r.stdout == las.points.array.tobytes()
+
+
+@pytest.mark.parametrize("chunks, field, rc, code", [
+    ([100, 200], "table", 0, b"GDT-3916"),  # 2^32 - 1 chunks claimed: the header's fill 2
+    (50, "header", 3, b"GDT-3913"),         # 2^32 - 1 points claimed: cannot fit
+])
+def test_huge_counts_cost_nothing(tool, tmp_path, chunks, field, rc, code):
+    """Counts far past the file are neither allocated for nor decoded."""
+    las = build_las(0, 300, seed=14)
+    path = write_laz(tmp_path / "full.laz", las, chunks)
+    b = bytearray(path.read_bytes())
+    (offset,) = struct.unpack_from("<I", b, 96)
+    (table,) = struct.unpack_from("<q", b, offset)
+    struct.pack_into("<I", b, table + 4 if field == "table" else 107, 0xFFFFFFFF)
+    bad = tmp_path / "huge.laz"
+    bad.write_bytes(bytes(b))
+    r = run([str(tool("laz_decode")), str(bad)], text=False, timeout=20)
+    assert r.returncode == rc and code in r.stderr, r.stderr.decode()
+    if rc == 0:
+        assert r.stdout == las.points.array.tobytes()
+
+
+@pytest.mark.parametrize("chunks, count, warning", [
+    (100, 650, None),            # the last chunk read in part
+    (100, 550, b"GDT-3916"),     # a chunk too many in the table
+    ([100, 50, 150], 200, b"GDT-3917"),  # a variable chunk cut
+])
+def test_header_count_wins(tool, tmp_path, chunks, count, warning):
+    las = build_las(3, 700 if chunks == 100 else 300, seed=21)
+    path = write_laz(tmp_path / "full.laz", las, chunks)
+    b = bytearray(path.read_bytes())
+    struct.pack_into("<I", b, 107, count)
+    short = tmp_path / "short.laz"
+    short.write_bytes(bytes(b))
+    r = decode(tool, short)
+    assert r.returncode == 0, r.stderr.decode()
+    assert r.stdout == las.points.array.tobytes()[:count * las.header.point_format.size]
+    if warning:
+        assert warning in r.stderr, r.stderr.decode()
+
+
 @pytest.mark.parametrize("fmt", [0, 3, 5])
 def test_truncated_chunk_names_it(tool, tmp_path, fmt):
     las = build_las(fmt, 700, seed=8)
