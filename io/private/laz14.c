@@ -977,6 +977,25 @@ gdt_status gdt_laz14_new(gdt_laz14 **out, const gdt_laz_vlr *vlr, unsigned recor
     return GDT_OK;
 }
 
+/* What layer l holds, for messages. */
+static const char *layer_name(const gdt_laz14 *z, unsigned l)
+{
+    if (l < L_P14)
+        return p14_layer_name[l];
+    for (unsigned k = 0; k < z->nitems; k++) {
+        const x_item *it = &z->items[k];
+        if (l >= it->layer && l < it->layer + it->nlayers) {
+            switch (it->type) {
+            case GDT_LAZ_RGB14: return "RGB";
+            case GDT_LAZ_RGBNIR14: return l == it->layer ? "RGB" : "NIR";
+            case GDT_LAZ_WAVEPACKET14: return "wave packet";
+            default: return "extra byte";
+            }
+        }
+    }
+    return "unknown";
+}
+
 gdt_status gdt_laz14_start(gdt_laz14 *z, const unsigned char *data, size_t avail, uint64_t npoints,
                            const char *path, uint64_t chunk_index, gdt_error *err)
 {
@@ -1008,7 +1027,7 @@ gdt_status gdt_laz14_start(gdt_laz14 *z, const unsigned char *data, size_t avail
         z->loff[l] = (size_t)pos;
         pos += z->lsize[l];
         if (pos > avail) {
-            const char *what = l < L_P14 ? p14_layer_name[l] : "item";
+            const char *what = layer_name(z, l);
             return gdt_error_set(err, GDT_EINPUT, 3943,
                                  "%s: LAZ chunk %" PRIu64 ": its %s layer (%u) of %" PRIu32
                                  " bytes ends at byte %" PRIu64 ", past the chunk's %zu",
@@ -1068,7 +1087,7 @@ static gdt_status layer_error(const gdt_laz14 *z, gdt_error *err)
     for (unsigned l = 0; l < z->nlayers; l++) {
         const gdt_laz_dec *d = &z->dec[l];
         if (z->lon[l] && d->bad) {
-            const char *what = l < L_P14 ? p14_layer_name[l] : "item";
+            const char *what = layer_name(z, l);
             if (d->bad & GDT_LAZ_DEC_OVERRUN)
                 return gdt_error_set(err, GDT_EINPUT, 3944,
                                      "%s: LAZ chunk %" PRIu64 ", point %" PRIu64
