@@ -1004,7 +1004,7 @@ gdt_status gdt_laz14_start(gdt_laz14 *z, const unsigned char *data, size_t avail
     uint32_t count;
 
     z->data = data;
-    z->npoints = npoints;
+    z->npoints = 0; /* until the chunk is started: no point to read */
     z->pos = 0;
     z->path = path;
     z->chunk = chunk_index;
@@ -1057,6 +1057,7 @@ gdt_status gdt_laz14_start(gdt_laz14 *z, const unsigned char *data, size_t avail
                              path, chunk_index, npoints);
 
     z->gen++;
+    z->npoints = npoints;
     return GDT_OK;
 }
 

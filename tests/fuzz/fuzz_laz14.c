@@ -51,15 +51,26 @@ static void check_zeros(const unsigned char *r, unsigned rl, unsigned need)
     }
 }
 
+/* One decoder per item layout and need mask, reused across inputs (as a
+ * reader reuses one across chunks: stale models from earlier inputs must
+ * not leak into a chunk); with the VLR each was made for, which must
+ * outlive it.  Kept until the process ends. */
+static gdt_laz_vlr vlrs[5][4][8][8];
+static gdt_laz_chunk *decoders[5][4][8][8];
+
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
-    static const unsigned needs[8] = {
-        GDT_LAZ_NEED_ALL, GDT_LAZ_NEED_XYZ, GDT_LAZ_NEED_CLASS, GDT_LAZ_NEED_FLAGS,
-        GDT_LAZ_NEED_XYZ | GDT_LAZ_NEED_CLASS | GDT_LAZ_NEED_FLAGS,
-        GDT_LAZ_NEED_XYZ | GDT_LAZ_NEED_FLAGS, GDT_LAZ_NEED_ALL, GDT_LAZ_NEED_ALL};
+    static const unsigned needs[8] = {GDT_LAZ_NEED_ALL,
+                                      GDT_LAZ_NEED_XYZ,
+                                      GDT_LAZ_NEED_CLASS,
+                                      GDT_LAZ_NEED_FLAGS,
+                                      GDT_LAZ_NEED_XYZ | GDT_LAZ_NEED_CLASS | GDT_LAZ_NEED_FLAGS,
+                                      GDT_LAZ_NEED_XYZ | GDT_LAZ_NEED_FLAGS,
+                                      GDT_LAZ_NEED_ALL,
+                                      GDT_LAZ_NEED_ALL};
     unsigned char records[BATCH * (67 + 7)];
-    gdt_laz_vlr vlr;
-    gdt_laz_chunk *c = NULL;
+    gdt_laz_vlr *vlr;
+    gdt_laz_chunk **c;
     gdt_error err;
     gdt_status st;
     unsigned fmt, v_point, v_rest, extra, need, rl;
@@ -73,32 +84,35 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     extra = (data[1] >> 2) & 7;
     need = needs[data[1] >> 5];
     npoints = 1 + ((unsigned)data[2] | ((unsigned)data[3] << 8)) % 4096;
+    vlr = &vlrs[fmt - 6][data[1] & 3][extra][data[1] >> 5];
+    c = &decoders[fmt - 6][data[1] & 3][extra][data[1] >> 5];
 
-    memset(&vlr, 0, sizeof vlr);
     memset(&err, 0, sizeof err);
-    vlr.compressor = GDT_LAZ_COMPRESSOR_LAYERED_CHUNKED;
-    vlr.chunk_size = 50000;
-    add_item(&vlr, GDT_LAZ_POINT14, 30, v_point);
-    if (fmt == 7)
-        add_item(&vlr, GDT_LAZ_RGB14, 6, v_rest);
-    if (fmt == 8 || fmt == 10)
-        add_item(&vlr, GDT_LAZ_RGBNIR14, 8, v_rest);
-    if (fmt == 9 || fmt == 10)
-        add_item(&vlr, GDT_LAZ_WAVEPACKET14, 29, v_rest);
-    if (extra)
-        add_item(&vlr, GDT_LAZ_BYTE14, extra, v_rest);
+    if (!*c) {
+        memset(vlr, 0, sizeof *vlr);
+        vlr->compressor = GDT_LAZ_COMPRESSOR_LAYERED_CHUNKED;
+        vlr->chunk_size = 50000;
+        add_item(vlr, GDT_LAZ_POINT14, 30, v_point);
+        if (fmt == 7)
+            add_item(vlr, GDT_LAZ_RGB14, 6, v_rest);
+        if (fmt == 8 || fmt == 10)
+            add_item(vlr, GDT_LAZ_RGBNIR14, 8, v_rest);
+        if (fmt == 9 || fmt == 10)
+            add_item(vlr, GDT_LAZ_WAVEPACKET14, 29, v_rest);
+        if (extra)
+            add_item(vlr, GDT_LAZ_BYTE14, extra, v_rest);
+    }
     rl = 0;
-    for (unsigned i = 0; i < vlr.nitems; i++)
-        rl += vlr.items[i].size;
-
-    if ((st = gdt_laz_chunk_new(&c, &vlr, rl, need, &err)) != GDT_OK) {
+    for (unsigned i = 0; i < vlr->nitems; i++)
+        rl += vlr->items[i].size;
+    if (!*c && (st = gdt_laz_chunk_new(c, vlr, rl, need, &err)) != GDT_OK) {
         gdt_fuzz_check_error(st, &err);
         return 0;
     }
-    st = gdt_laz_chunk_start(c, data + 4, size - 4, npoints, "fuzz", 0, &err);
+    st = gdt_laz_chunk_start(*c, data + 4, size - 4, npoints, "fuzz", 0, &err);
     while (st == GDT_OK && done < npoints) {
         size_t n = npoints - done < BATCH ? (size_t)(npoints - done) : BATCH;
-        st = gdt_laz_chunk_read(c, records, n, &err);
+        st = gdt_laz_chunk_read(*c, records, n, &err);
         if (st == GDT_OK && need != GDT_LAZ_NEED_ALL)
             for (size_t i = 0; i < n; i++)
                 check_zeros(records + i * rl, rl, need);
@@ -106,8 +120,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     }
     if (st != GDT_OK)
         gdt_fuzz_check_error(st, &err);
-    else if (gdt_laz_chunk_used(c) > size - 4)
+    else if (gdt_laz_chunk_used(*c) > size - 4)
         abort();
-    gdt_laz_chunk_free(c);
     return 0;
 }
