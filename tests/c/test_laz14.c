@@ -43,6 +43,22 @@ static size_t one_point_chunk(unsigned char *buf, uint32_t count, unsigned spare
     return HEAD + spare;
 }
 
+/* Checks that starting chunk[0 .. n) of npoints fails with GDT_EINPUT code
+ * and a message naming the file, the chunk and what. */
+static void start_refused(gdt_checks *c, gdt_laz_chunk *dec, const unsigned char *chunk, size_t n,
+                          uint64_t npoints, int code, const char *what)
+{
+    gdt_error err;
+    gdt_status st;
+
+    gdt_error_clear(&err);
+    st = gdt_laz_chunk_start(dec, chunk, n, npoints, "t.laz", 3, &err);
+    GDT_CHECK(c,
+              st == GDT_EINPUT && err.code == code && strstr(err.msg, "t.laz") &&
+                  strstr(err.msg, "chunk 3") && strstr(err.msg, what),
+              "code %d: %s", err.code, err.msg);
+}
+
 int main(void)
 {
     gdt_checks c = {0, 0};
@@ -94,29 +110,14 @@ int main(void)
         GDT_CHECK(&c, gdt_laz_chunk_read(all, rec, 1, &err) == GDT_EINTERNAL && err.code == 7395,
                   "read after a refused start: code %d", err.code);
 
-        /* A layer (a skipped one too) past the chunk. */
-        gdt_error_clear(&err);
+        /* A layer (a skipped one too) past the chunk; fewer points than
+         * the caller's; two points with an empty changed-values layer. */
         n = one_point_chunk(chunk, 1, 13, 40);
-        GDT_CHECK(&c,
-                  gdt_laz_chunk_start(sel, chunk, n - 1, 1, "t.laz", 2, &err) == GDT_EINPUT &&
-                      err.code == 3943 && strstr(err.msg, "extra byte layer"),
-                  "code %d: %s", err.code, err.msg);
-
-        /* Fewer points than the caller's. */
-        gdt_error_clear(&err);
+        start_refused(&c, sel, chunk, n - 1, 1, 3943, "extra byte layer");
         n = one_point_chunk(chunk, 1, 0, 0);
-        GDT_CHECK(&c,
-                  gdt_laz_chunk_start(all, chunk, n, 2, "t.laz", 0, &err) == GDT_EINPUT &&
-                      err.code == 3942,
-                  "code %d: %s", err.code, err.msg);
-
-        /* Two points with an empty changed-values layer. */
-        gdt_error_clear(&err);
+        start_refused(&c, all, chunk, n, 2, 3942, "1 points");
         n = one_point_chunk(chunk, 2, 0, 0);
-        GDT_CHECK(&c,
-                  gdt_laz_chunk_start(all, chunk, n, 2, "t.laz", 0, &err) == GDT_EINPUT &&
-                      err.code == 3943,
-                  "code %d: %s", err.code, err.msg);
+        start_refused(&c, all, chunk, n, 2, 3943, "changed-values");
 
         /* A changed-values layer of garbage runs out of bytes. */
         gdt_error_clear(&err);
