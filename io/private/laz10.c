@@ -17,7 +17,7 @@
 #include "bytes.h"
 #include "laz_arith.h"
 
-/* ---- helpers ---- */
+/* ---- byte access, wrapping arithmetic, keyed models ---- */
 
 static inline void put_u16(unsigned char *p, uint32_t v)
 {
