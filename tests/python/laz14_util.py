@@ -31,6 +31,10 @@ def make_las(fmt, n, seed, channels=4, extra=True, channel_base=0):
     a["X"] = np.cumsum(rng.integers(-50, 200, size=n)).astype(np.int32) + 100000
     a["Y"] = (np.cumsum(rng.integers(-80, 80, size=n)) + 500000).astype(np.int32)
     a["Z"] = (rng.normal(0, 300, size=n).astype(np.int64) + 2000).astype(np.int32)
+    # rare far jumps (the coders' contexts of large differences)
+    for c in ("X", "Y", "Z"):
+        far = rng.random(n) < 0.02
+        a[c][far] += rng.integers(-2**26, 2**26, size=int(far.sum())).astype(np.int32)
     a["intensity"] = rng.integers(0, 65536, size=n)
     nret = rng.integers(1, 16, size=n)
     ret = np.minimum(rng.integers(1, 16, size=n), nret)
@@ -43,9 +47,10 @@ def make_las(fmt, n, seed, channels=4, extra=True, channel_base=0):
     a["user_data"] = rng.integers(0, 256, size=n)
     a["scan_angle"] = np.cumsum(rng.integers(-30, 31, size=n)).astype(np.int16)
     a["point_source_id"] = np.repeat(rng.integers(0, 65536, size=n // 100 + 1), 100)[:n]
-    # GPS time: pulses of several returns, steps of varying size, rare jumps
-    # and two interleaved time lines (the coder's sequence switches)
-    t = 1.0e8 + np.cumsum(rng.integers(0, 3, size=n) * rng.choice([1e-6, 1e-5, 1e-2], size=n))
+    # GPS time: pulses of several returns, steps of varying size (some
+    # backwards), rare jumps and two interleaved time lines (the coder's
+    # sequence switches)
+    t = 1.0e8 + np.cumsum(rng.integers(-1, 4, size=n) * rng.choice([1e-6, 1e-5, 1e-2], size=n))
     t = t + np.cumsum(rng.random(n) < 0.002) * 12345.678
     other = np.repeat(rng.random(n // 8 + 1) < 0.3, 8)[:n]
     t[other] += 98765.4321
