@@ -542,6 +542,7 @@ static gdt_status open_current(gdt_cloud *c, gdt_error *err)
     memset(&so, 0, sizeof so);
     so.log = c->pass == 0 ? c->opts.log : &c->quiet;
     so.buffer_bytes = c->opts.buffer_bytes;
+    so.threads = c->opts.threads;
     st = gdt_source_open(&c->src, ci->path, &so, err);
     if (st != GDT_OK)
         return st;

@@ -24,6 +24,7 @@
 #include "gdt_plycheck.h"
 #include "gdt_seam.h"
 #include "gdt_tiler.h"
+#include "private/cli_modes.h"
 #include "private/job.h"
 #include "private/json_out.h"
 #include "private/outpaths.h"
@@ -314,13 +315,7 @@ static gdt_status sort_faces(tr_ctx *c, gdt_mesh *m, size_t nf, uint32_t base,
 }
 
 /* --threads K, 0 = the online cores. */
-static int host_threads(int k)
-{
-    long n = sysconf(_SC_NPROCESSORS_ONLN);
-    if (k > 0)
-        return k;
-    return n < 1 ? 1 : n > 1024 ? 1024 : (int)n;
-}
+static int host_threads(int k) { return gdt_cli_threads(k); }
 
 /* The first half of tile k, on the main thread: loads it and runs the core
  * on its own points into sl (the halo goes beside it). */
@@ -1368,6 +1363,7 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     memset(&co, 0, sizeof co);
     co.log = &c.log;
     co.quantum = opts->quantum;
+    co.threads = host_threads(opts->threads);
     st = gdt_cloud_open(&c.cloud, opts->inputs, opts->ninputs, &co, err);
     if (st != GDT_OK)
         goto fail;
