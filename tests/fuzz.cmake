@@ -1,5 +1,6 @@
 # Fuzz targets (tests/fuzz/): one per reader of untrusted bytes.
 #   fuzz_las       LAS reader (gdt_source.h)
+#   fuzz_laz       LAZ reader (gdt_source.h: LAS with LASzip point data)
 #   fuzz_pcd       PCD reader (gdt_source.h)
 #   fuzz_plycheck  the PLY checker's reader (gdt_plycheck.h)
 #   fuzz_job       the job-state loader (tiler/private/job.h)
@@ -37,6 +38,8 @@ function(gdt_fuzz_target name)
 endfunction()
 
 gdt_fuzz_target(las SOURCES ${GDT_FUZZ_DIR}/fuzz_source.c DEFINES GDT_FUZZ_FORMAT=1)
+gdt_fuzz_target(laz SOURCES ${GDT_FUZZ_DIR}/fuzz_source.c DEFINES GDT_FUZZ_FORMAT=1
+  GDT_FUZZ_LAZ=1)
 gdt_fuzz_target(pcd SOURCES ${GDT_FUZZ_DIR}/fuzz_source.c DEFINES GDT_FUZZ_FORMAT=2)
 gdt_fuzz_target(plycheck SOURCES ${GDT_FUZZ_DIR}/fuzz_plycheck.c)
 gdt_fuzz_target(job SOURCES ${GDT_FUZZ_DIR}/fuzz_job.c)

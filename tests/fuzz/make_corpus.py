@@ -4,12 +4,16 @@
   make_corpus.py BUILD OUT [--data DIR]
 
 BUILD is a build folder (its gdt-tile and pcd_write_pcl are used), OUT the
-folder that receives one subfolder per target (las, pcd, plycheck, job, tri),
+folder that receives one subfolder per target (las, laz, pcd, plycheck, job, tri),
 emptied first.  Seeds, each small enough for the targets' -max_len:
   las       the real samples of DIR (default ../shared/data) up to 16 KiB
             whole, larger ones cut to their first 16 KiB (header, VLRs and
             the first records); generated clouds of every LAS version and
             point format, GeoKeys and WKT CRS records, degenerate clouds
+  laz       the real LAZ samples, cut the same way (the chunk table is then
+            gone: the chunks are found in order); laspy (lazrs) LAZ files
+            of the generated clouds of every pointwise format, in chunks
+            of a few points, LAS 1.2 and 1.4 (with an EVLR after the table)
   pcd       the real PCD samples, cut the same way; PCL-written clouds in
             ascii, binary and binary_compressed with several field types,
             extra fields and invalid (NaN) points
@@ -31,6 +35,7 @@ import tempfile
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 SCRIPTS = ROOT / "scripts"
+sys.path.insert(0, str(ROOT / "tests" / "python"))
 CUT = 16384  # bytes of a real sample kept as a seed (the targets' -max_len)
 
 
@@ -77,6 +82,27 @@ def las_seeds(out, data, tmp):
         gen_cloud(out / f"gen_{name}.las", n, "--seed", len(name), *extra)
     for kind in ("collinear", "duplicates", "one", "extreme"):
         gen_degenerate(out / f"deg_{kind}.las", kind, 50, "las")
+
+
+def laz_seeds(out, data, tmp):
+    import laspy
+    from laspy.vlrs.vlrlist import VLRList
+
+    import laz_util
+
+    for f in sorted(data.glob("*.laz")):
+        copy_cut(f, out / f"real_{f.stem}.laz")
+    runs = [("v12_pf0", 60, 7, "1.2", 0), ("v12_pf1", 50, 16, "1.2", 1),
+            ("v12_pf2", 40, 13, "1.2", 2), ("v12_pf3", 80, 20, "1.2", 3),
+            ("v14_pf1", 45, 10, "1.4", 1), ("v14_pf3", 70, 25, "1.4", 3)]
+    for name, n, chunk, version, fmt in runs:
+        las = tmp / f"laz_{name}.las"
+        gen_cloud(las, n, "--seed", len(name) + fmt, "--las-version", version,
+                  "--point-format", fmt, "--kind", "lidar")
+        cloud = laspy.read(str(las))
+        if version == "1.4":
+            cloud.evlrs = VLRList([laspy.VLR("gdt_test", 7, "opaque", b"evlr" * 8)])
+        laz_util.write_laz(cloud, out / f"gen_{name}.laz", chunk)
 
 
 def pcd_seeds(out, build, data):
@@ -144,7 +170,7 @@ def main(argv=None):
     ap.add_argument("--data", type=pathlib.Path, default=ROOT.parent / "shared" / "data")
     a = ap.parse_args(argv)
     build = a.build.resolve()
-    dirs = {t: a.out / t for t in ("las", "pcd", "plycheck", "job", "tri")}
+    dirs = {t: a.out / t for t in ("las", "laz", "pcd", "plycheck", "job", "tri")}
     for d in dirs.values():
         shutil.rmtree(d, ignore_errors=True)
         d.mkdir(parents=True)
@@ -153,6 +179,7 @@ def main(argv=None):
     with tempfile.TemporaryDirectory(prefix="gdt-corpus-") as t:
         tmp = pathlib.Path(t)
         las_seeds(dirs["las"], a.data, tmp)
+        laz_seeds(dirs["laz"], a.data, tmp)
         pcd_seeds(dirs["pcd"], build, a.data)
         ply_and_job_seeds(dirs["plycheck"], dirs["job"], dirs["tri"], build, tmp)
     for t, d in dirs.items():
