@@ -423,3 +423,27 @@ def test_changed_laz_input_refused_by_the_job(gdt_bin, runner, data_dir, tmp_pat
     r = runner(cmd + ["--restart"], cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     assert out.read_bytes() != before
+
+
+def dump_digest(dump, path, *args):
+    """SHA-1 of gdt_dump's output, streamed (millions of lines)."""
+    import hashlib
+    h = hashlib.sha1()
+    with subprocess.Popen([str(dump), *map(str, args), str(path)], stdout=subprocess.PIPE) as p:
+        for block in iter(lambda: p.stdout.read(1 << 20), b""):
+            h.update(block)
+    assert p.returncode == 0, f"gdt_dump {args} {path}: rc={p.returncode}"
+    return h.hexdigest()
+
+
+@pytest.mark.slow
+def test_chunks_too_large_for_a_worker_slot(dump, tmp_path):
+    """Chunks of 2,000,000 points of 34 bytes (68 MB of records, above the
+    64 MiB a worker's slot takes) are decoded in pieces by the reading
+    thread, between the workers' chunks: the same points for every thread
+    count."""
+    src = random_las(tmp_path / "big.las", "1.2", 3, 4_500_000, seed=3)
+    laz = lu.write_laz(src, tmp_path / "big.laz", 2_000_000)
+    want = dump_digest(dump, src)
+    for t in (1, 3):
+        assert dump_digest(dump, laz, "--threads", t) == want, f"--threads {t}"
