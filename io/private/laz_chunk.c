@@ -5,11 +5,13 @@
 #include <stdlib.h>
 
 #include "laz10.h"
+#include "laz14.h"
 
 struct gdt_laz_chunk {
     const gdt_laz_vlr *vlr;
     unsigned record_length, need;
     gdt_laz10 *pointwise; /* compressor 2 */
+    gdt_laz14 *layered;   /* compressor 3 */
 };
 
 gdt_status gdt_laz_chunk_new(gdt_laz_chunk **out, const gdt_laz_vlr *vlr,
@@ -19,13 +21,8 @@ gdt_status gdt_laz_chunk_new(gdt_laz_chunk **out, const gdt_laz_vlr *vlr,
     gdt_status st;
 
     *out = NULL;
-    if (vlr->compressor == GDT_LAZ_COMPRESSOR_LAYERED_CHUNKED) {
-        /* Layered chunks (point formats 6-10). */
-        return gdt_error_set(err, GDT_EINPUT, 3924,
-                             "LAZ point formats 6-10 (layered chunks) are decoded by the layered "
-                             "item decoders, which this build lacks");
-    }
-    if (vlr->compressor != GDT_LAZ_COMPRESSOR_POINTWISE_CHUNKED)
+    if (vlr->compressor != GDT_LAZ_COMPRESSOR_POINTWISE_CHUNKED &&
+        vlr->compressor != GDT_LAZ_COMPRESSOR_LAYERED_CHUNKED)
         return gdt_error_set(err, GDT_EINPUT, 3902, "LAZ compressor %u has no chunk decoder",
                              (unsigned)vlr->compressor);
     c = calloc(1, sizeof *c);
@@ -34,7 +31,11 @@ gdt_status gdt_laz_chunk_new(gdt_laz_chunk **out, const gdt_laz_vlr *vlr,
     c->vlr = vlr;
     c->record_length = record_length;
     c->need = need;
-    if ((st = gdt_laz10_new(&c->pointwise, vlr, record_length, err)) != GDT_OK) {
+    if (vlr->compressor == GDT_LAZ_COMPRESSOR_LAYERED_CHUNKED)
+        st = gdt_laz14_new(&c->layered, vlr, record_length, need, err);
+    else
+        st = gdt_laz10_new(&c->pointwise, vlr, record_length, err);
+    if (st != GDT_OK) {
         free(c);
         return st;
     }
@@ -47,6 +48,7 @@ void gdt_laz_chunk_free(gdt_laz_chunk *c)
     if (!c)
         return;
     gdt_laz10_free(c->pointwise);
+    gdt_laz14_free(c->layered);
     free(c);
 }
 
@@ -54,16 +56,22 @@ gdt_status gdt_laz_chunk_start(gdt_laz_chunk *c, const unsigned char *data, size
                                uint64_t npoints, const char *path, uint64_t chunk_index,
                                gdt_error *err)
 {
+    if (c->layered)
+        return gdt_laz14_start(c->layered, data, avail, npoints, path, chunk_index, err);
     return gdt_laz10_start(c->pointwise, data, avail, npoints, path, chunk_index, err);
 }
 
 gdt_status gdt_laz_chunk_read(gdt_laz_chunk *c, unsigned char *records, size_t n,
                               gdt_error *err)
 {
+    if (c->layered)
+        return gdt_laz14_read(c->layered, records, n, err);
     return gdt_laz10_read(c->pointwise, records, n, err);
 }
 
 size_t gdt_laz_chunk_used(const gdt_laz_chunk *c)
 {
+    if (c->layered)
+        return gdt_laz14_used(c->layered);
     return gdt_laz10_used(c->pointwise);
 }
