@@ -149,6 +149,9 @@ CASES = [
     ("1.2", 3, 5, None, False, False),
     ("1.4", 1, 300, 40, False, True),
     ("1.4", 3, 420, 100, True, True),
+    ("1.4", 6, 333, 50, False, True),
+    ("1.4", 7, 280, 64, True, False),
+    ("1.4", 8, 150, 41, True, True),
 ]
 
 
@@ -167,12 +170,27 @@ def test_lazrs_files_equal_laspy(dump, runner, tmp_path, version, fmt, n, chunk,
         assert int(info["laz_chunks"]) == -(-n // chunk)
     ref = None
     for args in [("--threads", 1), ("--threads", 2), ("--threads", 7),
-                 ("--threads", 3, "--buffer-bytes", 100, "--chunk", 7)]:
+                 ("--threads", 3, "--buffer-bytes", 100, "--chunk", 7),
+                 ("--threads", 1, "--need", 1), ("--threads", 3, "--need", 3)]:
         got, _ = dump_text(runner, dump, laz, *args)
         if ref is None:
             assert_dump_equals_laspy(got, src, f"{fmt=} {chunk=}")
             ref = got
         assert got == ref, f"{args}: points differ from --threads 1"
+
+
+@pytest.mark.parametrize("fmt", [3, 6])
+def test_las14_64bit_count_only(dump, runner, tmp_path, fmt):
+    """LAS 1.4 with the legacy count 0: the 64-bit count gives the points."""
+    src = random_las(tmp_path / "src.las", "1.4", fmt, 250, seed=fmt, evlr=True)
+    laz = lu.write_laz(src, tmp_path / "src.laz", 60)
+    data = bytearray(laz.read_bytes())
+    assert struct.unpack_from("<Q", data, 247)[0] == 250
+    struct.pack_into("<I", data, 107, 0)
+    laz.write_bytes(bytes(data))
+    for t in (1, 3):
+        got, _ = dump_text(runner, dump, laz, "--threads", t)
+        assert_dump_equals_laspy(got, src, f"format {fmt}, legacy count 0, --threads {t}")
 
 
 def test_no_chunk_table_reads_the_chunks_in_order(dump, runner, tmp_path):
@@ -374,9 +392,11 @@ def test_reference_on_laz_equals_las(gdt_bin, runner, data_dir, tmp_path):
     assert outs[0] == outs[1]
 
 
-@pytest.mark.parametrize("fmt", [1, 3])
+@pytest.mark.parametrize("fmt", [1, 3, 6, 7, 8])
 def test_generated_laz_through_the_pipeline(gdt_bin, runner, tmp_path, fmt):
-    las = gen_cloud(tmp_path / "c.las", 20000, fmt, "--point-format", fmt, "--kind", "lidar")
+    version = "1.4" if fmt >= 6 else "1.2"
+    las = gen_cloud(tmp_path / "c.las", 20000, fmt, "--point-format", fmt, "--kind", "lidar",
+                    "--las-version", version)
     laz = lu.write_laz(las, tmp_path / "c.laz", 3000)
     _, want = ply_parts(tile(runner, gdt_bin, [las], tmp_path / "las.ply"))
     for t in (1, 4):
@@ -438,11 +458,11 @@ def dump_digest(dump, path, *args):
 
 @pytest.mark.slow
 def test_chunks_too_large_for_a_worker_slot(dump, tmp_path):
-    """Chunks of 2,000,000 points of 34 bytes (68 MB of records, above the
-    64 MiB a worker's slot takes) are decoded in pieces by the reading
-    thread, between the workers' chunks: the same points for every thread
-    count."""
-    src = random_las(tmp_path / "big.las", "1.2", 3, 4_500_000, seed=3)
+    """A chunk of 2,000,000 points of 34 bytes (68 MB of records, above the
+    64 MiB a worker's slot takes) is decoded in pieces by the reading
+    thread, the short last chunk by a worker: the same points for every
+    thread count."""
+    src = random_las(tmp_path / "big.las", "1.2", 3, 2_100_000, seed=3)
     laz = lu.write_laz(src, tmp_path / "big.laz", 2_000_000)
     want = dump_digest(dump, src)
     for t in (1, 3):
