@@ -9,10 +9,14 @@
  *    through to opts.log (quiet is used otherwise).
  *  - sbuf holds scap source records; px/py (projected clouds only) hold scap
  *    doubles each.
+ *  - replay (opts.replay_dir set) holds the records of the compressed inputs
+ *    pass 0 read to their end; while input cur streams from it, replaying is
+ *    1 and src is NULL.  Pass 0 writes input cur to it while recording is 1.
  */
 #include "gdt_cloud.h"
 #include "private/cloud_lattice.h"
 #include "private/crs.h"
+#include "private/replay.h"
 
 #include <ctype.h>
 #include <stdarg.h>
@@ -22,6 +26,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <time.h>
 
 /* Source records converted per read call. */
 #define CLOUD_CHUNK 4096
@@ -51,6 +57,10 @@ struct gdt_cloud {
     double *px, *py;
     size_t scap;
     gdt_error failed; /* sticky read error; status GDT_OK when none */
+    gdt_replay *replay;
+    struct timespec *mtime; /* per input: modification time when pass 0 read it */
+    int replaying, recording;
+    int replay_noted;
 };
 
 /* ---- pure lattice and CRS decisions ---------------------------------- */
@@ -504,6 +514,23 @@ gdt_status gdt_cloud_open(gdt_cloud **out, const char *const *paths, size_t npat
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         goto fail;
     }
+    if (c->opts.replay_dir != NULL) {
+        int any = 0;
+        for (size_t i = 0; i < npaths; i++)
+            any |= c->in[i].info.compressed;
+        if (any) {
+            gdt_error local;
+            gdt_error_clear(&local);
+            c->mtime = calloc(npaths, sizeof *c->mtime);
+            if (c->mtime == NULL)
+                gdt_error_set(&local, GDT_EINTERNAL, 7001, "out of memory");
+            else
+                gdt_replay_open(&c->replay, c->opts.replay_dir, &local);
+            if (c->replay == NULL)
+                gdt_log_note(c->opts.log, "%s; compressed inputs are decoded in every pass",
+                             local.msg);
+        }
+    }
     *out = c;
     return GDT_OK;
 fail:
@@ -531,6 +558,26 @@ const gdt_cloud_input_map *gdt_cloud_input_map_of(const gdt_cloud *cloud, size_t
 
 /* ---- streaming ----------------------------------------------------------- */
 
+/* Starts input c->cur from the replay file, after checking by its size and
+ * modification time that the file is still the one pass 0 decoded. */
+static gdt_status replay_current(gdt_cloud *c, gdt_error *err)
+{
+    const cloud_input *ci = &c->in[c->cur];
+    struct stat sb;
+
+    if (stat(ci->path, &sb) != 0 || (uint64_t)sb.st_size != ci->info.file_size ||
+        sb.st_mtim.tv_sec != c->mtime[c->cur].tv_sec ||
+        sb.st_mtim.tv_nsec != c->mtime[c->cur].tv_nsec)
+        return gdt_error_set(err, GDT_EINPUT, 3405,
+                             "%s: the file changed since it was opened (size or modification "
+                             "time differ)",
+                             ci->path);
+    c->cur_read = 0;
+    c->replaying = 1;
+    gdt_log_note(c->opts.log, "%s: reading the points decoded by the first pass", ci->path);
+    return gdt_replay_start(c->replay, c->cur, ci->info.scale, ci->info.offset, err);
+}
+
 /* Opens input c->cur and checks it is still the file seen at open. */
 static gdt_status open_current(gdt_cloud *c, gdt_error *err)
 {
@@ -538,6 +585,9 @@ static gdt_status open_current(gdt_cloud *c, gdt_error *err)
     const gdt_source_info *now;
     gdt_source_opts so;
     gdt_status st;
+
+    if (c->pass > 0 && gdt_replay_has(c->replay, c->cur))
+        return replay_current(c, err);
 
     memset(&so, 0, sizeof so);
     so.log = c->pass == 0 ? c->opts.log : &c->quiet;
@@ -556,7 +606,36 @@ static gdt_status open_current(gdt_cloud *c, gdt_error *err)
                              "%s: the file changed since it was opened (header or size differ)",
                              ci->path);
     c->cur_read = 0;
+    if (c->pass == 0 && c->replay != NULL && ci->info.compressed) {
+        struct stat sb;
+        if (stat(ci->path, &sb) == 0) {
+            c->mtime[c->cur] = sb.st_mtim;
+            gdt_replay_begin(c->replay, c->cur);
+            c->recording = 1;
+        }
+    }
     return GDT_OK;
+}
+
+/* Ends input c->cur's stream (complete: read to its end). */
+static void end_current(gdt_cloud *c, int complete)
+{
+    gdt_source_close(c->src);
+    c->src = NULL;
+    c->replaying = 0;
+    if (c->recording) {
+        if (complete)
+            gdt_replay_end(c->replay);
+        else
+            gdt_replay_abandon(c->replay);
+        c->recording = 0;
+        if (gdt_replay_failed(c->replay) != NULL && !c->replay_noted) {
+            gdt_log_note(c->opts.log, "keeping decoded points for the next pass stopped (%s);"
+                         " compressed inputs from %s on are decoded again",
+                         gdt_replay_failed(c->replay), c->in[c->cur].path);
+            c->replay_noted = 1;
+        }
+    }
 }
 
 static gdt_status bad_point(const gdt_cloud *c, uint64_t idx, gdt_snap_result r, char axis,
@@ -644,15 +723,20 @@ gdt_status gdt_cloud_read(gdt_cloud *cloud, gdt_point *buf, size_t cap, size_t *
         return gdt_error_set(err, GDT_EINTERNAL, 7402, "gdt_cloud_read: empty buffer");
     while (cloud->cur < cloud->nin) {
         const cloud_input *ci = &cloud->in[cloud->cur];
-        if (cloud->src == NULL) {
+        size_t want = cap < cloud->scap ? cap : cloud->scap;
+        if (cloud->src == NULL && !cloud->replaying) {
             st = open_current(cloud, &cloud->failed);
             if (st != GDT_OK)
                 goto fail;
         }
-        st = gdt_source_read(cloud->src, cloud->sbuf, cap < cloud->scap ? cap : cloud->scap,
-                             &got, &cloud->failed);
+        if (cloud->replaying)
+            st = gdt_replay_read(cloud->replay, cloud->sbuf, want, &got, &cloud->failed);
+        else
+            st = gdt_source_read(cloud->src, cloud->sbuf, want, &got, &cloud->failed);
         if (st != GDT_OK)
             goto fail;
+        if (cloud->recording)
+            gdt_replay_append(cloud->replay, cloud->sbuf, got);
         if (got == 0) {
             if (ci->info.format == GDT_FORMAT_LAS && cloud->cur_read != ci->info.point_count) {
                 st = gdt_error_set(&cloud->failed, GDT_EINPUT, 3404,
@@ -660,8 +744,7 @@ gdt_status gdt_cloud_read(gdt_cloud *cloud, gdt_point *buf, size_t cap, size_t *
                                    ci->path, cloud->cur_read, ci->info.point_count);
                 goto fail;
             }
-            gdt_source_close(cloud->src);
-            cloud->src = NULL;
+            end_current(cloud, 1);
             cloud->cur++;
             continue;
         }
@@ -681,8 +764,7 @@ gdt_status gdt_cloud_read(gdt_cloud *cloud, gdt_point *buf, size_t cap, size_t *
     }
     return GDT_OK;
 fail:
-    gdt_source_close(cloud->src);
-    cloud->src = NULL;
+    end_current(cloud, 0);
     return gdt_error_set(err, cloud->failed.status, cloud->failed.code, "%s",
                          cloud->failed.msg);
 }
@@ -690,8 +772,7 @@ fail:
 gdt_status gdt_cloud_rewind(gdt_cloud *cloud, gdt_error *err)
 {
     (void)err;
-    gdt_source_close(cloud->src);
-    cloud->src = NULL;
+    end_current(cloud, 0);
     cloud->cur = 0;
     cloud->cur_read = 0;
     cloud->next_ord = 0;
@@ -705,6 +786,8 @@ void gdt_cloud_close(gdt_cloud *cloud)
     if (cloud == NULL)
         return;
     gdt_source_close(cloud->src);
+    gdt_replay_close(cloud->replay);
+    free(cloud->mtime);
     for (size_t i = 0; i < cloud->nin; i++) {
         free(cloud->in[i].path);
         free(cloud->in[i].wkt);

@@ -100,6 +100,11 @@ typedef struct gdt_cloud_opts {
     double quantum;        /* lattice step for float/projected input; 0 = default 0.001 */
     size_t buffer_bytes;   /* per-source read buffer; 0 = default */
     int threads;           /* decoder threads per compressed input (LAZ); <= 1: none */
+    const char *replay_dir; /* when set, the first pass keeps the records of
+                               compressed inputs in an unlinked temporary file
+                               here, and later passes read them back instead
+                               of decoding again (same points, same bytes);
+                               NULL: every pass decodes */
 } gdt_cloud_opts;
 
 #define GDT_CLOUD_DEFAULT_QUANTUM 0.001

@@ -53,6 +53,7 @@ typedef struct gdt_src_point {
 typedef struct gdt_source_info {
     gdt_format format;
     char format_name[16];      /* "LAS", "LAZ" (format LAS, compressed), "PCD" */
+    int compressed;            /* 1: decoding costs far more than reading (LAZ) */
     char version[16];          /* "1.4", "0.7" */
     char encoding[32];         /* LAS: "point format 3"; PCD: "ascii" / "binary" / "binary_compressed" */
     uint64_t point_count;      /* header count, verified against the file size where possible */
@@ -75,7 +76,6 @@ typedef struct gdt_source_info {
     unsigned evlr_count;       /* EVLRs actually read */
     uint64_t file_size;
     /* LAZ details for --info (all zero for an uncompressed file): */
-    int compressed;            /* 1: LASzip-compressed point records */
     char compressor[24];       /* "pointwise chunked", "layered chunked", "pointwise" */
     char laz_items[256];       /* the LASzip items, "POINT10 v2, GPSTIME11 v2, RGB12 v2" */
     uint32_t laz_chunk_size;   /* points per chunk; 0: variable */

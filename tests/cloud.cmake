@@ -10,3 +10,5 @@ gdt_add_test_exe(test_dedup_count ${CMAKE_CURRENT_SOURCE_DIR}/c/test_dedup_count
 add_test(NAME dedup_count COMMAND test_dedup_count ${CMAKE_CURRENT_BINARY_DIR})
 gdt_add_test_exe(test_cloud_stream ${CMAKE_CURRENT_SOURCE_DIR}/c/test_cloud_stream.c)
 add_test(NAME cloud_stream COMMAND test_cloud_stream ${CMAKE_CURRENT_BINARY_DIR})
+gdt_add_test_exe(test_replay ${CMAKE_CURRENT_SOURCE_DIR}/c/test_replay.c)
+add_test(NAME replay COMMAND test_replay ${CMAKE_CURRENT_BINARY_DIR})

@@ -1364,6 +1364,7 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     co.log = &c.log;
     co.quantum = opts->quantum;
     co.threads = host_threads(opts->threads);
+    co.replay_dir = c.job; /* LAZ is decoded once, in pass 1 */
     st = gdt_cloud_open(&c.cloud, opts->inputs, opts->ninputs, &co, err);
     if (st != GDT_OK)
         goto fail;
