@@ -14,6 +14,8 @@ import laz_util as lu
 from test_laz_reader import random_las
 
 TIMEOUT = 60
+# One mask per byte, rotating: the low bit, the high bit, every bit.
+MASKS = (0x01, 0x80, 0xFF)
 
 
 @pytest.fixture(scope="module")
@@ -84,10 +86,11 @@ def test_flipped_vlr_bytes(dump, runner, tmp_path, base):
         lay = lu.Layout(src)
         at, n = lay.vlr
         for i in range(n):
-            for mask in (0x01, 0x80, 0xFF):
-                def fn(d, i=i, mask=mask):
-                    d[at + i] ^= mask
-                check(runner, dump, mutate(tmp_path, src, fn), f"{src.name} VLR byte {i}^{mask}")
+            mask = MASKS[i % len(MASKS)]
+
+            def fn(d, i=i, mask=mask):
+                d[at + i] ^= mask
+            check(runner, dump, mutate(tmp_path, src, fn), f"{src.name} VLR byte {i}^{mask}")
 
 
 @pytest.mark.sanitize
@@ -95,12 +98,13 @@ def test_flipped_table_bytes(dump, runner, tmp_path, base):
     for src in base:
         lay = lu.Layout(src)
         offs = list(range(lay.points_start, lay.points_start + 8))
-        offs += list(range(lay.table_offset, min(lay.size, lay.table_offset + 64)))
+        offs += list(range(lay.table_offset, min(lay.size, lay.table_offset + 48)))
         for i in offs:
-            for mask in (0x01, 0x10, 0xFF):
-                def fn(d, i=i, mask=mask):
-                    d[i] ^= mask
-                check(runner, dump, mutate(tmp_path, src, fn), f"{src.name} table byte {i}^{mask}")
+            mask = MASKS[i % len(MASKS)]
+
+            def fn(d, i=i, mask=mask):
+                d[i] ^= mask
+            check(runner, dump, mutate(tmp_path, src, fn), f"{src.name} table byte {i}^{mask}")
 
 
 @pytest.mark.sanitize
@@ -111,7 +115,7 @@ def test_flipped_stream_bytes(dump, runner, tmp_path, base):
         for k, (start, nbytes, _) in enumerate(lay.chunks):
             offs = {start, start + 1, start + nbytes - 1, start + lay.record_length,
                     start + lay.record_length + 1}
-            offs.update(rng.randrange(start, start + nbytes) for _ in range(6))
+            offs.update(rng.randrange(start, start + nbytes) for _ in range(3))
             for i in sorted(offs):
                 def fn(d, i=i):
                     d[i] ^= 1 << rng.randrange(8)
