@@ -27,7 +27,7 @@ typedef struct lz_slot {
     uint64_t chunk;
     unsigned char *rec; /* count[chunk] records when READY */
     size_t rec_cap;
-    uint64_t oob;       /* READY: first record outside the bounds, or UINT64_MAX */
+    uint64_t oob; /* READY: first record outside the bounds, or UINT64_MAX */
     gdt_error err;
 } lz_slot;
 
@@ -60,8 +60,8 @@ struct gdt_laz_stream {
     uint64_t delivered;
     int warned;
     gdt_status failed;
-    gdt_error first;     /* the sticky error */
-    lz_slot *held;       /* the slot whose records were handed on last */
+    gdt_error first; /* the sticky error */
+    lz_slot *held;   /* the slot whose records were handed on last */
 
     /* The workers; nworkers == 0 until the first read, or when none run. */
     int started;
@@ -73,8 +73,8 @@ struct gdt_laz_stream {
     pthread_cond_t cv_work; /* a slot became free, or stop */
     pthread_cond_t cv_done; /* a slot became READY, FAILED or BIG */
     uint64_t next_claim;
-    int stop;   /* close: workers return */
-    int halt;   /* a chunk failed: no more claims (the consumer stops there) */
+    int stop; /* close: workers return */
+    int halt; /* a chunk failed: no more claims (the consumer stops there) */
 };
 
 static gdt_status lz_oom(gdt_error *err)
@@ -261,8 +261,8 @@ static gdt_status lz_start_workers(gdt_laz_stream *s, gdt_error *err)
     s->nslots = 2 * want;
     s->nw = want;
     for (unsigned i = 0; i < want; i++) {
-        gdt_status st = gdt_laz_chunk_new(&s->w[i].dec, &s->vlr, s->p.record_length, s->p.need,
-                                          err);
+        gdt_status st =
+            gdt_laz_chunk_new(&s->w[i].dec, &s->vlr, s->p.record_length, s->p.need, err);
         if (st != GDT_OK)
             return st;
         s->w[i].s = s;
@@ -287,14 +287,14 @@ static gdt_status lz_fail(gdt_laz_stream *s, gdt_status st)
 
 /* Waits for chunk k's slot; READY: hands its records on; FAILED: the
  * chunk's error; BIG: *big = 1, the consumer decodes it. */
-static gdt_status lz_take_slot(gdt_laz_stream *s, uint64_t k, const unsigned char **recs,
-                               size_t *n, int *big, gdt_error *err)
+static gdt_status lz_take_slot(gdt_laz_stream *s, uint64_t k, const unsigned char **recs, size_t *n,
+                               int *big, gdt_error *err)
 {
     lz_slot *sl = &s->slots[k % s->nslots];
 
     pthread_mutex_lock(&s->mu);
-    while (!(sl->chunk == k && (sl->state == SLOT_READY || sl->state == SLOT_FAILED ||
-                                sl->state == SLOT_BIG)))
+    while (!(sl->chunk == k &&
+             (sl->state == SLOT_READY || sl->state == SLOT_FAILED || sl->state == SLOT_BIG)))
         pthread_cond_wait(&s->cv_done, &s->mu);
     pthread_mutex_unlock(&s->mu);
     if (sl->state == SLOT_FAILED) {
@@ -326,8 +326,7 @@ static void lz_release(gdt_laz_stream *s)
 }
 
 /* The next piece of the chunk the consumer decodes itself. */
-static gdt_status lz_piece(gdt_laz_stream *s, const unsigned char **recs, size_t *n,
-                           gdt_error *err)
+static gdt_status lz_piece(gdt_laz_stream *s, const unsigned char **recs, size_t *n, gdt_error *err)
 {
     uint64_t k = s->chunk;
     size_t m = s->chunk_left < s->piece_points ? (size_t)s->chunk_left : s->piece_points;
@@ -445,11 +444,10 @@ gdt_status gdt_laz_stream_open(gdt_laz_stream **out, const unsigned char *vlr, s
         s->lo[a] = p->min[a] - step;
         s->hi[a] = p->max[a] + step;
     }
-    st = gdt_laz_vlr_parse(p->path, vlr, vlr_len, p->point_format, p->record_length, &s->vlr,
-                           err);
+    st = gdt_laz_vlr_parse(p->path, vlr, vlr_len, p->point_format, p->record_length, &s->vlr, err);
     if (st == GDT_OK)
-        st = gdt_laz_table_read(&s->tab, &s->vlr, p->fd, p->path, p->points_start,
-                                p->region_end, p->point_count, p->log, err);
+        st = gdt_laz_table_read(&s->tab, &s->vlr, p->fd, p->path, p->points_start, p->region_end,
+                                p->point_count, p->log, err);
     if (st != GDT_OK)
         goto fail;
     s->nchunks = s->tab.present ? s->tab.nchunks : 0;

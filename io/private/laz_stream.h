@@ -59,20 +59,20 @@ static inline uint64_t gdt_laz_stream_bytes_max(uint64_t count, unsigned len)
 }
 
 typedef struct gdt_laz_stream_params {
-    int fd;                 /* the open LAZ file (borrowed) */
-    const char *path;       /* for messages (borrowed) */
-    uint64_t points_start;  /* the header's offset to the point data */
-    uint64_t region_end;    /* end of what the point data may use: the EVLR
-                               start, else the file size */
-    uint64_t point_count;   /* the header's count: the number of records */
-    unsigned point_format;  /* 0..10 (compression bits cleared) */
+    int fd;                /* the open LAZ file (borrowed) */
+    const char *path;      /* for messages (borrowed) */
+    uint64_t points_start; /* the header's offset to the point data */
+    uint64_t region_end;   /* end of what the point data may use: the EVLR
+                              start, else the file size */
+    uint64_t point_count;  /* the header's count: the number of records */
+    unsigned point_format; /* 0..10 (compression bits cleared) */
     unsigned record_length;
-    unsigned need;          /* GDT_LAZ_NEED_* */
-    int threads;            /* decoder threads; <= 1: the caller's thread */
-    size_t piece_bytes;     /* records per decoding step in the caller's
-                               thread; 0 = 1 MiB */
+    unsigned need;                              /* GDT_LAZ_NEED_* */
+    int threads;                                /* decoder threads; <= 1: the caller's thread */
+    size_t piece_bytes;                         /* records per decoding step in the caller's
+                                                   thread; 0 = 1 MiB */
     double scale[3], offset[3], min[3], max[3]; /* the header's lattice and bounds */
-    gdt_log *log;           /* warnings; may be NULL */
+    gdt_log *log;                               /* warnings; may be NULL */
 } gdt_laz_stream_params;
 
 typedef struct gdt_laz_stream gdt_laz_stream;
