@@ -12,8 +12,9 @@ emptied first.  Seeds, each small enough for the targets' -max_len:
             point format, GeoKeys and WKT CRS records, degenerate clouds
   laz       the real LAZ samples, cut the same way (the chunk table is then
             gone: the chunks are found in order); laspy (lazrs) LAZ files
-            of the generated clouds of every pointwise format, in chunks
-            of a few points, LAS 1.2 and 1.4 (with an EVLR after the table)
+            of the generated clouds of formats 0-3 and 6-8 (layered), in
+            chunks of a few points, LAS 1.2 and 1.4 (with an EVLR after the
+            table)
   pcd       the real PCD samples, cut the same way; PCL-written clouds in
             ascii, binary and binary_compressed with several field types,
             extra fields and invalid (NaN) points
@@ -94,7 +95,9 @@ def laz_seeds(out, data, tmp):
         copy_cut(f, out / f"real_{f.stem}.laz")
     runs = [("v12_pf0", 60, 7, "1.2", 0), ("v12_pf1", 50, 16, "1.2", 1),
             ("v12_pf2", 40, 13, "1.2", 2), ("v12_pf3", 80, 20, "1.2", 3),
-            ("v14_pf1", 45, 10, "1.4", 1), ("v14_pf3", 70, 25, "1.4", 3)]
+            ("v14_pf1", 45, 10, "1.4", 1), ("v14_pf3", 70, 25, "1.4", 3),
+            ("v14_pf6", 60, 15, "1.4", 6), ("v14_pf7", 40, 12, "1.4", 7),
+            ("v14_pf8", 35, 9, "1.4", 8)]
     for name, n, chunk, version, fmt in runs:
         las = tmp / f"laz_{name}.las"
         gen_cloud(las, n, "--seed", len(name) + fmt, "--las-version", version,

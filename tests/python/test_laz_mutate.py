@@ -25,12 +25,14 @@ def dump(tool):
 
 @pytest.fixture(scope="module")
 def base(tmp_path_factory):
-    """Two small LAZ files: 8 chunks of format 3 (the last one shorter), 5
-    of format 1 in LAS 1.4 with an EVLR after the chunk table."""
+    """Three small LAZ files: 8 chunks of format 3 (the last one shorter), 5
+    of format 1 in LAS 1.4 with an EVLR after the chunk table, 4 layered
+    chunks of format 7."""
     d = tmp_path_factory.mktemp("lazmut")
     a = lu.write_laz(random_las(d / "a.las", "1.2", 3, 300, seed=31, extra=True), d / "a.laz", 40)
     b = lu.write_laz(random_las(d / "b.las", "1.4", 1, 250, seed=32, evlr=True), d / "b.laz", 50)
-    return [a, b]
+    c = lu.write_laz(random_las(d / "c.las", "1.4", 7, 110, seed=33), d / "c.laz", 30)
+    return [a, b, c]
 
 
 def check(runner, dump, path, what):
