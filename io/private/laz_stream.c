@@ -254,6 +254,16 @@ static gdt_status lz_start_workers(gdt_laz_stream *s, gdt_error *err)
     want = (unsigned)s->p.threads;
     if (want > s->nchunks)
         want = (unsigned)s->nchunks;
+    {
+        /* the slots' memory: 2 W times the largest chunk a slot takes */
+        uint64_t largest = 0, per = GDT_LAZ_STREAM_SLOT_MAX / s->p.record_length;
+        for (uint64_t k = 0; k < s->nchunks; k++)
+            if (s->tab.count[k] <= per && s->tab.count[k] > largest)
+                largest = s->tab.count[k];
+        uint64_t fit = GDT_LAZ_STREAM_SLOTS_TOTAL / (2 * (largest * s->p.record_length + 1));
+        if (want > fit)
+            want = fit > 0 ? (unsigned)fit : 1;
+    }
     s->w = calloc(want, sizeof *s->w);
     s->slots = calloc(2 * (size_t)want, sizeof *s->slots);
     if (s->w == NULL || s->slots == NULL)

@@ -11,7 +11,9 @@
  *          thread decodes each chunk in pieces of about piece_bytes of
  *          records, holding the chunk's compressed bytes and one piece.
  *   read, threads > 1: on the first read, W = min(threads, chunks) workers
- *          start, each with its own decoder and compressed-byte buffer.
+ *          (fewer if their slots would hold more than
+ *          GDT_LAZ_STREAM_SLOTS_TOTAL bytes) start, each with its own
+ *          decoder and compressed-byte buffer.
  *          They claim chunks in file order and decode each whole into one
  *          of 2 W record slots (chunk i goes to slot i mod 2 W, so at most
  *          2 W chunks are decoded or waiting); the caller's thread takes
@@ -46,6 +48,9 @@
 
 /* Largest record slot a worker fills (bytes of decoded records). */
 #define GDT_LAZ_STREAM_SLOT_MAX ((uint64_t)64 << 20)
+/* Most bytes all the slots of a stream may hold: fewer workers start when
+ * 2 W slots of the file's largest slot-sized chunk would exceed it. */
+#define GDT_LAZ_STREAM_SLOTS_TOTAL ((uint64_t)1 << 30)
 /* Most compressed bytes a chunk of count records of len bytes may take:
  * twice the records, plus room for a tiny chunk's coder start-up (no
  * LASzip encoder comes near it; a table claiming more is corrupt);
