@@ -1,10 +1,12 @@
 # Fuzz targets (tests/fuzz/): one per reader of untrusted bytes.
 #   fuzz_las       LAS reader (gdt_source.h)
-#   fuzz_laz       LAZ reader (gdt_source.h: LAS with LASzip point data)
+#   fuzz_lazfile   LAZ files through the LAS reader (gdt_source.h: LASzip
+#                  point data, 0 to 3 decoder threads)
 #   fuzz_pcd       PCD reader (gdt_source.h)
 #   fuzz_plycheck  the PLY checker's reader (gdt_plycheck.h)
 #   fuzz_job       the job-state loader (tiler/private/job.h)
 #   fuzz_tri       the tile-file (.tri) seam parser (tiler/private/tiled_files.h)
+#   fuzz_laz       the LASzip VLR parser and chunk decoder (io/private/laz_chunk.h)
 # With GDT_FUZZ=ON (clang) each is a libFuzzer binary; scripts/fuzz.sh
 # builds the seed corpora and runs them (smoke run, long campaign).  In
 # every build, the saved inputs tests/fuzz/regress/<target>/ (inputs that
@@ -38,9 +40,10 @@ function(gdt_fuzz_target name)
 endfunction()
 
 gdt_fuzz_target(las SOURCES ${GDT_FUZZ_DIR}/fuzz_source.c DEFINES GDT_FUZZ_FORMAT=1)
-gdt_fuzz_target(laz SOURCES ${GDT_FUZZ_DIR}/fuzz_source.c DEFINES GDT_FUZZ_FORMAT=1
+gdt_fuzz_target(lazfile SOURCES ${GDT_FUZZ_DIR}/fuzz_source.c DEFINES GDT_FUZZ_FORMAT=1
   GDT_FUZZ_LAZ=1)
 gdt_fuzz_target(pcd SOURCES ${GDT_FUZZ_DIR}/fuzz_source.c DEFINES GDT_FUZZ_FORMAT=2)
 gdt_fuzz_target(plycheck SOURCES ${GDT_FUZZ_DIR}/fuzz_plycheck.c)
 gdt_fuzz_target(job SOURCES ${GDT_FUZZ_DIR}/fuzz_job.c)
 gdt_fuzz_target(tri SOURCES ${GDT_FUZZ_DIR}/fuzz_tri.c)
+gdt_fuzz_target(laz SOURCES ${GDT_FUZZ_DIR}/fuzz_laz.c)

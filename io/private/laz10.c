@@ -17,7 +17,7 @@
 #include "bytes.h"
 #include "laz_arith.h"
 
-/* ---- helpers ---- */
+/* ---- byte access, wrapping arithmetic, keyed models ---- */
 
 static inline void put_u16(unsigned char *p, uint32_t v)
 {
@@ -904,7 +904,7 @@ gdt_status gdt_laz10_start(gdt_laz10 *z, const unsigned char *data, size_t avail
 {
     z->path = path;
     z->chunk_index = chunk_index;
-    z->npoints = npoints;
+    z->npoints = 0; /* no point to read until the chunk has started */
     z->next = 0;
     z->epoch++;
     z->raw_used = 0;
@@ -916,6 +916,7 @@ gdt_status gdt_laz10_start(gdt_laz10 *z, const unsigned char *data, size_t avail
                              path, chunk_index, avail, z->record_length);
     memcpy(z->raw, data, z->record_length);
     z->raw_used = z->record_length;
+    z->npoints = npoints;
     for (unsigned i = 0; i < z->nitems; i++) {
         plan_item *it = &z->items[i];
         const unsigned char *r = data + it->off;

@@ -172,7 +172,9 @@ gdt_status gdt_laz_intdec_new(gdt_laz_intdec *ic, uint32_t bits, uint32_t contex
     }
     ic->mbits = calloc(contexts, sizeof *ic->mbits);
     ic->mcorr = calloc(ic->corr_bits + 1, sizeof *ic->mcorr);
-    if (!ic->mbits || !ic->mcorr) {
+    ic->stamp_bits = calloc(contexts, sizeof *ic->stamp_bits);
+    ic->stamp_corr = calloc(ic->corr_bits + 1, sizeof *ic->stamp_corr);
+    if (!ic->mbits || !ic->mcorr || !ic->stamp_bits || !ic->stamp_corr) {
         gdt_laz_intdec_free(ic);
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     }
@@ -193,10 +195,13 @@ fail:
 
 void gdt_laz_intdec_init(gdt_laz_intdec *ic)
 {
-    for (uint32_t i = 0; i < ic->contexts; i++)
-        gdt_laz_symmodel_init(&ic->mbits[i]);
-    for (uint32_t i = 1; i <= ic->corr_bits; i++)
-        gdt_laz_symmodel_init(&ic->mcorr[i]);
+    /* Every stamp now differs from epoch (the models are fresh for epoch
+     * 0 after gdt_laz_intdec_new; on wrap-around the stamps restart). */
+    if (++ic->epoch == 0) {
+        memset(ic->stamp_bits, 0, ic->contexts * sizeof *ic->stamp_bits);
+        memset(ic->stamp_corr, 0, (ic->corr_bits + 1) * sizeof *ic->stamp_corr);
+        ic->epoch = 1;
+    }
     gdt_laz_bitmodel_init(&ic->mcorr0);
     ic->k = 0;
 }
@@ -211,5 +216,7 @@ void gdt_laz_intdec_free(gdt_laz_intdec *ic)
             gdt_laz_symmodel_free(&ic->mcorr[i]);
     free(ic->mbits);
     free(ic->mcorr);
+    free(ic->stamp_bits);
+    free(ic->stamp_corr);
     memset(ic, 0, sizeof *ic);
 }

@@ -248,6 +248,12 @@ typedef struct gdt_laz_intdec {
     gdt_laz_symmodel *mbits;        /* contexts models of corr_bits + 1 symbols */
     gdt_laz_symmodel *mcorr;        /* [1 .. corr_bits]: models of the low bits */
     gdt_laz_bitmodel mcorr0;        /* k = 0 */
+    /* A model is reset on its first use after gdt_laz_intdec_init (when
+     * its stamp differs from epoch), so a chunk pays only for the models
+     * it uses: a 32-bit decompressor has thousands of symbols. */
+    uint32_t epoch;
+    uint32_t *stamp_bits;           /* of mbits */
+    uint32_t *stamp_corr;           /* of mcorr */
 } gdt_laz_intdec;
 
 /* Creates the models of an integer decompressor (bits 1 .. 32, 0 meaning 32;
@@ -257,9 +263,31 @@ typedef struct gdt_laz_intdec {
  * freed). */
 gdt_status gdt_laz_intdec_new(gdt_laz_intdec *ic, uint32_t bits, uint32_t contexts,
                               uint32_t bits_high, uint32_t range, gdt_error *err);
-/* Resets every model (once per chunk). */
+/* Resets every model (once per chunk; the symbol models lazily, see
+ * epoch).  An encoder sharing these models must reach them through
+ * gdt_laz_intdec_kmodel and gdt_laz_intdec_cmodel too. */
 void gdt_laz_intdec_init(gdt_laz_intdec *ic);
 void gdt_laz_intdec_free(gdt_laz_intdec *ic);
+
+/* The model of k in context (< contexts), reset if it is stale. */
+static inline gdt_laz_symmodel *gdt_laz_intdec_kmodel(gdt_laz_intdec *ic, uint32_t context)
+{
+    if (ic->stamp_bits[context] != ic->epoch) {
+        gdt_laz_symmodel_init(&ic->mbits[context]);
+        ic->stamp_bits[context] = ic->epoch;
+    }
+    return &ic->mbits[context];
+}
+
+/* The model of the corrector's (top) bits for k (1 .. corr_bits). */
+static inline gdt_laz_symmodel *gdt_laz_intdec_cmodel(gdt_laz_intdec *ic, uint32_t k)
+{
+    if (ic->stamp_corr[k] != ic->epoch) {
+        gdt_laz_symmodel_init(&ic->mcorr[k]);
+        ic->stamp_corr[k] = ic->epoch;
+    }
+    return &ic->mcorr[k];
+}
 
 /* The corrector of the next value in context (< contexts). */
 static inline int32_t gdt_laz_intdec_corrector(gdt_laz_intdec *ic, gdt_laz_dec *d,
@@ -271,16 +299,14 @@ static inline int32_t gdt_laz_intdec_corrector(gdt_laz_intdec *ic, gdt_laz_dec *
         d->bad |= GDT_LAZ_DEC_CORRUPT;
         context = 0;
     }
-    k = ic->k = gdt_laz_decode_symbol(d, &ic->mbits[context]);
+    k = ic->k = gdt_laz_decode_symbol(d, gdt_laz_intdec_kmodel(ic, context));
     if (k == 0)
         return (int32_t)gdt_laz_decode_bit(d, &ic->mcorr0);
     if (k >= 32)
         return ic->corr_min;
-    if (k <= ic->bits_high) {
-        c = gdt_laz_decode_symbol(d, &ic->mcorr[k]);
-    } else {
+    c = gdt_laz_decode_symbol(d, gdt_laz_intdec_cmodel(ic, k));
+    if (k > ic->bits_high) {
         unsigned k1 = k - ic->bits_high;
-        c = gdt_laz_decode_symbol(d, &ic->mcorr[k]);
         c = (c << k1) | gdt_laz_read_bits(d, k1);
     }
     /* c in [0, 2^(k-1)) are the negatives, [2^(k-1), 2^k) the positives

@@ -18,6 +18,10 @@
 #include "laz_arith.h"
 #include "laz_chunk.h"
 
+/* The fewest bytes a chunk can have: the raw first record of the smallest
+ * point format (POINT10). */
+#define LAZ_MIN_CHUNK 20
+
 /* Reads n bytes at off; returns 0, an errno value, or -1 for end of file. */
 static int read_at(int fd, void *buf, size_t n, uint64_t off)
 {
@@ -130,6 +134,17 @@ gdt_status gdt_laz_table_read(gdt_laz_table *t, const gdt_laz_vlr *vlr, int fd,
                              path, ntab, (unsigned)vlr->chunk_size, point_count);
     if (need > point_count)
         need = point_count; /* every chunk holds at least one point */
+    if (need > (data_end - chunks0) / LAZ_MIN_CHUNK) {
+        /* Each chunk holds at least its raw first record, so this many
+         * cannot fit: refuse before allocating for them. */
+        if (!variable)
+            return gdt_error_set(err, GDT_EINPUT, 3913,
+                                 "%s: LAZ point data of %" PRIu64 " bytes cannot hold the %" PRIu64
+                                 " chunks of %u points the header's %" PRIu64 " points need",
+                                 path, data_end - chunks0, need, (unsigned)vlr->chunk_size,
+                                 point_count);
+        need = (data_end - chunks0) / LAZ_MIN_CHUNK;
+    }
     if (ntab == 0)
         return gdt_error_set(err, GDT_EINPUT, 3913,
                              "%s: LAZ chunk table lists no chunk for %" PRIu64 " points", path,
@@ -140,9 +155,9 @@ gdt_status gdt_laz_table_read(gdt_laz_table *t, const gdt_laz_vlr *vlr, int fd,
     navail = fsize - table_off - 8;
     if (navail > 16 * need + 16)
         navail = 16 * need + 16;
-    t->start = malloc(need * sizeof *t->start);
-    t->bytes = malloc(need * sizeof *t->bytes);
-    t->count = malloc(need * sizeof *t->count);
+    t->start = malloc((need ? need : 1) * sizeof *t->start);
+    t->bytes = malloc((need ? need : 1) * sizeof *t->bytes);
+    t->count = malloc((need ? need : 1) * sizeof *t->count);
     buf = malloc(navail ? navail : 1);
     if (!t->start || !t->bytes || !t->count || !buf) {
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
@@ -177,15 +192,30 @@ gdt_status gdt_laz_table_read(gdt_laz_table *t, const gdt_laz_vlr *vlr, int fd,
                                    i);
                 goto fail;
             }
-            if (prev_bytes == 0 || pos + prev_bytes > data_end) {
+            if (prev_bytes < LAZ_MIN_CHUNK) {
+                st = gdt_error_set(err, GDT_EINPUT, 3915,
+                                   "%s: LAZ chunk table: chunk %" PRIu64 " of %u bytes cannot "
+                                   "hold its first record",
+                                   path, i, (unsigned)prev_bytes);
+                goto fail;
+            }
+            if (pos + prev_bytes > data_end) {
                 st = gdt_error_set(err, GDT_EINPUT, 3915,
                                    "%s: LAZ chunk table: chunk %" PRIu64 " of %u bytes at %" PRIu64
                                    " passes the end of the point data (%" PRIu64 ")",
                                    path, i, (unsigned)prev_bytes, pos, data_end);
                 goto fail;
             }
-            if (cnt > point_count - points)
+            if (cnt > point_count - points) {
+                /* The last chunk of fixed size is short; a variable one
+                 * that holds more than the header counts is cut. */
+                if (variable)
+                    gdt_log_warn(log, 3917,
+                                 "%s: LAZ chunk table: chunk %" PRIu64 " holds %" PRIu64
+                                 " points, past the header's %" PRIu64 "; reading %" PRIu64,
+                                 path, i, cnt, point_count, point_count - points);
                 cnt = point_count - points;
+            }
             t->start[i] = pos;
             t->bytes[i] = prev_bytes;
             t->count[i] = cnt;

@@ -1,6 +1,7 @@
 /* Fuzz target of the streaming point sources (gdt_source.h): the LAS reader
  * (built with GDT_FUZZ_FORMAT=1) or the PCD reader (GDT_FUZZ_FORMAT=2);
- * with GDT_FUZZ_FORMAT=1 and GDT_FUZZ_LAZ=1, the LAZ reader (LAS files whose
+ * with GDT_FUZZ_FORMAT=1 and GDT_FUZZ_LAZ=1 (fuzz_lazfile), whole LAZ files
+ * through the LAS reader and the LAZ stream (LAS files whose
  * point format byte has the compression bits; the LAS target skips them).
  * The LAZ target also derives the decoder thread count (0 to 3) and the
  * fields needed from the input, so the workers and the selective decoding

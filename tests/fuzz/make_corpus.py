@@ -4,13 +4,14 @@
   make_corpus.py BUILD OUT [--data DIR]
 
 BUILD is a build folder (its gdt-tile and pcd_write_pcl are used), OUT the
-folder that receives one subfolder per target (las, laz, pcd, plycheck, job, tri),
+folder that receives one subfolder per target (las, pcd, plycheck, job, tri, laz,
+lazfile),
 emptied first.  Seeds, each small enough for the targets' -max_len:
   las       the real samples of DIR (default ../shared/data) up to 16 KiB
             whole, larger ones cut to their first 16 KiB (header, VLRs and
             the first records); generated clouds of every LAS version and
             point format, GeoKeys and WKT CRS records, degenerate clouds
-  laz       the real LAZ samples, cut the same way (the chunk table is then
+  lazfile   the real LAZ samples, cut the same way (the chunk table is then
             gone: the chunks are found in order); laspy (lazrs) LAZ files
             of the generated clouds of formats 0-3 and 6-8 (layered), in
             chunks of a few points, LAS 1.2 and 1.4 (with an EVLR after the
@@ -22,6 +23,9 @@ emptied first.  Seeds, each small enough for the targets' -max_len:
             collinear and tiny clouds (no faces)
   job       the job.db of small tiled runs kept with --keep-job
   tri       the tile files (tiles/*.tri) of those runs, up to 64 KiB each
+  laz       the first chunk of each real LAZ sample of formats 0-5, framed
+            for fuzz_laz (format, item version and extra bytes, points),
+            whole and cut
 The samples are copied into the build tree at test time, never into the
 repository.  Needs numpy (the generators); run it with the project's .venv.
 Exit status 0, or 1 when a generator or gdt-tile fails.
@@ -85,7 +89,7 @@ def las_seeds(out, data, tmp):
         gen_degenerate(out / f"deg_{kind}.las", kind, 50, "las")
 
 
-def laz_seeds(out, data, tmp):
+def lazfile_seeds(out, data, tmp):
     import laspy
     from laspy.vlrs.vlrlist import VLRList
 
@@ -106,6 +110,26 @@ def laz_seeds(out, data, tmp):
         if version == "1.4":
             cloud.evlrs = VLRList([laspy.VLR("gdt_test", 7, "opaque", b"evlr" * 8)])
         laz_util.write_laz(cloud, out / f"gen_{name}.laz", chunk)
+
+
+def laz_seeds(out, data):
+    """fuzz_laz inputs: 4 framing bytes, then a chunk's first bytes."""
+    # one point of format 0: its raw record and the coder's 4 bytes
+    (out / "one_point.bin").write_bytes(bytes(4 + 20 + 4))
+    base = {0: 20, 1: 28, 2: 26, 3: 34, 4: 57, 5: 63}
+    for f in sorted(data.glob("*.laz")):
+        b = f.read_bytes()
+        if len(b) < 227:
+            continue
+        fmt, rl = b[104] & 0x3F, int.from_bytes(b[105:107], "little")
+        offset = int.from_bytes(b[96:100], "little")
+        if fmt not in base or not 0 <= rl - base[fmt] < 8:
+            continue
+        count = min(int.from_bytes(b[107:111], "little"), 4096)
+        frame = bytes([fmt, (rl - base[fmt]) << 1]) + max(count - 1, 0).to_bytes(2, "little")
+        chunk = b[offset + 8:offset + 8 + CUT - 4]
+        (out / f"real_{f.stem}.bin").write_bytes(frame + chunk)
+        (out / f"cut_{f.stem}.bin").write_bytes(frame + chunk[:len(chunk) // 3])
 
 
 def pcd_seeds(out, build, data):
@@ -173,7 +197,7 @@ def main(argv=None):
     ap.add_argument("--data", type=pathlib.Path, default=ROOT.parent / "shared" / "data")
     a = ap.parse_args(argv)
     build = a.build.resolve()
-    dirs = {t: a.out / t for t in ("las", "laz", "pcd", "plycheck", "job", "tri")}
+    dirs = {t: a.out / t for t in ("las", "pcd", "plycheck", "job", "tri", "laz", "lazfile")}
     for d in dirs.values():
         shutil.rmtree(d, ignore_errors=True)
         d.mkdir(parents=True)
@@ -182,9 +206,10 @@ def main(argv=None):
     with tempfile.TemporaryDirectory(prefix="gdt-corpus-") as t:
         tmp = pathlib.Path(t)
         las_seeds(dirs["las"], a.data, tmp)
-        laz_seeds(dirs["laz"], a.data, tmp)
+        lazfile_seeds(dirs["lazfile"], a.data, tmp)
         pcd_seeds(dirs["pcd"], build, a.data)
         ply_and_job_seeds(dirs["plycheck"], dirs["job"], dirs["tri"], build, tmp)
+        laz_seeds(dirs["laz"], a.data)
     for t, d in dirs.items():
         files = list(d.iterdir())
         print(f"{t}: {len(files)} seeds, largest {max(f.stat().st_size for f in files)} bytes")
