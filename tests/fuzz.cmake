@@ -7,6 +7,7 @@
 #   fuzz_job       the job-state loader (tiler/private/job.h)
 #   fuzz_tri       the tile-file (.tri) seam parser (tiler/private/tiled_files.h)
 #   fuzz_laz       the LASzip VLR parser and chunk decoder (io/private/laz_chunk.h)
+#   fuzz_laz14     the layered (formats 6-10) chunk decoder (io/private/laz14.h)
 # With GDT_FUZZ=ON (clang) each is a libFuzzer binary; scripts/fuzz.sh
 # builds the seed corpora and runs them (smoke run, long campaign).  In
 # every build, the saved inputs tests/fuzz/regress/<target>/ (inputs that
@@ -47,3 +48,4 @@ gdt_fuzz_target(plycheck SOURCES ${GDT_FUZZ_DIR}/fuzz_plycheck.c)
 gdt_fuzz_target(job SOURCES ${GDT_FUZZ_DIR}/fuzz_job.c)
 gdt_fuzz_target(tri SOURCES ${GDT_FUZZ_DIR}/fuzz_tri.c)
 gdt_fuzz_target(laz SOURCES ${GDT_FUZZ_DIR}/fuzz_laz.c)
+gdt_fuzz_target(laz14 SOURCES ${GDT_FUZZ_DIR}/fuzz_laz14.c)

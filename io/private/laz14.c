@@ -45,8 +45,8 @@ enum {
 };
 
 static const char *const p14_layer_name[L_P14] = {
-    "changed values", "Z", "classification", "flags", "intensity",
-    "scan angle", "user data", "point source", "GPS time"};
+    "changed values", "Z",         "classification", "flags",   "intensity",
+    "scan angle",     "user data", "point source",   "GPS time"};
 
 /* The GPS time coding: multipliers of the last difference up to 500, down
  * to -10, a code for a full 64-bit time and codes to switch among the four
@@ -122,10 +122,10 @@ typedef struct wave_models {
 typedef struct x_ctx {
     uint64_t gen;
     int allocated;
-    unsigned char *last;   /* size bytes: the item's last values */
-    rgb_models rgb;        /* RGB14, RGBNIR14 */
-    nir_models nir;        /* RGBNIR14 */
-    wave_models wave;      /* WAVEPACKET14 */
+    unsigned char *last;     /* size bytes: the item's last values */
+    rgb_models rgb;          /* RGB14, RGBNIR14 */
+    nir_models nir;          /* RGBNIR14 */
+    wave_models wave;        /* WAVEPACKET14 */
     gdt_laz_symmodel *bytes; /* BYTE14: size models */
 } x_ctx;
 
@@ -134,7 +134,7 @@ typedef struct x_item {
     unsigned offset; /* in the record */
     unsigned layer;  /* its first layer */
     unsigned nlayers;
-    unsigned cur;    /* its current context */
+    unsigned cur;         /* its current context */
     unsigned char *store; /* NCTX * size bytes behind the contexts' last */
     x_ctx ctx[NCTX];
 } x_item;
@@ -146,10 +146,10 @@ struct gdt_laz14 {
     unsigned nitems; /* items after POINT14 */
     x_item items[GDT_LAZ_MAX_ITEMS];
     unsigned nlayers;
-    uint32_t *lsize;    /* nlayers */
-    size_t *loff;       /* nlayers, from data */
-    int *ldecode;       /* nlayers: 1 when the run decodes this layer */
-    gdt_laz_dec *dec;   /* nlayers */
+    uint32_t *lsize;      /* nlayers */
+    size_t *loff;         /* nlayers, from data */
+    int *ldecode;         /* nlayers: 1 when the run decodes this layer */
+    gdt_laz_dec *dec;     /* nlayers */
     gdt_laz_dec **active; /* the decoders started for this chunk */
     unsigned nactive;
     /* the chunk */
@@ -158,7 +158,7 @@ struct gdt_laz14 {
     uint64_t npoints, pos, chunk;
     const char *path;
     uint64_t gen;
-    unsigned cur; /* POINT14 context */
+    unsigned cur;       /* POINT14 context */
     unsigned char *lon; /* nlayers: decoded in this chunk (needed and not empty) */
     p14_ctx p14[NCTX];
 };
@@ -248,8 +248,7 @@ static inline void put16(unsigned char *p, uint32_t v)
 }
 
 /* The model m ready for this chunk: allocated once, reset on first use. */
-static inline gdt_laz_symmodel *lazy(lazy_model *m, uint32_t symbols, uint64_t gen,
-                                     gdt_error *err)
+static inline gdt_laz_symmodel *lazy(lazy_model *m, uint32_t symbols, uint64_t gen, gdt_error *err)
 {
     if (m->stamp == gen)
         return &m->m;
@@ -302,8 +301,8 @@ static inline void p14_put(const gdt_laz14 *z, unsigned char *r, const p14_point
     }
     if (z->want_flags) {
         r[14] = (unsigned char)(p->ret | (p->nret << 4));
-        r[15] = (unsigned char)(p->cflags | (p->channel << 4) | (p->scan_dir << 6) |
-                                (p->edge << 7));
+        r[15] =
+            (unsigned char)(p->cflags | (p->channel << 4) | (p->scan_dir << 6) | (p->edge << 7));
     }
     if (z->want_class)
         r[16] = p->cls;
@@ -367,8 +366,7 @@ static gdt_status p14_ctx_alloc(gdt_laz14 *z, p14_ctx *c, gdt_error *err)
 
 /* Puts context c in use for this chunk, continuing from the values of from
  * (the point the stream had reached; copied, it may be c's own). */
-static gdt_status p14_ctx_start(gdt_laz14 *z, p14_ctx *c, const p14_point *from,
-                                gdt_error *err)
+static gdt_status p14_ctx_start(gdt_laz14 *z, p14_ctx *c, const p14_point *from, gdt_error *err)
 {
     p14_point p = *from;
 
@@ -528,14 +526,9 @@ static gdt_status p14_read(gdt_laz14 *z, unsigned char *r, unsigned *context, gd
     }
     n = p->nret;
     switch (cv & 3) {
-    case 0:
-        break;
-    case 1:
-        p->ret = (p->ret + 1) & 15;
-        break;
-    case 2:
-        p->ret = (p->ret + 15) & 15;
-        break;
+    case 0: break;
+    case 1: p->ret = (p->ret + 1) & 15; break;
+    case 2: p->ret = (p->ret + 15) & 15; break;
     default:
         if (gps_change) {
             if (!(m = lazy(&c->ret[p->ret], 16, gen, err)))
@@ -598,8 +591,8 @@ static gdt_status p14_read(gdt_laz14 *z, unsigned char *r, unsigned *context, gd
         p->user = (uint8_t)gdt_laz_decode_symbol(&z->dec[L_USER_DATA], m);
     }
     if (z->lon[L_POINT_SOURCE] && (cv & (1u << 5)))
-        p->point_source = (uint16_t)gdt_laz_intdec_decode(
-            &c->point_source, &z->dec[L_POINT_SOURCE], p->point_source, 0);
+        p->point_source = (uint16_t)gdt_laz_intdec_decode(&c->point_source, &z->dec[L_POINT_SOURCE],
+                                                          p->point_source, 0);
     if (z->lon[L_GPS_TIME] && gps_change) {
         p14_gps(c, &z->dec[L_GPS_TIME]);
         p->gps = c->gps_seq[c->gps_last];
@@ -614,12 +607,9 @@ static gdt_status p14_read(gdt_laz14 *z, unsigned char *r, unsigned *context, gd
 static unsigned item_layers(unsigned type, unsigned size)
 {
     switch (type) {
-    case GDT_LAZ_RGBNIR14:
-        return 2;
-    case GDT_LAZ_BYTE14:
-        return size;
-    default:
-        return 1;
+    case GDT_LAZ_RGBNIR14: return 2;
+    case GDT_LAZ_BYTE14: return size;
+    default: return 1;
     }
 }
 
@@ -721,9 +711,7 @@ static gdt_status x_ctx_start(gdt_laz14 *z, x_item *it, unsigned ci, const unsig
             gdt_laz_intdec_init(&c->wave.ret);
             gdt_laz_intdec_init(&c->wave.xyz);
             break;
-        default:
-            syms_init(c->bytes, it->size);
-            break;
+        default: syms_init(c->bytes, it->size); break;
         }
     }
     c->wave.last_diff = 0;
@@ -737,8 +725,7 @@ static gdt_status x_ctx_start(gdt_laz14 *z, x_item *it, unsigned ci, const unsig
 /* The 16-bit colour channels: the low and high bytes of red, then green and
  * blue predicted from red's change, each byte only where sym says it
  * changed. */
-static void rgb_read(gdt_laz_dec *d, rgb_models *m, const unsigned char *last,
-                     unsigned char *out)
+static void rgb_read(gdt_laz_dec *d, rgb_models *m, const unsigned char *last, unsigned char *out)
 {
     uint32_t l0 = gdt_le_get_u16(last), l1 = gdt_le_get_u16(last + 2),
              l2 = gdt_le_get_u16(last + 4);
@@ -753,9 +740,11 @@ static void rgb_read(gdt_laz_dec *d, rgb_models *m, const unsigned char *last,
         uint32_t g_lo, b_lo, g_hi, b_hi;
 
         diff = (int32_t)(v0 & 255) - (int32_t)(l0 & 255);
-        g_lo = (sym & 4) ? (gdt_laz_decode_symbol(d, &m->diff[2]) +
-                            clamp_u8(diff + (int32_t)(l1 & 255))) & 255
-                         : l1 & 255;
+        g_lo =
+            (sym & 4)
+                ? (gdt_laz_decode_symbol(d, &m->diff[2]) + clamp_u8(diff + (int32_t)(l1 & 255))) &
+                      255
+                : l1 & 255;
         if (sym & 16) {
             diff = (diff + ((int32_t)g_lo - (int32_t)(l1 & 255))) / 2;
             b_lo = (gdt_laz_decode_symbol(d, &m->diff[4]) + clamp_u8(diff + (int32_t)(l2 & 255))) &
@@ -764,13 +753,14 @@ static void rgb_read(gdt_laz_dec *d, rgb_models *m, const unsigned char *last,
             b_lo = l2 & 255;
         }
         diff = (int32_t)(v0 >> 8) - (int32_t)(l0 >> 8);
-        g_hi = (sym & 8) ? (gdt_laz_decode_symbol(d, &m->diff[3]) +
-                            clamp_u8(diff + (int32_t)(l1 >> 8))) & 255
-                         : l1 >> 8;
+        g_hi = (sym & 8)
+                   ? (gdt_laz_decode_symbol(d, &m->diff[3]) + clamp_u8(diff + (int32_t)(l1 >> 8))) &
+                         255
+                   : l1 >> 8;
         if (sym & 32) {
             diff = (diff + ((int32_t)g_hi - (int32_t)(l1 >> 8))) / 2;
-            b_hi = (gdt_laz_decode_symbol(d, &m->diff[5]) + clamp_u8(diff + (int32_t)(l2 >> 8))) &
-                   255;
+            b_hi =
+                (gdt_laz_decode_symbol(d, &m->diff[5]) + clamp_u8(diff + (int32_t)(l2 >> 8))) & 255;
         } else {
             b_hi = l2 >> 8;
         }
@@ -794,8 +784,7 @@ static uint32_t nir_read(gdt_laz_dec *d, nir_models *m, uint32_t l)
 
 /* The wave packet: descriptor index, byte offset (same, after the last
  * packet, a 32-bit difference or raw), size, return point and x, y, z. */
-static void wave_read(gdt_laz_dec *d, wave_models *m, const unsigned char *last,
-                      unsigned char *out)
+static void wave_read(gdt_laz_dec *d, wave_models *m, const unsigned char *last, unsigned char *out)
 {
     uint64_t off = gdt_le_get_u64(last + 1);
     uint32_t size = gdt_le_get_u32(last + 9);
@@ -803,18 +792,13 @@ static void wave_read(gdt_laz_dec *d, wave_models *m, const unsigned char *last,
     out[0] = (unsigned char)gdt_laz_decode_symbol(d, &m->index);
     m->last_sym = gdt_laz_decode_symbol(d, &m->offset[m->last_sym]);
     switch (m->last_sym) {
-    case 0:
-        break;
-    case 1:
-        off += size;
-        break;
+    case 0: break;
+    case 1: off += size; break;
     case 2:
         m->last_diff = gdt_laz_intdec_decode(&m->offset_diff, d, m->last_diff, 0);
         off += (uint64_t)(int64_t)m->last_diff;
         break;
-    default:
-        off = gdt_laz_read_int64(d);
-        break;
+    default: off = gdt_laz_read_int64(d); break;
     }
     gdt_le_put_u64(out + 1, off);
     gdt_le_put_u32(out + 9, (uint32_t)gdt_laz_intdec_decode(&m->size, d, gdt_laz_i32(size), 0));
@@ -937,28 +921,18 @@ gdt_status gdt_laz14_new(gdt_laz14 **out, const gdt_laz_vlr *vlr, unsigned recor
         unsigned want = 0;
 
         switch (vi->type) {
-        case GDT_LAZ_RGB14:
-            want = 6;
-            break;
-        case GDT_LAZ_RGBNIR14:
-            want = 8;
-            break;
-        case GDT_LAZ_WAVEPACKET14:
-            want = 29;
-            break;
-        case GDT_LAZ_BYTE14:
-            want = vi->size;
-            break;
-        default:
-            break;
+        case GDT_LAZ_RGB14: want = 6; break;
+        case GDT_LAZ_RGBNIR14: want = 8; break;
+        case GDT_LAZ_WAVEPACKET14: want = 29; break;
+        case GDT_LAZ_BYTE14: want = vi->size; break;
+        default: break;
         }
         if (want == 0 || vi->size != want || (vi->version != 3 && vi->version != 4)) {
             gdt_laz14_free(z);
             return gdt_error_set(err, GDT_EINPUT, 3940,
                                  "layered LAZ stream: item %u (type %u, %u bytes, version %u) "
                                  "cannot follow POINT14",
-                                 k, (unsigned)vi->type, (unsigned)vi->size,
-                                 (unsigned)vi->version);
+                                 k, (unsigned)vi->type, (unsigned)vi->size, (unsigned)vi->version);
         }
         it->type = vi->type;
         it->size = vi->size;
@@ -1003,17 +977,34 @@ gdt_status gdt_laz14_new(gdt_laz14 **out, const gdt_laz_vlr *vlr, unsigned recor
     return GDT_OK;
 }
 
-gdt_status gdt_laz14_start(gdt_laz14 *z, const unsigned char *data, size_t avail,
-                           uint64_t npoints, const char *path, uint64_t chunk_index,
-                           gdt_error *err)
+/* What layer l holds, for messages. */
+static const char *layer_name(const gdt_laz14 *z, unsigned l)
+{
+    if (l < L_P14)
+        return p14_layer_name[l];
+    for (unsigned k = 0; k < z->nitems; k++) {
+        const x_item *it = &z->items[k];
+        if (l >= it->layer && l < it->layer + it->nlayers) {
+            switch (it->type) {
+            case GDT_LAZ_RGB14: return "RGB";
+            case GDT_LAZ_RGBNIR14: return l == it->layer ? "RGB" : "NIR";
+            case GDT_LAZ_WAVEPACKET14: return "wave packet";
+            default: return "extra byte";
+            }
+        }
+    }
+    return "unknown";
+}
+
+gdt_status gdt_laz14_start(gdt_laz14 *z, const unsigned char *data, size_t avail, uint64_t npoints,
+                           const char *path, uint64_t chunk_index, gdt_error *err)
 {
     size_t head = (size_t)z->record_length + 4 + 4 * (size_t)z->nlayers;
     uint64_t pos;
     uint32_t count;
-    p14_point first;
 
     z->data = data;
-    z->npoints = npoints;
+    z->npoints = 0; /* until the chunk is started: no point to read */
     z->pos = 0;
     z->path = path;
     z->chunk = chunk_index;
@@ -1036,7 +1027,7 @@ gdt_status gdt_laz14_start(gdt_laz14 *z, const unsigned char *data, size_t avail
         z->loff[l] = (size_t)pos;
         pos += z->lsize[l];
         if (pos > avail) {
-            const char *what = l < L_P14 ? p14_layer_name[l] : "item";
+            const char *what = layer_name(z, l);
             return gdt_error_set(err, GDT_EINPUT, 3943,
                                  "%s: LAZ chunk %" PRIu64 ": its %s layer (%u) of %" PRIu32
                                  " bytes ends at byte %" PRIu64 ", past the chunk's %zu",
@@ -1066,7 +1057,17 @@ gdt_status gdt_laz14_start(gdt_laz14 *z, const unsigned char *data, size_t avail
                              path, chunk_index, npoints);
 
     z->gen++;
-    p14_parse(&first, data);
+    z->npoints = npoints;
+    return GDT_OK;
+}
+
+/* Puts the first point's channel contexts in use: done when the second
+ * point is decoded, so one-point chunks never reset a model. */
+static gdt_status chunk_contexts(gdt_laz14 *z, gdt_error *err)
+{
+    p14_point first;
+
+    p14_parse(&first, z->data);
     z->cur = first.channel;
     if (p14_ctx_start(z, &z->p14[z->cur], &first, err) != GDT_OK)
         return GDT_EINTERNAL;
@@ -1074,7 +1075,7 @@ gdt_status gdt_laz14_start(gdt_laz14 *z, const unsigned char *data, size_t avail
         for (unsigned k = 0; k < z->nitems; k++) {
             x_item *it = &z->items[k];
             it->cur = z->cur;
-            if (x_ctx_start(z, it, it->cur, data + it->offset, err) != GDT_OK)
+            if (x_ctx_start(z, it, it->cur, z->data + it->offset, err) != GDT_OK)
                 return GDT_EINTERNAL;
         }
     }
@@ -1087,7 +1088,7 @@ static gdt_status layer_error(const gdt_laz14 *z, gdt_error *err)
     for (unsigned l = 0; l < z->nlayers; l++) {
         const gdt_laz_dec *d = &z->dec[l];
         if (z->lon[l] && d->bad) {
-            const char *what = l < L_P14 ? p14_layer_name[l] : "item";
+            const char *what = layer_name(z, l);
             if (d->bad & GDT_LAZ_DEC_OVERRUN)
                 return gdt_error_set(err, GDT_EINPUT, 3944,
                                      "%s: LAZ chunk %" PRIu64 ", point %" PRIu64
@@ -1099,8 +1100,9 @@ static gdt_status layer_error(const gdt_laz14 *z, gdt_error *err)
                                  z->path, z->chunk, z->pos, what, l);
         }
     }
-    return gdt_error_set(err, GDT_EINPUT, 3945, "%s: LAZ chunk %" PRIu64 ", point %" PRIu64
-                         ": corrupt layer", z->path, z->chunk, z->pos);
+    return gdt_error_set(err, GDT_EINPUT, 3945,
+                         "%s: LAZ chunk %" PRIu64 ", point %" PRIu64 ": corrupt layer", z->path,
+                         z->chunk, z->pos);
 }
 
 gdt_status gdt_laz14_read(gdt_laz14 *z, unsigned char *records, size_t n, gdt_error *err)
@@ -1118,9 +1120,13 @@ gdt_status gdt_laz14_read(gdt_laz14 *z, unsigned char *records, size_t n, gdt_er
         if (!z->want_all)
             memset(r, 0, rl);
         if (z->pos == 0) {
-            p14_put(z, r, &z->p14[z->cur].last);
+            p14_point first;
+            p14_parse(&first, z->data);
+            p14_put(z, r, &first);
             if (z->want_rest)
                 memcpy(r + 30, z->data + 30, rl - 30);
+            if (z->npoints > 1 && chunk_contexts(z, err) != GDT_OK)
+                return GDT_EINTERNAL;
         } else {
             if (p14_read(z, r, &context, err) != GDT_OK)
                 return GDT_EINTERNAL;

@@ -47,9 +47,8 @@ void gdt_laz14_free(gdt_laz14 *z);
  * data[0 .. avail) and starts the layers the decoder needs.
  * returns: GDT_EINPUT 3941-3943 (the chunk cannot hold what it claims),
  * GDT_EINTERNAL 7001, or GDT_OK. */
-gdt_status gdt_laz14_start(gdt_laz14 *z, const unsigned char *data, size_t avail,
-                           uint64_t npoints, const char *path, uint64_t chunk_index,
-                           gdt_error *err);
+gdt_status gdt_laz14_start(gdt_laz14 *z, const unsigned char *data, size_t avail, uint64_t npoints,
+                           const char *path, uint64_t chunk_index, gdt_error *err);
 
 /* Decodes the next n points into records (n * record_length bytes; the
  * bytes of fields not needed are zero).  returns: GDT_EINPUT 3944-3945 (a

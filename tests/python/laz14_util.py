@@ -4,12 +4,14 @@ and byte-level access to the chunks (layer sizes, item versions) for the
 corruption tests.  Used by test_laz14_decode.py.
 """
 import io
+import pathlib
 import struct
 
 import laspy
 import lazrs
 import numpy as np
 
+DATA = pathlib.Path(__file__).resolve().parent / "data"
 EXTRA = [("eb_u8", "u1"), ("eb_i32", "i4")]
 
 def make_las(fmt, n, seed, channels=4, extra=True, channel_base=0):
@@ -41,9 +43,12 @@ def make_las(fmt, n, seed, channels=4, extra=True, channel_base=0):
     a["user_data"] = rng.integers(0, 256, size=n)
     a["scan_angle"] = np.cumsum(rng.integers(-30, 31, size=n)).astype(np.int16)
     a["point_source_id"] = np.repeat(rng.integers(0, 65536, size=n // 100 + 1), 100)[:n]
-    t = 1.0e8 + np.cumsum(rng.integers(0, 3, size=n) * 1.0e-5)
-    jumps = rng.random(n) < 0.002
-    t = t + np.cumsum(jumps) * 12345.678
+    # GPS time: pulses of several returns, steps of varying size, rare jumps
+    # and two interleaved time lines (the coder's sequence switches)
+    t = 1.0e8 + np.cumsum(rng.integers(0, 3, size=n) * rng.choice([1e-6, 1e-5, 1e-2], size=n))
+    t = t + np.cumsum(rng.random(n) < 0.002) * 12345.678
+    other = np.repeat(rng.random(n // 8 + 1) < 0.3, 8)[:n]
+    t[other] += 98765.4321
     a["gps_time"] = t
     names = a.dtype.names
     if "red" in names:
@@ -55,9 +60,12 @@ def make_las(fmt, n, seed, channels=4, extra=True, channel_base=0):
         a["wavepacket_index"] = rng.integers(0, 4, size=n)
         sizes = rng.integers(20, 400, size=n)
         a["wavepacket_size"] = sizes
-        off = np.cumsum(sizes) + 1000
+        # the offset: after the last packet, the same, a 32-bit step or far
+        step = np.where(rng.random(n) < 0.6, np.roll(sizes, 1), 0)
+        step = np.where(rng.random(n) < 0.2, rng.integers(-5000, 5000, size=n), step)
+        off = np.cumsum(step) + 10**6
         off[rng.random(n) < 0.01] += 2**40
-        a["wavepacket_offset"] = off
+        a["wavepacket_offset"] = off.astype(np.uint64)
         a["return_point_wave_location"] = rng.random(n).astype(np.float32) * 1000
         for c in ("x_t", "y_t", "z_t"):
             a[c] = rng.normal(0, 1, size=n).astype(np.float32)
