@@ -640,6 +640,7 @@ static gdt_status open_current(gdt_cloud *c, gdt_error *err)
     so.buffer_bytes = c->opts.buffer_bytes;
     so.need = c->opts.census ? GDT_SRC_NEED_XYZ | GDT_SRC_NEED_ATTRS
                              : gdt_filter_need(&c->filter);
+    so.threads = c->opts.threads;
     st = gdt_source_open(&c->src, ci->path, &so, err);
     if (st != GDT_OK)
         return st;

@@ -46,7 +46,8 @@
  * gdt_cloud_rewind) are quiet, so each warning is given once.
  *
  * Memory: one read buffer (opts.buffer_bytes) and one open input at a time,
- * whatever the number or size of the inputs.
+ * whatever the number or size of the inputs (a LAZ input decoded on
+ * opts.threads workers holds up to 2 x threads decoded chunks).
  *
  * Message numbers: 2401 (no input, bad quantum), 2305 (class or return
  * filter with an input without those attributes); 3401 (coordinate not
@@ -109,6 +110,7 @@ typedef struct gdt_cloud_opts {
     gdt_log *log;          /* warnings and notes; may be NULL */
     double quantum;        /* lattice step for float/projected input; 0 = default 0.001 */
     size_t buffer_bytes;   /* per-source read buffer; 0 = default */
+    int threads;           /* decoder threads per compressed input (LAZ); <= 1: none */
     const char *replay_dir; /* when set, the first pass keeps the records of
                                compressed inputs in an unlinked temporary file
                                here, and later passes read them back instead

@@ -1,4 +1,4 @@
-/* gdt_source.h — streaming point sources (LAS, PCD).
+/* gdt_source.h — streaming point sources (LAS, LAZ, PCD).
  *
  * A source yields the points of one input file in file order, in chunks the
  * caller sizes; it never holds more than one bounded read buffer, whatever
@@ -52,7 +52,7 @@ typedef struct gdt_src_point {
  * source and live until gdt_source_close. */
 typedef struct gdt_source_info {
     gdt_format format;
-    char format_name[16];      /* "LAS", "LAZ", "PCD" */
+    char format_name[16];      /* "LAS", "LAZ" (format LAS, compressed), "PCD" */
     int compressed;            /* 1: decoding costs far more than reading (LAZ) */
     char version[16];          /* "1.4", "0.7" */
     char encoding[32];         /* LAS: "point format 3"; PCD: "ascii" / "binary" / "binary_compressed" */
@@ -75,6 +75,11 @@ typedef struct gdt_source_info {
     unsigned vlr_count;        /* VLRs actually read */
     unsigned evlr_count;       /* EVLRs actually read */
     uint64_t file_size;
+    /* LAZ details for --info (all zero for an uncompressed file): */
+    char compressor[24];       /* "pointwise chunked", "layered chunked", "pointwise" */
+    char laz_items[256];       /* the LASzip items, "POINT10 v2, GPSTIME11 v2, RGB12 v2" */
+    uint32_t laz_chunk_size;   /* points per chunk; 0: variable */
+    uint64_t laz_chunks;       /* chunks in the chunk table; 0: the file has none */
 } gdt_source_info;
 
 typedef struct gdt_source gdt_source;

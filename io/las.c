@@ -1,4 +1,4 @@
-/* LAS 1.0–1.4 point reader (point data formats 0–10), streamed.
+/* LAS 1.0–1.4 and LAZ point reader (point data formats 0–10), streamed.
  *
  * design:
  *   open:  read the fixed header (at most LAS_HEADER_MAX bytes), validate every
@@ -14,11 +14,21 @@
  *          0–10, then the return and class bytes) are decoded
  *          (las_record_to_point); the rest of the record, extra bytes
  *          included, is skipped.
+ *   LAZ:   a point format byte with the compression bits (0x80 or 0x40)
+ *          marks LASzip point data: the "laszip encoded" VLR 22204 is kept
+ *          while walking the VLRs, the points region runs from the offset
+ *          to point data to the EVLRs (or the end of the file), and the
+ *          records come decoded from a LAZ stream (private/laz_stream.h)
+ *          instead of the file; they go through the same
+ *          las_record_to_point.
  *
- * Messages: GDT-31xx bad input, GDT-41xx I/O, GDT-3150.. warnings.
+ * Messages: GDT-31xx bad input, GDT-41xx I/O, GDT-3150.. warnings; LAZ:
+ * GDT-3974 here, the rest in private/laz_stream.h and private/laz_chunk.h.
  */
 #include "private/bytes.h"
+#include "private/fd_io.h"
 #include "private/las_crs.h"
+#include "private/laz_stream.h"
 #include "private/source_impl.h"
 
 #include <errno.h>
@@ -56,7 +66,8 @@ typedef struct las_header {
     unsigned header_size;
     uint64_t offset_to_points;
     uint32_t vlr_claimed;
-    unsigned format;
+    unsigned format;         /* 0..10, the compression bits cleared */
+    int compressed;          /* the point format byte had 0x80 or 0x40 set: LAZ */
     unsigned record_length;
     uint64_t point_count;
     double scale[3], offset[3], min[3], max[3];
@@ -78,11 +89,15 @@ typedef struct las_impl {
     unsigned point_format;
     double scale[3], offset[3];
     gdt_status failed; /* status of an earlier failed read, else GDT_OK */
+    gdt_laz_stream *laz;        /* LAZ: the decoded records, else NULL */
+    const unsigned char *lrec;  /* LAZ: the records the stream gave, not yet converted */
+    size_t lrec_left;
     char *wkt;         /* OGC WKT of the file, NUL-terminated, or NULL */
     gdt_las_crs crs;
 } las_impl;
 
-/* CRS payloads collected while walking the (E)VLRs; all owned. */
+/* CRS payloads (and the LASzip VLR) collected while walking the (E)VLRs;
+ * all owned. */
 typedef struct las_crs_payloads {
     unsigned char *geokeys;
     size_t geokeys_len;
@@ -90,6 +105,8 @@ typedef struct las_crs_payloads {
     size_t ascii_len;
     char *wkt;
     size_t wkt_len;
+    unsigned char *laszip; /* the 22204 "laszip encoded" VLR payload */
+    size_t laszip_len;
 } las_crs_payloads;
 
 /* Reads exactly n bytes at offset off.  The caller has checked that the range
@@ -98,24 +115,16 @@ typedef struct las_crs_payloads {
 static gdt_status las_pread(int fd, const char *path, void *dst, size_t n, uint64_t off,
                             const char *what, gdt_error *err)
 {
-    unsigned char *p = dst;
-    while (n > 0) {
-        ssize_t got = pread(fd, p, n, (off_t)off);
-        if (got < 0) {
-            if (errno == EINTR)
-                continue;
-            return gdt_error_set(err, GDT_EIO, 4103, "%s: read error at byte %" PRIu64 " (%s): %s",
-                                 path, off, what, strerror(errno));
-        }
-        if (got == 0)
-            return gdt_error_set(err, GDT_EINPUT, 3130,
-                                 "%s: file ends at byte %" PRIu64
-                                 " inside the %s (it shrank while being read)",
-                                 path, off, what);
-        p += got;
-        n -= (size_t)got;
-        off += (uint64_t)got;
-    }
+    size_t got;
+    int e = gdt_fd_pread_all(fd, dst, n, off, &got);
+    if (e != 0)
+        return gdt_error_set(err, GDT_EIO, 4103, "%s: read error at byte %" PRIu64 " (%s): %s",
+                             path, off + got, what, strerror(e));
+    if (got < n)
+        return gdt_error_set(err, GDT_EINPUT, 3130,
+                             "%s: file ends at byte %" PRIu64
+                             " inside the %s (it shrank while being read)",
+                             path, off + got, what);
     return GDT_OK;
 }
 
@@ -162,13 +171,8 @@ static gdt_status las_parse_header(const char *path, const unsigned char *b, siz
     h->offset_to_points = gdt_le_get_u32(b + 96);
     h->vlr_claimed = gdt_le_get_u32(b + 100);
     unsigned fmt_byte = b[104];
-    if (fmt_byte & 0xc0u)
-        return gdt_error_set(err, GDT_EINPUT, 3109,
-                             "%s: LAZ (compressed) is not supported"
-                             " (point format byte %u has the compression bits set);"
-                             " decompress it to LAS first",
-                             path, fmt_byte);
-    h->format = fmt_byte;
+    h->compressed = (fmt_byte & 0xc0u) != 0;
+    h->format = fmt_byte & 0x3fu;
     if (h->format > 10)
         return gdt_error_set(err, GDT_EINPUT, 3110,
                              "%s: unknown point data format %u"
@@ -254,6 +258,12 @@ static gdt_status las_locate_points(const char *path, const las_header *h, uint6
                                  ", before the point data at %" PRIu64,
                                  path, h->evlr_start, h->offset_to_points);
         data_end = h->evlr_start;
+    }
+    if (h->compressed) {
+        /* LASzip point data: its size is only known from the chunk table,
+         * which the LAZ stream reads and checks against this region. */
+        *points_end = data_end;
+        return GDT_OK;
     }
     if (h->minor >= 3 && (h->global_encoding & LAS_GE_WAVEFORM_INTERNAL) &&
         h->waveform_start > h->offset_to_points && h->waveform_start < data_end)
@@ -382,6 +392,15 @@ static gdt_status las_scan_vlrs(int fd, const char *path, const las_header *h, g
             st = las_keep_payload(fd, path, gdt_le_get_u16(vh + 18), body, (size_t)len, "VLR", pl, err);
             if (st != GDT_OK)
                 return st;
+        } else if (h->compressed && pl->laszip == NULL && gdt_le_get_u16(vh + 18) == 22204 &&
+                   strncmp((const char *)vh + 2, "laszip encoded", 16) == 0) {
+            pl->laszip = malloc(len > 0 ? (size_t)len : 1);
+            if (pl->laszip == NULL)
+                return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+            pl->laszip_len = (size_t)len;
+            st = las_pread(fd, path, pl->laszip, (size_t)len, body, "LASzip VLR", err);
+            if (st != GDT_OK)
+                return st;
         }
         pos = body + len;
     }
@@ -440,6 +459,7 @@ static void las_payloads_free(las_crs_payloads *pl)
     free(pl->geokeys);
     free(pl->ascii);
     free(pl->wkt);
+    free(pl->laszip);
     memset(pl, 0, sizeof *pl);
 }
 
@@ -532,7 +552,18 @@ static gdt_status las_read(gdt_source *src, gdt_src_point *out, size_t cap, size
                              src->path);
     while (*n < cap && im->next_point < im->point_count) {
         const unsigned char *rec;
-        if (im->buf_len - im->buf_pos >= im->record_length) {
+        if (im->laz != NULL) {
+            if (im->lrec_left == 0) {
+                st = gdt_laz_stream_next(im->laz, &im->lrec, &im->lrec_left, err);
+                if (st != GDT_OK)
+                    goto fail;
+                if (im->lrec_left == 0) /* the stream gives point_count records */
+                    break;
+            }
+            rec = im->lrec;
+            im->lrec += im->record_length;
+            im->lrec_left--;
+        } else if (im->buf_len - im->buf_pos >= im->record_length) {
             rec = im->buf + im->buf_pos;
             im->buf_pos += im->record_length;
         } else {
@@ -559,6 +590,7 @@ static void las_impl_free(las_impl *im)
 {
     if (im == NULL)
         return;
+    gdt_laz_stream_close(im->laz);
     if (im->fd >= 0)
         close(im->fd);
     free(im->buf);
@@ -573,6 +605,57 @@ static void las_close(gdt_source *src)
 }
 
 static const gdt_source_vtable las_vtable = {las_read, las_close};
+
+/* LAZ: the records come from a LAZ stream over [offset to points,
+ * points_end).  The LASzip VLR is required: without it the point data
+ * cannot be decoded. */
+static gdt_status las_open_laz(gdt_source *src, las_impl *im, const las_header *h,
+                               const las_crs_payloads *pl, uint64_t points_end, gdt_error *err)
+{
+    const gdt_source_opts *o = &src->opts;
+    gdt_laz_stream_params lp;
+
+    if (pl->laszip == NULL)
+        return gdt_error_set(err, GDT_EINPUT, 3974,
+                             "%s: the point format byte says LAZ (compressed) but the file has"
+                             " no LASzip VLR (user \"laszip encoded\", record 22204)"
+                             " describing the compression",
+                             src->path);
+    memset(&lp, 0, sizeof lp);
+    lp.fd = im->fd;
+    lp.path = src->path;
+    lp.points_start = h->offset_to_points;
+    lp.region_end = points_end;
+    lp.point_count = h->point_count;
+    lp.point_format = h->format;
+    lp.record_length = h->record_length;
+    /* need 0 is every field; XYZ is always decoded. */
+    lp.need = o->need == 0 ? GDT_LAZ_NEED_ALL
+                           : GDT_LAZ_NEED_XYZ |
+                                 ((o->need & GDT_SRC_NEED_CLASS) ? GDT_LAZ_NEED_CLASS : 0u) |
+                                 ((o->need & GDT_SRC_NEED_FLAGS) ? GDT_LAZ_NEED_FLAGS : 0u);
+    lp.threads = o->threads;
+    lp.piece_bytes = o->buffer_bytes;
+    memcpy(lp.scale, h->scale, sizeof lp.scale);
+    memcpy(lp.offset, h->offset, sizeof lp.offset);
+    memcpy(lp.min, h->min, sizeof lp.min);
+    memcpy(lp.max, h->max, sizeof lp.max);
+    lp.log = o->log;
+    return gdt_laz_stream_open(&im->laz, pl->laszip, pl->laszip_len, &lp, err);
+}
+
+/* The LAZ fields of info, from the stream just opened. */
+static void las_info_laz(gdt_source_info *in, const gdt_laz_stream *laz)
+{
+    gdt_laz_stream_desc d;
+    gdt_laz_stream_describe(laz, &d);
+    snprintf(in->format_name, sizeof in->format_name, "LAZ");
+    in->compressed = 1;
+    snprintf(in->compressor, sizeof in->compressor, "%s", d.compressor);
+    snprintf(in->laz_items, sizeof in->laz_items, "%s", d.items);
+    in->laz_chunk_size = d.chunk_size;
+    in->laz_chunks = d.chunks;
+}
 
 gdt_status gdt_las_open(gdt_source *src, gdt_error *err)
 {
@@ -649,7 +732,11 @@ gdt_status gdt_las_open(gdt_source *src, gdt_error *err)
         }
     }
 
-    {
+    if (h.compressed) {
+        st = las_open_laz(src, im, &h, &pl, points_end, err);
+        if (st != GDT_OK)
+            goto fail;
+    } else {
         uint64_t point_bytes = points_end - h.offset_to_points;
         size_t cap = src->opts.buffer_bytes != 0 ? src->opts.buffer_bytes : (size_t)1 << 20;
         if (point_bytes < cap)
@@ -695,6 +782,8 @@ gdt_status gdt_las_open(gdt_source *src, gdt_error *err)
     in->vlr_count = vlr_count;
     in->evlr_count = evlr_count;
     in->file_size = file_size;
+    if (im->laz != NULL)
+        las_info_laz(in, im->laz);
     src->impl = im;
     src->vt = &las_vtable;
     return GDT_OK;

@@ -16,7 +16,7 @@ set -euo pipefail
 
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 # FUZZ_TARGETS="las pcd" narrows a run to some targets.
-read -r -a TARGETS <<<"${FUZZ_TARGETS:-las pcd plycheck job tri laz}"
+read -r -a TARGETS <<<"${FUZZ_TARGETS:-las pcd plycheck job tri laz lazfile laz14}"
 
 usage() {
   sed -n '5,8p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//' >&2

@@ -1,5 +1,7 @@
 # Fuzz targets (tests/fuzz/): one per reader of untrusted bytes.
 #   fuzz_las       LAS reader (gdt_source.h)
+#   fuzz_lazfile   LAZ files through the LAS reader (gdt_source.h: LASzip
+#                  point data, 0 to 3 decoder threads)
 #   fuzz_pcd       PCD reader (gdt_source.h)
 #   fuzz_plycheck  the PLY checker's reader (gdt_plycheck.h)
 #   fuzz_job       the job-state loader (tiler/private/job.h)
@@ -39,6 +41,8 @@ function(gdt_fuzz_target name)
 endfunction()
 
 gdt_fuzz_target(las SOURCES ${GDT_FUZZ_DIR}/fuzz_source.c DEFINES GDT_FUZZ_FORMAT=1)
+gdt_fuzz_target(lazfile SOURCES ${GDT_FUZZ_DIR}/fuzz_source.c DEFINES GDT_FUZZ_FORMAT=1
+  GDT_FUZZ_LAZ=1)
 gdt_fuzz_target(pcd SOURCES ${GDT_FUZZ_DIR}/fuzz_source.c DEFINES GDT_FUZZ_FORMAT=2)
 gdt_fuzz_target(plycheck SOURCES ${GDT_FUZZ_DIR}/fuzz_plycheck.c)
 gdt_fuzz_target(job SOURCES ${GDT_FUZZ_DIR}/fuzz_job.c)

@@ -14,6 +14,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #ifndef GDT_VERSION
 #define GDT_VERSION "0.0.0"
@@ -438,6 +439,14 @@ gdt_status gdt_cli_check_stop(const gdt_options *opts, const char *where, gdt_er
         return GDT_OK;
     return gdt_error_set(err, GDT_EINTERRUPTED, 1303,
                          "stopped by a signal during %s; nothing was written", where);
+}
+
+int gdt_cli_threads(int k)
+{
+    long n = sysconf(_SC_NPROCESSORS_ONLN);
+    if (k > 0)
+        return k;
+    return n < 1 ? 1 : n > 1024 ? 1024 : (int)n;
 }
 
 int gdt_cli_main_stop(int argc, char **argv, volatile sig_atomic_t *stop)

@@ -38,6 +38,17 @@ static void print_source(FILE *out, size_t i, const char *path, const gdt_source
     if (s->format == GDT_FORMAT_LAS)
         fprintf(out, " (%u bytes/record, %u extra bytes)", s->record_length, s->extra_bytes);
     fputc('\n', out);
+    if (s->compressed) {
+        fprintf(out, "  compression  : LASzip %s: %s\n", s->compressor, s->laz_items);
+        if (s->laz_chunks == 0)
+            fprintf(out, "  chunks       : no chunk table (read in order)");
+        else
+            fprintf(out, "  chunks       : %" PRIu64, s->laz_chunks);
+        if (s->laz_chunk_size != 0)
+            fprintf(out, ", %" PRIu32 " points each\n", s->laz_chunk_size);
+        else
+            fprintf(out, ", of variable size\n");
+    }
     fprintf(out, "  points       : %" PRIu64 "\n", s->point_count);
     if (s->has_bounds)
         fprintf(out, "  bounds       : x [%.17g, %.17g]  y [%.17g, %.17g]  z [%.17g, %.17g]\n",
@@ -235,6 +246,14 @@ static gdt_status write_json(const char *path, gdt_cloud *cloud, const info_stat
         gdt_json_string(&j, "format", si->format_name);
         gdt_json_string(&j, "version", si->version);
         gdt_json_string(&j, "encoding", si->encoding);
+        if (si->compressed) {
+            gdt_json_begin_object(&j, "compression");
+            gdt_json_string(&j, "compressor", si->compressor);
+            gdt_json_string(&j, "items", si->laz_items);
+            gdt_json_uint(&j, "chunk_size", si->laz_chunk_size);
+            gdt_json_uint(&j, "chunks", si->laz_chunks);
+            gdt_json_end_object(&j);
+        }
         gdt_json_uint(&j, "points", si->point_count);
         gdt_json_string(&j, "crs", si->crs_desc != NULL ? si->crs_desc : "");
         gdt_json_int(&j, "epsg", si->epsg);
@@ -305,6 +324,7 @@ gdt_status gdt_cli_info(const gdt_options *opts, gdt_error *err)
     co.quantum = opts->quantum;
     co.filter = &opts->filter;
     co.census = 1;
+    co.threads = gdt_cli_threads(opts->threads);
     st = gdt_cloud_open(&cloud, opts->inputs, opts->ninputs, &co, err);
     if (st != GDT_OK)
         goto fail;

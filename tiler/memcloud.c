@@ -7,6 +7,7 @@
 
 #include "gdt_ply.h"
 #include "private/filter_report.h"
+#include "private/cli_modes.h"
 #include "private/run_stats.h"
 
 #define MC_CHUNK 65536
@@ -60,6 +61,7 @@ gdt_status gdt_memcloud_load(gdt_memcloud *mc, const gdt_options *opts, gdt_log 
     co.log = log;
     co.quantum = opts->quantum;
     co.filter = &opts->filter;
+    co.threads = gdt_cli_threads(opts->threads);
     st = gdt_cloud_open(&mc->cloud, opts->inputs, opts->ninputs, &co, err);
     if (st == GDT_OK)
         st = read_all(mc, mode, err);

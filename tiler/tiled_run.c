@@ -25,6 +25,7 @@
 #include "gdt_seam.h"
 #include "gdt_tiler.h"
 #include "private/filter_report.h"
+#include "private/cli_modes.h"
 #include "private/job.h"
 #include "private/json_out.h"
 #include "private/outpaths.h"
@@ -315,13 +316,7 @@ static gdt_status sort_faces(tr_ctx *c, gdt_mesh *m, size_t nf, uint32_t base,
 }
 
 /* --threads K, 0 = the online cores. */
-static int host_threads(int k)
-{
-    long n = sysconf(_SC_NPROCESSORS_ONLN);
-    if (k > 0)
-        return k;
-    return n < 1 ? 1 : n > 1024 ? 1024 : (int)n;
-}
+static int host_threads(int k) { return gdt_cli_threads(k); }
 
 /* The first half of tile k, on the main thread: loads it and runs the core
  * on its own points into sl (the halo goes beside it). */
@@ -1377,6 +1372,7 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     memset(&co, 0, sizeof co);
     co.log = &c.log;
     co.quantum = opts->quantum;
+    co.threads = host_threads(opts->threads);
     co.replay_dir = c.job; /* LAZ is decoded once, in pass 1 */
     co.filter = &opts->filter;
     st = gdt_cloud_open(&c.cloud, opts->inputs, opts->ninputs, &co, err);

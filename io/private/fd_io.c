@@ -24,3 +24,21 @@ int gdt_fd_write_all(int fd, const void *p, size_t n, int64_t off)
     }
     return 0;
 }
+
+int gdt_fd_pread_all(int fd, void *p, size_t n, uint64_t off, size_t *got)
+{
+    unsigned char *b = p;
+    *got = 0;
+    while (*got < n) {
+        ssize_t k = pread(fd, b + *got, n - *got, (off_t)(off + *got));
+        if (k < 0) {
+            if (errno == EINTR)
+                continue;
+            return errno;
+        }
+        if (k == 0)
+            break;
+        *got += (size_t)k;
+    }
+    return 0;
+}

@@ -1,4 +1,5 @@
-/* Whole-buffer writes to file descriptors, shared by the writers of io/. */
+/* Whole-buffer reads and writes of file descriptors, shared by the readers
+ * and writers of io/. */
 #ifndef GDT_FD_IO_H
 #define GDT_FD_IO_H
 
@@ -10,5 +11,11 @@
  * EINTR are retried.
  * returns: 0, or an errno value (EIO when the system accepts no byte). */
 int gdt_fd_write_all(int fd, const void *p, size_t n, int64_t off);
+
+/* Reads n bytes at byte offset off into p (the file position is left
+ * alone); EINTR and partial reads are retried.  *got is the number of bytes
+ * read: n, or fewer when the file ends first.
+ * returns: 0, or an errno value. */
+int gdt_fd_pread_all(int fd, void *p, size_t n, uint64_t off, size_t *got);
 
 #endif

@@ -121,8 +121,10 @@ enum {
     GDT_LAZ_NEED_XYZ = 1u << 0,     /* X, Y, Z (and, layered, the return layer XY needs) */
     GDT_LAZ_NEED_CLASS = 1u << 1,   /* classification */
     GDT_LAZ_NEED_FLAGS = 1u << 2,   /* return number, number of returns, class flags */
-    GDT_LAZ_NEED_ALL = 0xFFFFFFFFu  /* every byte of every record (tests, oracles) */
 };
+/* every byte of every record (tests, oracles); a macro, as an enum constant
+ * must fit an int */
+#define GDT_LAZ_NEED_ALL 0xFFFFFFFFu
 
 typedef struct gdt_laz_chunk gdt_laz_chunk;
 

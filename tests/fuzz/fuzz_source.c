@@ -1,5 +1,11 @@
 /* Fuzz target of the streaming point sources (gdt_source.h): the LAS reader
- * (built with GDT_FUZZ_FORMAT=1) or the PCD reader (GDT_FUZZ_FORMAT=2).
+ * (built with GDT_FUZZ_FORMAT=1) or the PCD reader (GDT_FUZZ_FORMAT=2);
+ * with GDT_FUZZ_FORMAT=1 and GDT_FUZZ_LAZ=1 (fuzz_lazfile), whole LAZ files
+ * through the LAS reader and the LAZ stream (LAS files whose
+ * point format byte has the compression bits; the LAS target skips them).
+ * The LAZ target also derives the decoder thread count (0 to 3) and the
+ * fields needed from the input, so the workers and the selective decoding
+ * are exercised too.
  *
  * Each input is opened as a file, its header validated, every info field
  * read, and every point streamed to the end or to the first error.  Inputs
@@ -21,6 +27,10 @@
 
 #ifndef GDT_FUZZ_FORMAT
 #error "GDT_FUZZ_FORMAT must be 1 (LAS) or 2 (PCD)"
+#endif
+
+#ifndef GDT_FUZZ_LAZ
+#define GDT_FUZZ_LAZ 0
 #endif
 
 #define FUZZ_MAX_POINTS ((uint64_t)1 << 22)
@@ -63,7 +73,13 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     gdt_error_clear(&err);
     if (gdt_source_sniff(path, &fmt, &err) != GDT_OK || fmt != (gdt_format)GDT_FUZZ_FORMAT)
         return 0;
+    if (GDT_FUZZ_FORMAT == 1 && (size > 104 && (data[104] & 0xc0u) != 0) != GDT_FUZZ_LAZ)
+        return 0; /* LAZ to the LAZ target, the rest to the LAS one */
     memset(&opts, 0, sizeof opts);
+    if (GDT_FUZZ_LAZ) {
+        opts.threads = (int)(size % 4);
+        opts.need = (unsigned)(size / 4 % 8);
+    }
     gdt_log_init(&log, -1); /* warnings counted, not printed */
     opts.log = &log;
     /* 64 .. 4159 bytes: small enough that most inputs need several refills. */

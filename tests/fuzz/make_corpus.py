@@ -4,12 +4,18 @@
   make_corpus.py BUILD OUT [--data DIR]
 
 BUILD is a build folder (its gdt-tile and pcd_write_pcl are used), OUT the
-folder that receives one subfolder per target (las, pcd, plycheck, job, tri, laz),
+folder that receives one subfolder per target (las, pcd, plycheck, job, tri, laz,
+lazfile),
 emptied first.  Seeds, each small enough for the targets' -max_len:
   las       the real samples of DIR (default ../shared/data) up to 16 KiB
             whole, larger ones cut to their first 16 KiB (header, VLRs and
             the first records); generated clouds of every LAS version and
             point format, GeoKeys and WKT CRS records, degenerate clouds
+  lazfile   the real LAZ samples, cut the same way (the chunk table is then
+            gone: the chunks are found in order); laspy (lazrs) LAZ files
+            of the generated clouds of formats 0-3 and 6-8 (layered), in
+            chunks of a few points, LAS 1.2 and 1.4 (with an EVLR after the
+            table)
   pcd       the real PCD samples, cut the same way; PCL-written clouds in
             ascii, binary and binary_compressed with several field types,
             extra fields and invalid (NaN) points
@@ -34,6 +40,7 @@ import tempfile
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 SCRIPTS = ROOT / "scripts"
+sys.path.insert(0, str(ROOT / "tests" / "python"))
 CUT = 16384  # bytes of a real sample kept as a seed (the targets' -max_len)
 
 
@@ -82,6 +89,29 @@ def las_seeds(out, data, tmp):
         gen_degenerate(out / f"deg_{kind}.las", kind, 50, "las")
 
 
+def lazfile_seeds(out, data, tmp):
+    import laspy
+    from laspy.vlrs.vlrlist import VLRList
+
+    import laz_util
+
+    for f in sorted(data.glob("*.laz")):
+        copy_cut(f, out / f"real_{f.stem}.laz")
+    runs = [("v12_pf0", 60, 7, "1.2", 0), ("v12_pf1", 50, 16, "1.2", 1),
+            ("v12_pf2", 40, 13, "1.2", 2), ("v12_pf3", 80, 20, "1.2", 3),
+            ("v14_pf1", 45, 10, "1.4", 1), ("v14_pf3", 70, 25, "1.4", 3),
+            ("v14_pf6", 60, 15, "1.4", 6), ("v14_pf7", 40, 12, "1.4", 7),
+            ("v14_pf8", 35, 9, "1.4", 8)]
+    for name, n, chunk, version, fmt in runs:
+        las = tmp / f"laz_{name}.las"
+        gen_cloud(las, n, "--seed", len(name) + fmt, "--las-version", version,
+                  "--point-format", fmt, "--kind", "lidar")
+        cloud = laspy.read(str(las))
+        if version == "1.4":
+            cloud.evlrs = VLRList([laspy.VLR("gdt_test", 7, "opaque", b"evlr" * 8)])
+        laz_util.write_laz(cloud, out / f"gen_{name}.laz", chunk)
+
+
 def laz_seeds(out, data):
     """fuzz_laz inputs: 4 framing bytes, then a chunk's first bytes."""
     # one point of format 0: its raw record and the coder's 4 bytes
@@ -100,6 +130,12 @@ def laz_seeds(out, data):
         chunk = b[offset + 8:offset + 8 + CUT - 4]
         (out / f"real_{f.stem}.bin").write_bytes(frame + chunk)
         (out / f"cut_{f.stem}.bin").write_bytes(frame + chunk[:len(chunk) // 3])
+
+
+def laz14_seeds(out):
+    """fuzz_laz14 inputs: the hand-made layered chunks kept for its replay."""
+    for f in sorted((ROOT / "tests" / "fuzz" / "regress" / "laz14").iterdir()):
+        shutil.copyfile(f, out / f.name)
 
 
 def pcd_seeds(out, build, data):
@@ -167,7 +203,7 @@ def main(argv=None):
     ap.add_argument("--data", type=pathlib.Path, default=ROOT.parent / "shared" / "data")
     a = ap.parse_args(argv)
     build = a.build.resolve()
-    dirs = {t: a.out / t for t in ("las", "pcd", "plycheck", "job", "tri", "laz")}
+    dirs = {t: a.out / t for t in ("las", "pcd", "plycheck", "job", "tri", "laz", "lazfile", "laz14")}
     for d in dirs.values():
         shutil.rmtree(d, ignore_errors=True)
         d.mkdir(parents=True)
@@ -176,9 +212,11 @@ def main(argv=None):
     with tempfile.TemporaryDirectory(prefix="gdt-corpus-") as t:
         tmp = pathlib.Path(t)
         las_seeds(dirs["las"], a.data, tmp)
+        lazfile_seeds(dirs["lazfile"], a.data, tmp)
         pcd_seeds(dirs["pcd"], build, a.data)
         ply_and_job_seeds(dirs["plycheck"], dirs["job"], dirs["tri"], build, tmp)
         laz_seeds(dirs["laz"], a.data)
+        laz14_seeds(dirs["laz14"])
     for t, d in dirs.items():
         files = list(d.iterdir())
         print(f"{t}: {len(files)} seeds, largest {max(f.stat().st_size for f in files)} bytes")

@@ -1,10 +1,14 @@
 /* gdt_dump — test tool: streams one input through gdt_source and prints it.
  *
- *   gdt_dump [--buffer-bytes N] [--chunk N] [--info] FILE
+ *   gdt_dump [--buffer-bytes N] [--chunk N] [--threads N] [--need BITS] [--info] FILE
  *
  * Without --info: one line per point, "x y z X Y Z" (%.17g for the doubles,
  * the LAS record integers last; 0 for formats without a lattice).
- * With --info: the validated header as "key=value" lines.
+ * With --info: the validated header as "key=value" lines (LAZ: also the
+ * compressor, items, chunk size and chunk count).  --threads N: decoder
+ * threads of a compressed input (the output must not depend on it).
+ * --need BITS: gdt_source_opts.need (GDT_SRC_NEED_* bits; 0, the default,
+ * is every field).
  * Exit status: the gdt_status of the first failure (3 bad input, 4 I/O, ...).
  */
 #include <inttypes.h>
@@ -39,6 +43,9 @@ static void print_info(const gdt_source_info *in)
     printf("point_format=%u\nrecord_length=%u\nextra_bytes=%u\nvlrs=%u\nevlrs=%u\n",
            in->point_format, in->record_length, in->extra_bytes, in->vlr_count,
            in->evlr_count);
+    if (in->compressed)
+        printf("compressor=%s\nlaz_items=%s\nlaz_chunk_size=%" PRIu32 "\nlaz_chunks=%" PRIu64 "\n",
+               in->compressor, in->laz_items, in->laz_chunk_size, in->laz_chunks);
 }
 
 int main(int argc, char **argv)
@@ -64,17 +71,30 @@ int main(int argc, char **argv)
         } else if (strcmp(argv[i], "--chunk") == 0 && i + 1 < argc) {
             if (parse_size(argv[++i], &chunk) != 0)
                 return GDT_EUSAGE;
+        } else if (strcmp(argv[i], "--threads") == 0 && i + 1 < argc) {
+            size_t t;
+            if (parse_size(argv[++i], &t) != 0 || t > 1024)
+                return GDT_EUSAGE;
+            opts.threads = (int)t;
+        } else if (strcmp(argv[i], "--need") == 0 && i + 1 < argc) {
+            char *end = NULL;
+            unsigned long v = strtoul(argv[++i], &end, 10);
+            if (end == argv[i] || *end != '\0' || v > 0xFFFFu)
+                return GDT_EUSAGE;
+            opts.need = (unsigned)v;
         } else if (strcmp(argv[i], "--info") == 0) {
             info = 1;
         } else if (path == NULL && argv[i][0] != '-') {
             path = argv[i];
         } else {
-            fprintf(stderr, "usage: gdt_dump [--buffer-bytes N] [--chunk N] [--info] FILE\n");
+            fprintf(stderr, "usage: gdt_dump [--buffer-bytes N] [--chunk N] [--threads N] [--need BITS]"
+                            " [--info] FILE\n");
             return GDT_EUSAGE;
         }
     }
     if (path == NULL) {
-        fprintf(stderr, "usage: gdt_dump [--buffer-bytes N] [--chunk N] [--info] FILE\n");
+        fprintf(stderr, "usage: gdt_dump [--buffer-bytes N] [--chunk N] [--threads N] [--need BITS]"
+                        " [--info] FILE\n");
         return GDT_EUSAGE;
     }
     st = gdt_source_open(&src, path, &opts, &err);

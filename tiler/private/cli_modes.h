@@ -17,4 +17,7 @@ gdt_status gdt_cli_reference(const gdt_options *opts, gdt_error *err);
  * that write nothing until their end. */
 gdt_status gdt_cli_check_stop(const gdt_options *opts, const char *where, gdt_error *err);
 
+/* The host threads of --threads K: K, or for 0 the online cores (1..1024). */
+int gdt_cli_threads(int k);
+
 #endif
