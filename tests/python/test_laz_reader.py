@@ -467,3 +467,24 @@ def test_chunks_too_large_for_a_worker_slot(dump, tmp_path):
     want = dump_digest(dump, src)
     for t in (1, 3):
         assert dump_digest(dump, laz, "--threads", t) == want, f"--threads {t}"
+
+
+def test_pass_2_reads_the_records_pass_1_decoded(gdt_bin, runner, data_dir, tmp_path):
+    """A LAZ input is decoded once: pass 2 reads back the records pass 1 kept
+    (an unlinked file in the job directory, so nothing is left behind); the
+    mesh is the LAS one, with a filter too, and LAS inputs are read twice."""
+    laz = sample(data_dir, "autzen_trim.laz")
+    las = sample(data_dir, "autzen_trim.las")
+    note = "reading the points decoded by the first pass"
+    for args in ((), ("--keep-class", "2")):
+        job = tmp_path / f"job{len(args)}"
+        out = tmp_path / f"mixed{len(args)}.ply"
+        r = runner([gdt_bin, laz, las, "--tile", 4096, "-o", out, "-v", "--job", job,
+                    "--keep-job", *args], cwd=tmp_path)
+        assert r.returncode == 0, r.stderr[-3000:]
+        lines = [ln for ln in r.stderr.splitlines() if note in ln]
+        assert len(lines) == 1 and "autzen_trim.laz" in lines[0], r.stderr[-3000:]
+        assert not [p for p in job.rglob("*") if "replay" in p.name], list(job.rglob("*"))
+        ref = tmp_path / f"ref{len(args)}.ply"
+        tile(runner, gdt_bin, [las, las], ref, *args)
+        assert ply_parts(out)[1] == ply_parts(ref)[1], args
