@@ -132,7 +132,10 @@ gdt_status gdt_cli_single_tile(const gdt_options *opts, gdt_error *err)
     st = gdt_memcloud_load(&mc, opts, &log, "--single-tile", err);
     if (st == GDT_OK)
         st = gdt_cli_check_stop(opts, "the reading", err);
-    if (st == GDT_OK && mc.read > (uint64_t)opts->tile * (uint64_t)opts->tile / 2)
+    /* Without a class or return filter the header counts were checked before
+     * (check_one_tile in cli.c); with one, the points kept are checked here. */
+    if (st == GDT_OK && gdt_filter_uses_attributes(&opts->filter) &&
+        mc.read > (uint64_t)opts->tile * (uint64_t)opts->tile / 2)
         st = gdt_error_set(err, GDT_EUSAGE, 2109,
                            "--single-tile: the filter keeps %zu points, more than one tile "
                            "of %d x %d texels takes (%llu); use a larger --tile or the "
