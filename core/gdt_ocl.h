@@ -65,6 +65,13 @@ typedef struct gdt_ocl_opts {
     gdt_log *log;           /* notes (-v) and warnings; may be NULL */
 } gdt_ocl_opts;
 
+/* Points POCL_CACHE_DIR at the kernel cache (above) once per process; later
+ * calls do nothing.  gdt_ocl_create calls it; setenv must not run while
+ * another thread may call getenv (libraries do, e.g. compressors writing
+ * the tile index), so a program that creates contexts on a thread of its
+ * own calls this first, before it starts that thread.  Thread-safe. */
+void gdt_ocl_prepare_env(const char *cache_dir, gdt_log *log);
+
 /* Checks the syntax of a device SPEC (above) without touching OpenCL, so a
  * malformed one is a usage error before any work.  NULL and "" are valid.
  * returns: GDT_OK; GDT_EUSAGE 2110 (malformed). */

@@ -11,6 +11,7 @@
 #include <ctype.h>
 #include <errno.h>
 #include <inttypes.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -181,14 +182,14 @@ static int make_dirs(const char *path)
 /* Points POCL_CACHE_DIR at a project-controlled directory (see gdt_ocl.h).
  * Failure to create the directory is only a warning: PoCL then falls back
  * to compiling without a cache. */
-static void set_pocl_cache(const gdt_ocl_opts *opts)
+static void set_pocl_cache(const char *cache_dir, gdt_log *log)
 {
     char dir[4096];
     const char *xdg, *home;
     int rc;
 
-    if (opts->cache_dir != NULL && opts->cache_dir[0] != '\0') {
-        snprintf(dir, sizeof dir, "%s", opts->cache_dir);
+    if (cache_dir != NULL && cache_dir[0] != '\0') {
+        snprintf(dir, sizeof dir, "%s", cache_dir);
     } else if (getenv("POCL_CACHE_DIR") != NULL) {
         return;
     } else if ((xdg = getenv("XDG_CACHE_HOME")) != NULL && xdg[0] == '/') {
@@ -200,11 +201,24 @@ static void set_pocl_cache(const gdt_ocl_opts *opts)
     }
     rc = make_dirs(dir);
     if (rc != 0) {
-        gdt_log_warn(opts->log, 5150, "cannot create the OpenCL kernel cache directory %s: %s",
+        gdt_log_warn(log, 5150, "cannot create the OpenCL kernel cache directory %s: %s",
                      dir, strerror(rc));
         return;
     }
     setenv("POCL_CACHE_DIR", dir, 1);
+}
+
+void gdt_ocl_prepare_env(const char *cache_dir, gdt_log *log)
+{
+    static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
+    static int done;
+
+    pthread_mutex_lock(&lock);
+    if (!done) {
+        set_pocl_cache(cache_dir, log);
+        done = 1;
+    }
+    pthread_mutex_unlock(&lock);
 }
 
 typedef struct dev_entry {
@@ -462,7 +476,7 @@ gdt_status gdt_ocl_create(gdt_ocl **out, const gdt_ocl_opts *opts, gdt_error *er
         memset(&defaults, 0, sizeof defaults);
         opts = &defaults;
     }
-    set_pocl_cache(opts);
+    gdt_ocl_prepare_env(opts->cache_dir, opts->log);
     st = enumerate(&devs, &n, err);
     if (st != GDT_OK)
         return st;

@@ -20,6 +20,7 @@
 #include "gdt_core.h"
 #include "gdt_grow.h"
 #include "gdt_mesh.h"
+#include "gdt_ocl.h"
 #include "gdt_ply.h"
 #include "gdt_plycheck.h"
 #include "gdt_seam.h"
@@ -1293,6 +1294,9 @@ static void *core_start_main(void *arg)
 static void core_start_begin(core_start *cs)
 {
     gdt_error_clear(&cs->err);
+    /* setenv here, before pass 1 runs beside the thread (getenv in other
+     * threads while setenv runs can crash) */
+    gdt_ocl_prepare_env(cs->opts.cache_dir, cs->opts.log);
     cs->running = pthread_create(&cs->thread, NULL, core_start_main, cs) == 0;
     if (!cs->running)
         core_start_main(cs);
