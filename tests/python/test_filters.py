@@ -215,6 +215,11 @@ def test_info_of_autzen(gdt_bin, data_dir, tmp_path):
            "0 withheld)" in r.stdout.splitlines()
 
 
+# The real samples that are point clouds; the others in the folder are
+# hostile headers with tests of their own (laspy itself would try to
+# allocate what garbage_nVariableLength.las claims).
+REAL_SAMPLES = ["100-points.las", "autzen_trim.las", "autzen_trim.laz", "epsg_4326.las",
+                "gps-time-nan.las", "test_epsg_4326.las"]
 REAL_FILTERS = [["--keep-class", "2"], ["--drop-class", "1,7"], ["--returns", "first"],
                 ["--returns", "last"], ["--returns", "single"], ["--keep-withheld"]]
 
@@ -223,15 +228,14 @@ def test_filter_counts_equal_laspy_on_every_real_file(gdt_bin, data_dir, tmp_pat
     """Every real LAS and LAZ sample laspy reads: --info's class counts and
     the counts of each filter equal laspy's."""
     seen = 0
-    for src in sorted(data_dir.glob("*.la[sz]")):
-        try:
-            _, a = attrs(src)
-        except Exception:  # a sample made to be refused (it has its own tests)
+    for name in REAL_SAMPLES:
+        src = data_dir / name
+        if not src.is_file():
             continue
         js = tmp_path / f"{src.name}.json"
         r = run([gdt_bin, src, "--info", "--json", js])
-        if r.returncode != 0:
-            continue  # refused for another reason (a lying header): not a filter matter
+        assert r.returncode == 0, f"{name}: {r.stderr}"
+        _, a = attrs(src)
         seen += 1
         inp = json.loads(js.read_text())["inputs"][0]
         got = {c["class"]: c["points"] for c in inp["classes"]}
