@@ -70,6 +70,9 @@ typedef struct gdt_laz_vlr {
     gdt_laz_item items[GDT_LAZ_MAX_ITEMS];
 } gdt_laz_vlr;
 
+/* "POINT10", "RGB14", ... for a GDT_LAZ_* item type; NULL when unknown. */
+const char *gdt_laz_item_name(unsigned type);
+
 /* Parses the payload of the 22204 VLR and checks that its items describe
  * records of point_format (0-10) and record_length bytes exactly, that every
  * item type and version is one the decoder knows, and that the compressor

@@ -520,23 +520,6 @@ void gdt_laz_stream_close(gdt_laz_stream *s)
     free(s);
 }
 
-static const char *lz_item_name(unsigned type)
-{
-    switch (type) {
-    case GDT_LAZ_BYTE: return "BYTE";
-    case GDT_LAZ_POINT10: return "POINT10";
-    case GDT_LAZ_GPSTIME11: return "GPSTIME11";
-    case GDT_LAZ_RGB12: return "RGB12";
-    case GDT_LAZ_WAVEPACKET13: return "WAVEPACKET13";
-    case GDT_LAZ_POINT14: return "POINT14";
-    case GDT_LAZ_RGB14: return "RGB14";
-    case GDT_LAZ_RGBNIR14: return "RGBNIR14";
-    case GDT_LAZ_WAVEPACKET14: return "WAVEPACKET14";
-    case GDT_LAZ_BYTE14: return "BYTE14";
-    default: return "unknown";
-    }
-}
-
 void gdt_laz_stream_describe(const gdt_laz_stream *s, gdt_laz_stream_desc *d)
 {
     size_t len = 0;
@@ -553,10 +536,10 @@ void gdt_laz_stream_describe(const gdt_laz_stream *s, gdt_laz_stream_desc *d)
         int k;
         if (it->type == GDT_LAZ_BYTE || it->type == GDT_LAZ_BYTE14)
             k = snprintf(d->items + len, sizeof d->items - len, "%s%s v%u (%u bytes)",
-                         i ? ", " : "", lz_item_name(it->type), it->version, it->size);
+                         i ? ", " : "", (gdt_laz_item_name(it->type) != NULL ? gdt_laz_item_name(it->type) : "unknown"), it->version, it->size);
         else
             k = snprintf(d->items + len, sizeof d->items - len, "%s%s v%u", i ? ", " : "",
-                         lz_item_name(it->type), it->version);
+                         (gdt_laz_item_name(it->type) != NULL ? gdt_laz_item_name(it->type) : "unknown"), it->version);
         if (k < 0)
             break;
         len += (size_t)k;

@@ -19,7 +19,7 @@ static int64_t get_i64(const unsigned char *p)
     return u <= (uint64_t)INT64_MAX ? (int64_t)u : (int64_t)(u - (uint64_t)INT64_MAX - 1) + INT64_MIN;
 }
 
-static const char *item_name(unsigned type)
+const char *gdt_laz_item_name(unsigned type)
 {
     switch (type) {
     case GDT_LAZ_BYTE: return "BYTE";
@@ -142,7 +142,7 @@ gdt_status gdt_laz_vlr_parse(const char *path, const unsigned char *payload, siz
         it->type = gdt_le_get_u16(p);
         it->size = gdt_le_get_u16(p + 2);
         it->version = gdt_le_get_u16(p + 4);
-        name = item_name(it->type);
+        name = gdt_laz_item_name(it->type);
         if (!name)
             return gdt_error_set(err, GDT_EINPUT, 3906, "%s: LASzip item %u has unknown type %u",
                                  path, i, (unsigned)it->type);
@@ -153,7 +153,7 @@ gdt_status gdt_laz_vlr_parse(const char *path, const unsigned char *payload, siz
             return gdt_error_set(err, GDT_EINPUT, 3907,
                                  "%s: LASzip item %u is %s where point format %u has %s", path, i,
                                  name, point_format,
-                                 i > nwant ? "no further item" : item_name(expect));
+                                 i > nwant ? "no further item" : gdt_laz_item_name(expect));
         if (it->type == GDT_LAZ_BYTE || it->type == GDT_LAZ_BYTE14) {
             if (it->size == 0)
                 return gdt_error_set(err, GDT_EINPUT, 3907,
