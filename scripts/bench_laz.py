@@ -122,6 +122,7 @@ def ensure_clouds(work, n, fmt, seed):
     import laspy
     import numpy as np
 
+    work.mkdir(parents=True, exist_ok=True)
     las_p = work / f"laz-bench-{n}-f{fmt}-s{seed}.las"
     laz_p = las_p.with_suffix(".laz")
     if be.las_points(las_p) == n and laz_p.is_file():

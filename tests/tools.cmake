@@ -1,3 +1,7 @@
 # Test tools shared by several Python test files.
 gdt_add_test_exe(gdt_dump ${CMAKE_CURRENT_SOURCE_DIR}/tools/gdt_dump.c)
 gdt_add_test_exe(src_read ${CMAKE_CURRENT_SOURCE_DIR}/tools/src_read.c)
+# LD_PRELOAD shim that makes pthread_create fail after a given number of calls.
+add_library(gdt_fail_threads MODULE ${CMAKE_CURRENT_SOURCE_DIR}/tools/fail_threads.c)
+target_link_libraries(gdt_fail_threads PRIVATE ${CMAKE_DL_LIBS})
+gdt_target_flags(gdt_fail_threads)

@@ -16,6 +16,7 @@
 
 #include "bytes.h"
 #include "laz_arith.h"
+#include "laz_median.h"
 
 /* ---- byte access, wrapping arithmetic, keyed models ---- */
 
@@ -132,70 +133,6 @@ static void models_reset(void *s, const model_spec *spec, unsigned n, int releas
     }
 }
 
-/* The streaming median of the last five values (POINT10 v2). */
-typedef struct median5 {
-    int32_t v[5]; /* sorted */
-    int high;     /* the next insert replaces from the top */
-} median5;
-
-static void median5_init(median5 *m)
-{
-    memset(m->v, 0, sizeof m->v);
-    m->high = 1;
-}
-
-static void median5_add(median5 *m, int32_t x)
-{
-    int32_t *v = m->v;
-    if (m->high) {
-        if (x < v[2]) {
-            v[4] = v[3];
-            v[3] = v[2];
-            if (x < v[0]) {
-                v[2] = v[1];
-                v[1] = v[0];
-                v[0] = x;
-            } else if (x < v[1]) {
-                v[2] = v[1];
-                v[1] = x;
-            } else {
-                v[2] = x;
-            }
-        } else {
-            if (x < v[3]) {
-                v[4] = v[3];
-                v[3] = x;
-            } else {
-                v[4] = x;
-            }
-            m->high = 0;
-        }
-    } else {
-        if (v[2] < x) {
-            v[0] = v[1];
-            v[1] = v[2];
-            if (v[4] < x) {
-                v[2] = v[3];
-                v[3] = v[4];
-                v[4] = x;
-            } else if (v[3] < x) {
-                v[2] = v[3];
-                v[3] = x;
-            } else {
-                v[2] = x;
-            }
-        } else {
-            if (v[1] < x) {
-                v[0] = v[1];
-                v[1] = x;
-            } else {
-                v[0] = x;
-            }
-            m->high = 1;
-        }
-    }
-}
-
 /* Contexts of the return number r and the number of returns n (both 0-7):
  * the regular pairs 1 <= r <= n <= 5 get contexts 0-14, the others share
  * the rest; and the distance |n - r| as the level of a return. */
@@ -248,7 +185,7 @@ typedef struct p10v2 {
     gdt_laz_symmodel angle[2];     /* by scan direction */
     gdt_laz_intdec intensity, psid, dx, dy, z;
     keyed256 flags, cls, user;
-    median5 mx[16], my[16];
+    gdt_laz_median5 mx[16], my[16];
     uint32_t last_intensity[16];
     int32_t last_height[8];
     p10 last;
@@ -262,8 +199,8 @@ static const model_spec P10V2_MODELS[] = {
 static void p10v2_init(p10v2 *s, const unsigned char *raw)
 {
     for (int i = 0; i < 16; i++) {
-        median5_init(&s->mx[i]);
-        median5_init(&s->my[i]);
+        gdt_laz_median5_init(&s->mx[i]);
+        gdt_laz_median5_init(&s->my[i]);
         s->last_intensity[i] = 0;
     }
     memset(s->last_height, 0, sizeof s->last_height);
@@ -303,11 +240,11 @@ static void p10v2_read(p10v2 *s, gdt_laz_dec *d, unsigned char *out, uint64_t ep
 
     diff = gdt_laz_intdec_decode(&s->dx, d, s->mx[m].v[2], n == 1);
     p->x = add32(p->x, diff);
-    median5_add(&s->mx[m], diff);
+    gdt_laz_median5_add(&s->mx[m], diff);
     k = gdt_laz_intdec_k(&s->dx);
     diff = gdt_laz_intdec_decode(&s->dy, d, s->my[m].v[2], (n == 1) + (k < 20 ? k & ~1u : 20));
     p->y = add32(p->y, diff);
-    median5_add(&s->my[m], diff);
+    gdt_laz_median5_add(&s->my[m], diff);
     k = (gdt_laz_intdec_k(&s->dx) + gdt_laz_intdec_k(&s->dy)) / 2;
     p->z = gdt_laz_intdec_decode(&s->z, d, s->last_height[l], (n == 1) + (k < 18 ? k & ~1u : 18));
     s->last_height[l] = p->z;

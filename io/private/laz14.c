@@ -27,6 +27,7 @@
 
 #include "bytes.h"
 #include "laz_arith.h"
+#include "laz_median.h"
 
 #define NCTX 4 /* scanner channels */
 
@@ -71,11 +72,6 @@ typedef struct lazy_model {
     uint64_t stamp;
 } lazy_model;
 
-typedef struct median5 {
-    int32_t v[5];
-    int high;
-} median5;
-
 /* POINT14 values as the stream predicts them. */
 typedef struct p14_point {
     uint32_t x, y, z;
@@ -92,7 +88,7 @@ typedef struct p14_ctx {
     gdt_laz_symmodel changed[8], channel, ret_gps_same;
     lazy_model nret[16], ret[16];
     gdt_laz_intdec dx, dy, z;
-    median5 mx[12], my[12];
+    gdt_laz_median5 mx[12], my[12];
     int32_t last_z[8];
     lazy_model cls[64], flags[64], user[64];
     gdt_laz_intdec intensity, scan_angle, point_source, gps;
@@ -169,67 +165,6 @@ static gdt_status oom(gdt_error *err)
 }
 
 /* ---- small pieces ---------------------------------------------------- */
-
-static void median5_init(median5 *m)
-{
-    memset(m->v, 0, sizeof m->v);
-    m->high = 1;
-}
-
-/* Keeps the five values sorted, dropping the oldest extreme: the encoder's
- * running median of five. */
-static inline void median5_add(median5 *m, int32_t x)
-{
-    int32_t *v = m->v;
-
-    if (m->high) {
-        if (x < v[2]) {
-            v[4] = v[3];
-            v[3] = v[2];
-            if (x < v[0]) {
-                v[2] = v[1];
-                v[1] = v[0];
-                v[0] = x;
-            } else if (x < v[1]) {
-                v[2] = v[1];
-                v[1] = x;
-            } else {
-                v[2] = x;
-            }
-        } else {
-            if (x < v[3]) {
-                v[4] = v[3];
-                v[3] = x;
-            } else {
-                v[4] = x;
-            }
-            m->high = 0;
-        }
-    } else {
-        if (v[2] < x) {
-            v[0] = v[1];
-            v[1] = v[2];
-            if (v[4] < x) {
-                v[2] = v[3];
-                v[3] = v[4];
-                v[4] = x;
-            } else if (v[3] < x) {
-                v[2] = v[3];
-                v[3] = x;
-            } else {
-                v[2] = x;
-            }
-        } else {
-            if (v[1] < x) {
-                v[0] = v[1];
-                v[1] = x;
-            } else {
-                v[0] = x;
-            }
-            m->high = 1;
-        }
-    }
-}
 
 static inline uint32_t clamp_u8(int32_t v)
 {
@@ -392,8 +327,8 @@ static gdt_status p14_ctx_start(gdt_laz14 *z, p14_ctx *c, const p14_point *from,
         }
     }
     for (unsigned i = 0; i < 12; i++) {
-        median5_init(&c->mx[i]);
-        median5_init(&c->my[i]);
+        gdt_laz_median5_init(&c->mx[i]);
+        gdt_laz_median5_init(&c->my[i]);
     }
     for (unsigned i = 0; i < 8; i++) {
         c->last_z[i] = gdt_laz_i32(p.z);
@@ -550,11 +485,11 @@ static gdt_status p14_read(gdt_laz14 *z, unsigned char *r, unsigned *context, gd
         unsigned mi = (mctx << 1) | (unsigned)gps_change;
         diff = gdt_laz_intdec_decode(&c->dx, d, c->mx[mi].v[2], n == 1);
         p->x += (uint32_t)diff;
-        median5_add(&c->mx[mi], diff);
+        gdt_laz_median5_add(&c->mx[mi], diff);
         kb = gdt_laz_intdec_k(&c->dx);
         diff = gdt_laz_intdec_decode(&c->dy, d, c->my[mi].v[2], (n == 1) + even_below(kb, 20));
         p->y += (uint32_t)diff;
-        median5_add(&c->my[mi], diff);
+        gdt_laz_median5_add(&c->my[mi], diff);
     }
     if (z->lon[L_Z]) {
         kb = (gdt_laz_intdec_k(&c->dx) + gdt_laz_intdec_k(&c->dy)) / 2;

@@ -488,3 +488,28 @@ def test_pass_2_reads_the_records_pass_1_decoded(gdt_bin, runner, data_dir, tmp_
         ref = tmp_path / f"ref{len(args)}.ply"
         tile(runner, gdt_bin, [las, las], ref, *args)
         assert ply_parts(out)[1] == ply_parts(ref)[1], args
+
+
+@pytest.mark.parametrize("fmt", [3, 6])
+def test_workers_that_cannot_be_started(dump, runner, tools_dir, tmp_path, fmt):
+    """When the system refuses threads (pthread_create fails with EAGAIN for
+    every worker, or after the first), the chunks are decoded by the
+    workers that did start or by the reading thread: the same points, in
+    the same order, and no hang."""
+    import os
+    shim = tools_dir / "libgdt_fail_threads.so"
+    if not shim.exists():
+        pytest.fail(f"libgdt_fail_threads.so not built at {shim}")
+    src = random_las(tmp_path / "src.las", "1.4", fmt, 20_000, seed=fmt)
+    laz = lu.write_laz(src, tmp_path / "src.laz", 1000)
+    want, _ = dump_text(runner, dump, laz, "--threads", 1)
+    assert_dump_equals_laspy(want, src, f"format {fmt}")
+    for allowed in (0, 1, 2):
+        log = tmp_path / f"refused{allowed}.log"
+        env = dict(os.environ, LD_PRELOAD=str(shim), GDT_TEST_THREADS_ALLOWED=str(allowed),
+                   GDT_TEST_THREADS_LOG=str(log))
+        r = subprocess.run([str(dump), "--threads", "4", str(laz)], capture_output=True,
+                           text=True, timeout=120, env=env)
+        assert r.returncode == 0, f"{allowed} threads allowed: rc={r.returncode}\n{r.stderr}"
+        assert r.stdout == want, f"{allowed} threads allowed: the points differ"
+        assert log.exists(), f"{allowed} threads allowed: no thread was refused (shim not loaded?)"
