@@ -280,6 +280,11 @@ void gdt_merger_destroy(gdt_merger *m);
 gdt_status gdt_merger_round(gdt_merger *m, const gdt_seam *row, int64_t y_next, int last,
                             const uint64_t **faces, size_t *nfaces, gdt_error *err);
 
+/* After a successful gdt_merger_round: the merge-frame coordinates of the
+ * vertices of its *faces, 3 per face in the same order (owned by m, valid
+ * until the next call on m). */
+const gdt_ipt *gdt_merger_face_points(const gdt_merger *m);
+
 /* The counters so far (owned by m). */
 const gdt_merge_stats *gdt_merger_stats(const gdt_merger *m);
 

@@ -24,7 +24,8 @@ typedef enum opt_id {
     OPT_OUTPUT, OPT_TILE, OPT_CELL, OPT_HALO, OPT_JOB, OPT_RESTART, OPT_RESUME, OPT_DEVICE,
     OPT_THREADS, OPT_MEM, OPT_QUANTUM, OPT_DUP, OPT_CHECK, OPT_JSON, OPT_QUIET, OPT_VERBOSE,
     OPT_INFO, OPT_REFERENCE, OPT_SINGLE, OPT_KEEP_JOB, OPT_HELP, OPT_VERSION,
-    OPT_KEEP_CLASS, OPT_DROP_CLASS, OPT_RETURNS, OPT_KEEP_WITHHELD
+    OPT_KEEP_CLASS, OPT_DROP_CLASS, OPT_RETURNS, OPT_KEEP_WITHHELD, OPT_MAX_EDGE,
+    OPT_CONCAVITY
 } opt_id;
 
 /* The option table: every option once, with its argument, default and help. */
@@ -69,7 +70,13 @@ static const opt_spec OPTIONS[] = {
      "single (one-return pulses)"},
     {OPT_KEEP_WITHHELD, "--keep-withheld", NULL, NULL, NULL,
      "keep LAS points flagged withheld (dropped by default: the LAS spec deletes them)"},
-    {OPT_CHECK, "--check", NULL, NULL, NULL, "validate the written mesh exactly"},
+    {OPT_MAX_EDGE, "--max-edge", NULL, "L", NULL,
+     "drop every triangle with an edge longer than L (horizontal, CRS units)"},
+    {OPT_CONCAVITY, "--concavity", NULL, "L", NULL,
+     "drop triangles from the convex hull inwards across edges longer than L, until no "
+     "boundary edge is longer (water, voids and the hull's bridges)"},
+    {OPT_CHECK, "--check", NULL, NULL, NULL,
+     "validate the written mesh exactly (not with --max-edge or --concavity)"},
     {OPT_JSON, "--json", NULL, "FILE", NULL, "write a machine-readable run summary"},
     {OPT_QUIET, "--quiet", "-q", NULL, NULL, "no progress and no warnings on stderr"},
     {OPT_VERBOSE, "--verbose", "-v", NULL, NULL, "more detail (predicate counters, stages)"},
@@ -293,6 +300,10 @@ static gdt_status apply(gdt_options *opts, const opt_spec *o, const char *val, g
         break;
     case OPT_RETURNS: st = gdt_filter_parse_returns(&opts->filter, val, err); break;
     case OPT_KEEP_WITHHELD: opts->filter.keep_withheld = 1; break;
+    case OPT_MAX_EDGE: st = parse_positive_double(o->lng, val, &opts->trim.max_edge, err); break;
+    case OPT_CONCAVITY:
+        st = parse_positive_double(o->lng, val, &opts->trim.concavity, err);
+        break;
     }
     return st;
 }
@@ -425,6 +436,19 @@ static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
     if (opts->single_tile && opts->mode != GDT_MODE_RUN)
         return gdt_error_set(err, GDT_EUSAGE, 2105,
                              "--single-tile only applies to a triangulation run");
+    if (gdt_trim_on(&opts->trim) && opts->mode == GDT_MODE_RESUME)
+        return gdt_error_set(err, GDT_EUSAGE, 2802,
+                             "--resume DIR trims the mesh as its job recorded (no --max-edge "
+                             "or --concavity)");
+    if (gdt_trim_on(&opts->trim) && opts->mode != GDT_MODE_RUN &&
+        opts->mode != GDT_MODE_REFERENCE)
+        return gdt_error_set(err, GDT_EUSAGE, 2801,
+                             "--max-edge and --concavity only apply to a triangulation run");
+    if (gdt_trim_on(&opts->trim) && opts->check)
+        return gdt_error_set(err, GDT_EUSAGE, 2803,
+                             "--check validates a whole triangulation, not a trimmed one: "
+                             "check the untrimmed mesh, and the trimming with "
+                             "scripts/validate_mesh.py TRIMMED.ply --trimmed-from FULL.ply");
     return GDT_OK;
 }
 

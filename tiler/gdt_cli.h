@@ -14,6 +14,7 @@
 #include "gdt_cloud.h"
 #include "gdt_error.h"
 #include "gdt_filter.h"
+#include "gdt_trim.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -49,6 +50,7 @@ typedef struct gdt_options {
     double quantum;          /* --quantum Q (CRS units) */
     gdt_dup_policy dup;      /* --dup */
     gdt_point_filter filter; /* --keep-class, --drop-class, --returns, --keep-withheld */
+    gdt_trim_rule trim;      /* --max-edge, --concavity (0 = off); sx, sy unused here */
     int check;               /* --check */
     const char *json;        /* --json FILE */
     int verbosity;           /* -q = -1, default 0, -v = 1 (-vv = 2) */

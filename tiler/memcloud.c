@@ -7,6 +7,7 @@
 
 #include "gdt_ply.h"
 #include "private/filter_report.h"
+#include "private/trim_report.h"
 #include "private/cli_modes.h"
 #include "private/run_stats.h"
 
@@ -105,8 +106,46 @@ void gdt_memcloud_free(gdt_memcloud *mc)
     memset(mc, 0, sizeof *mc);
 }
 
+/* The trimming of the faces canon (3 nf canonical vertex indices) on the
+ * whole mesh: keep[f] (malloc'd in *keep_out, NULL when no rule is on). */
+static gdt_status trim_faces(const gdt_memcloud *mc, const gdt_options *opts,
+                             const int64_t *canon, size_t nf, uint8_t **keep_out,
+                             gdt_trim_counts *tc, gdt_error *err)
+{
+    const gdt_cloud_info *ci = gdt_cloud_get_info(mc->cloud);
+    gdt_trim_rule r = opts->trim;
+    uint32_t *f;
+    uint8_t *keep;
+    gdt_status st;
+
+    *keep_out = NULL;
+    memset(tc, 0, sizeof *tc);
+    tc->faces = nf;
+    if (!gdt_trim_on(&r))
+        return GDT_OK;
+    r.sx = ci->lattice.sx;
+    r.sy = ci->lattice.sy;
+    f = malloc((3 * nf + 1) * sizeof *f);
+    keep = malloc(nf + 1);
+    if (f == NULL || keep == NULL) {
+        free(f);
+        free(keep);
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    }
+    for (size_t i = 0; i < 3 * nf; i++)
+        f[i] = (uint32_t)canon[i];
+    st = gdt_trim_mesh(&r, f, nf, mc->local, keep, tc, err);
+    free(f);
+    if (st != GDT_OK) {
+        free(keep);
+        return st;
+    }
+    *keep_out = keep;
+    return GDT_OK;
+}
+
 gdt_status gdt_memcloud_write(const gdt_memcloud *mc, const gdt_options *opts,
-                              const gdt_mesh *mesh, gdt_error *err)
+                              const gdt_mesh *mesh, gdt_trim_counts *tc, gdt_error *err)
 {
     const gdt_cloud_info *ci = gdt_cloud_get_info(mc->cloud);
     gdt_ply_writer *w = NULL;
@@ -114,8 +153,9 @@ gdt_status gdt_memcloud_write(const gdt_memcloud *mc, const gdt_options *opts,
     int64_t *canon = malloc((mesh->ntris > 0 ? 3 * mesh->ntris : 1) * sizeof *canon);
     double *xyz = malloc(3 * MC_CHUNK * sizeof *xyz);
     int32_t *tri = malloc(3 * MC_CHUNK * sizeof *tri);
-    char filter[GDT_FILTER_COMMENT_MAX];
-    const char *comments[1] = {filter};
+    char filter[GDT_FILTER_COMMENT_MAX], trim[GDT_TRIM_TEXT_MAX];
+    const char *comments[2] = {filter, trim};
+    uint8_t *keep = NULL;
     gdt_status st;
 
     memset(&meta, 0, sizeof meta);
@@ -123,13 +163,17 @@ gdt_status gdt_memcloud_write(const gdt_memcloud *mc, const gdt_options *opts,
     meta.epsg = ci->epsg;
     meta.crs_wkt = ci->crs_wkt;
     gdt_filter_report_comment(mc->cloud, filter, sizeof filter);
+    gdt_trim_report_comment(&opts->trim, trim, sizeof trim);
     meta.comments = comments;
-    meta.ncomments = 1;
+    meta.ncomments = trim[0] != '\0' ? 2 : 1;
     if (xyz == NULL || tri == NULL || canon == NULL) {
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         goto fail;
     }
-    st = gdt_ply_create(&w, opts->output, &meta, err);
+    gdt_mesh_canonical(mesh, canon);
+    st = trim_faces(mc, opts, canon, mesh->ntris, &keep, tc, err);
+    if (st == GDT_OK)
+        st = gdt_ply_create(&w, opts->output, &meta, err);
     for (size_t i = 0; st == GDT_OK && i < mesh->nverts; i += MC_CHUNK) {
         size_t m = mesh->nverts - i < MC_CHUNK ? mesh->nverts - i : MC_CHUNK;
         for (size_t k = 0; k < m; k++) {
@@ -140,12 +184,16 @@ gdt_status gdt_memcloud_write(const gdt_memcloud *mc, const gdt_options *opts,
         }
         st = gdt_ply_write_vertices(w, xyz, m, err);
     }
-    gdt_mesh_canonical(mesh, canon);
     for (size_t i = 0; st == GDT_OK && i < mesh->ntris; i += MC_CHUNK) {
-        size_t m = mesh->ntris - i < MC_CHUNK ? mesh->ntris - i : MC_CHUNK;
-        for (size_t k = 0; k < 3 * m; k++)
-            tri[k] = (int32_t)canon[3 * i + k];
-        st = gdt_ply_write_faces(w, tri, m, err);
+        size_t m = mesh->ntris - i < MC_CHUNK ? mesh->ntris - i : MC_CHUNK, n = 0;
+        for (size_t k = 0; k < m; k++) {
+            if (keep != NULL && !keep[i + k])
+                continue;
+            for (int q = 0; q < 3; q++)
+                tri[3 * n + q] = (int32_t)canon[3 * (i + k) + q];
+            n++;
+        }
+        st = gdt_ply_write_faces(w, tri, n, err);
     }
     if (st == GDT_OK) {
         st = gdt_ply_finish(w, err);
@@ -153,6 +201,7 @@ gdt_status gdt_memcloud_write(const gdt_memcloud *mc, const gdt_options *opts,
     }
 fail:
     gdt_ply_abort(w);
+    free(keep);
     free(canon);
     free(tri);
     free(xyz);
@@ -161,7 +210,8 @@ fail:
 
 gdt_status gdt_memcloud_finish(const gdt_memcloud *mc, const gdt_options *opts,
                                const gdt_mesh *mesh, gdt_pred_stats *pred, double *t_check,
-                               double *t_write, int *checked, gdt_error *err)
+                               double *t_write, int *checked, gdt_trim_counts *tc,
+                               gdt_error *err)
 {
     double t0 = gdt_now();
     gdt_status st;
@@ -175,13 +225,14 @@ gdt_status gdt_memcloud_finish(const gdt_memcloud *mc, const gdt_options *opts,
         *t_check = gdt_now() - t0;
     }
     t0 = gdt_now();
-    st = gdt_memcloud_write(mc, opts, mesh, err);
+    st = gdt_memcloud_write(mc, opts, mesh, tc, err);
     *t_write = gdt_now() - t0;
     return st;
 }
 
 gdt_status gdt_memcloud_json_head(gdt_json *j, const gdt_memcloud *mc, const gdt_options *opts,
-                                  const char *mode, uint64_t faces, gdt_error *err)
+                                  const char *mode, uint64_t faces, const gdt_trim_counts *tc,
+                                  gdt_error *err)
 {
     const gdt_cloud_info *ci = gdt_cloud_get_info(mc->cloud);
     gdt_status st = gdt_json_open(j, opts->json, err);
@@ -197,5 +248,6 @@ gdt_status gdt_memcloud_json_head(gdt_json *j, const gdt_memcloud *mc, const gdt
     gdt_json_uint(j, "faces", faces);
     gdt_json_string(j, "crs", ci->crs_desc);
     gdt_filter_report_json(j, mc->cloud);
+    gdt_trim_report_json(j, &opts->trim, tc);
     return GDT_OK;
 }

@@ -14,6 +14,7 @@
 #include "private/memcloud.h"
 #include "private/json_out.h"
 #include "private/run_stats.h"
+#include "private/trim_report.h"
 
 #include <inttypes.h>
 #include <stdio.h>
@@ -33,13 +34,14 @@ typedef struct ref_summary {
     double t_read, t_triangulate, t_check, t_write;
     gdt_reference_stats rs;
     int checked;
+    gdt_trim_counts trim;
 } ref_summary;
 
 static gdt_status write_summary(const gdt_options *opts, const gdt_memcloud *mc,
                                 const ref_summary *s, gdt_error *err)
 {
     gdt_json j;
-    gdt_status st = gdt_memcloud_json_head(&j, mc, opts, "reference", s->faces, err);
+    gdt_status st = gdt_memcloud_json_head(&j, mc, opts, "reference", s->faces, &s->trim, err);
     if (st != GDT_OK)
         return st;
     gdt_json_begin_object(&j, "times_s");
@@ -69,7 +71,7 @@ gdt_status gdt_cli_reference(const gdt_options *opts, gdt_error *err)
     gdt_mesh mesh;
     ref_summary s;
     gdt_filter_counts fc;
-    char ftext[160];
+    char ftext[160], ttext[GDT_TRIM_TEXT_MAX];
     double t0;
     gdt_status st;
 
@@ -97,9 +99,10 @@ gdt_status gdt_cli_reference(const gdt_options *opts, gdt_error *err)
         goto fail;
 
     st = gdt_memcloud_finish(&mc, opts, &mesh, &s.rs.pred, &s.t_check, &s.t_write, &s.checked,
-                             err);
+                             &s.trim, err);
     if (st != GDT_OK)
         goto fail;
+    s.faces = s.trim.faces - s.trim.dropped;
 
     if (opts->json != NULL) {
         st = write_summary(opts, &mc, &s, err);
@@ -108,12 +111,13 @@ gdt_status gdt_cli_reference(const gdt_options *opts, gdt_error *err)
     }
     fc = gdt_cloud_total_counts(mc.cloud);
     gdt_filter_counts_text(&opts->filter, &fc, ftext, sizeof ftext);
+    gdt_trim_report_text(&opts->trim, &s.trim, ttext, sizeof ttext);
     if (opts->verbosity >= 0)
         fprintf(stderr,
                 "gdt-tile: %s: %" PRIu64 " points%s, %" PRIu64 " vertices (%" PRIu64
-                " duplicates merged), %" PRIu64 " faces%s\n",
+                " duplicates merged), %" PRIu64 " faces%s%s\n",
                 opts->output, s.points_read, ftext, s.vertices, s.duplicates_merged, s.faces,
-                s.checked ? ", checked exactly" : "");
+                ttext, s.checked ? ", checked exactly" : "");
     gdt_log_note(&log,
                  "predicates: orient2d %" PRIu64 ", incircle %" PRIu64 " (%" PRIu64
                  " exact), tie-breaks %" PRIu64 "; flips %" PRIu64 "; times: read %.3fs, "

@@ -23,6 +23,7 @@
 #include "gdt_predicates.h"
 #include "private/json_out.h"
 #include "private/run_stats.h"
+#include "private/trim_report.h"
 
 typedef struct st_summary {
     uint64_t points_read, vertices, duplicates_merged, faces;
@@ -30,6 +31,7 @@ typedef struct st_summary {
     gdt_core_stats cs;
     gdt_pred_stats pred;
     int checked;
+    gdt_trim_counts trim;
     const char *device;
 } st_summary;
 
@@ -39,7 +41,7 @@ static gdt_status st_write_summary(const gdt_options *opts, const gdt_memcloud *
     const gdt_core_stats *c = &s->cs;
     const gdt_cloud_info *ci = gdt_cloud_get_info(mc->cloud);
     gdt_json j;
-    gdt_status st = gdt_memcloud_json_head(&j, mc, opts, "single-tile", s->faces, err);
+    gdt_status st = gdt_memcloud_json_head(&j, mc, opts, "single-tile", s->faces, &s->trim, err);
     if (st != GDT_OK)
         return st;
     gdt_json_string(&j, "device", s->device);
@@ -115,7 +117,7 @@ gdt_status gdt_cli_single_tile(const gdt_options *opts, gdt_error *err)
     gdt_mesh mesh;
     st_summary s;
     gdt_filter_counts fc;
-    char ftext[160];
+    char ftext[160], ttext[GDT_TRIM_TEXT_MAX];
     unsigned faults = 0;
     double t0;
     gdt_status st;
@@ -176,9 +178,10 @@ gdt_status gdt_cli_single_tile(const gdt_options *opts, gdt_error *err)
         goto fail;
 
     st = gdt_memcloud_finish(&mc, opts, &mesh, &s.pred, &s.t_check, &s.t_write, &s.checked,
-                             err);
+                             &s.trim, err);
     if (st != GDT_OK)
         goto fail;
+    s.faces = s.trim.faces - s.trim.dropped;
 
     if (opts->json != NULL) {
         st = st_write_summary(opts, &mc, &s, err);
@@ -187,11 +190,12 @@ gdt_status gdt_cli_single_tile(const gdt_options *opts, gdt_error *err)
     }
     fc = gdt_cloud_total_counts(mc.cloud);
     gdt_filter_counts_text(&opts->filter, &fc, ftext, sizeof ftext);
+    gdt_trim_report_text(&opts->trim, &s.trim, ttext, sizeof ttext);
     if (opts->verbosity >= 0)
         fprintf(stderr,
                 "gdt-tile: %s: %" PRIu64 " points%s, %" PRIu64 " vertices (%" PRIu64
-                " duplicates merged), %" PRIu64 " faces on %s (%s path)%s\n",
-                opts->output, s.points_read, ftext, s.vertices, s.duplicates_merged, s.faces, s.device,
+                " duplicates merged), %" PRIu64 " faces%s on %s (%s path)%s\n",
+                opts->output, s.points_read, ftext, s.vertices, s.duplicates_merged, s.faces, ttext, s.device,
                 s.cs.path, s.checked ? ", checked exactly" : "");
     gdt_log_note(&log,
                  "tile %dx%d texels of %" PRId64 " lattice steps: %s; phases %.3f %.3f %.3f %.3f "

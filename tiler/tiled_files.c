@@ -47,13 +47,33 @@ tr_tri_verdict tr_tri_check_header(const unsigned char hdr[TR_HEADER], uint64_t 
     /* no overflow in the sum: with 12 nf, 24 nv and 16 ne each at most
      * size, and size at most 2^62, it is at most 64 + 3 size < 2^64 */
     if (size < TR_HEADER || size > UINT64_MAX / 4 || *nf > size / 12 || *nv > size / 24 ||
-        *ne > size / 16 || TR_HEADER + 12 * *nf + 24 * *nv + 16 * *ne != size ||
-        *nv > ex->points)
+        *ne > size / 16 || *nv > ex->points)
+        return TR_TRI_SIZE;
+    if (ex->trim ? TR_HEADER + 12 * *nf + 24 * *nv + 16 * *ne + TT_HEADER > size
+                 : TR_HEADER + 12 * *nf + 24 * *nv + 16 * *ne != size)
         return TR_TRI_SIZE;
     if (ex->job_id != NULL &&
         (tr_get_u64(hdr + 48) != ex->job_id[0] || tr_get_u64(hdr + 56) != ex->job_id[1]))
         return TR_TRI_JOB;
     return TR_TRI_FITS;
+}
+
+int tr_trim_check(const unsigned char th[TT_HEADER], uint64_t at, uint64_t size, uint64_t nf,
+                  tr_trim_counts *tc)
+{
+    uint64_t left;
+    if (at > size || size - at < TT_HEADER || memcmp(th, TT_MAGIC, 8) != 0)
+        return -1;
+    tc->ncut = tr_get_u64(th + 8);
+    tc->ncand = tr_get_u64(th + 16);
+    tc->nopen = tr_get_u64(th + 24);
+    left = size - at - TT_HEADER;
+    /* each count is bounded first, so the sum cannot overflow */
+    if (tc->ncut > nf || tc->ncand > nf || tc->nopen > 3 * nf || tc->ncut > left / 4 ||
+        tc->ncand > left / 8 || tc->nopen > left / 20 ||
+        4 * tc->ncut + 8 * tc->ncand + 20 * tc->nopen != left)
+        return -1;
+    return 0;
 }
 
 gdt_status tr_open_tri(const char *tiles_dir, const gdt_tile_desc *d, FILE **f, uint64_t *size,
@@ -134,6 +154,50 @@ gdt_status tr_tri_read_seam(FILE *f, uint64_t size, const tr_tri_expect *ex, gdt
                                      "%s: barrier edge %" PRIu64 " names another tile's vertex",
                                      path, done + i);
             s->ne++;
+        }
+        done += m;
+    }
+    return GDT_OK;
+}
+
+gdt_status tr_tri_read_open(FILE *f, uint64_t size, const tr_tri_expect *ex,
+                            gdt_trim_open **open, size_t *nopen, size_t *cap_open,
+                            unsigned char *scratch, const char *path, gdt_error *err)
+{
+    unsigned char hdr[TR_HEADER], th[TT_HEADER];
+    uint64_t nf, nv, ne, at, lo = ex->base, hi = ex->base + ex->points;
+    tr_trim_counts tc;
+
+    *nopen = 0;
+    if (fseeko(f, 0, SEEK_SET) != 0 || fread(hdr, 1, TR_HEADER, f) != TR_HEADER)
+        return gdt_error_set(err, GDT_EIO, 4805, "%s: read failed", path);
+    if (tr_tri_check_header(hdr, size, ex, &nf, &nv, &ne) != TR_TRI_FITS)
+        return gdt_error_set(err, GDT_EJOB, 6801, "%s: not the tile file this run wrote", path);
+    at = TR_HEADER + 12 * nf + 24 * nv + 16 * ne;
+    if (fseeko(f, (off_t)at, SEEK_SET) != 0 || fread(th, 1, TT_HEADER, f) != TT_HEADER)
+        return gdt_error_set(err, GDT_EIO, 4805, "%s: read failed", path);
+    if (tr_trim_check(th, at, size, nf, &tc) != 0)
+        return gdt_error_set(err, GDT_EJOB, 6802, "%s: its trim section does not fit the file",
+                             path);
+    if (fseeko(f, (off_t)(at + TT_HEADER + 4 * tc.ncut + 8 * tc.ncand), SEEK_SET) != 0)
+        return gdt_error_set(err, GDT_EIO, 4805, "%s: cannot seek: %s", path, strerror(errno));
+    if (tc.nopen > SIZE_MAX || gdt_grow(open, cap_open, (size_t)tc.nopen, sizeof **open, 256) != 0)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    for (uint64_t done = 0; done < tc.nopen;) {
+        size_t m = tc.nopen - done < TR_CHUNK ? (size_t)(tc.nopen - done) : TR_CHUNK;
+        if (fread(scratch, 20, m, f) != m)
+            return gdt_error_set(err, GDT_EIO, 4805, "%s: read failed", path);
+        for (size_t i = 0; i < m; i++) {
+            gdt_trim_open *e = &(*open)[*nopen];
+            e->a = tr_get_u64(scratch + 20 * i);
+            e->b = tr_get_u64(scratch + 20 * i + 8);
+            e->label = tr_get_u32(scratch + 20 * i + 16);
+            if (e->a < lo || e->b >= hi || e->a >= e->b || e->label >= nf)
+                return gdt_error_set(err, GDT_EJOB, 6802,
+                                     "%s: open edge %" PRIu64 " of its trim section is not "
+                                     "an edge of the tile",
+                                     path, done + i);
+            (*nopen)++;
         }
         done += m;
     }

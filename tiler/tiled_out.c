@@ -1,6 +1,7 @@
 /* tiled_out.c — the PLY of a tiled run, written beside the tile stage (see
  * private/tiled_out.h). */
 #include "private/tiled_out.h"
+#include "gdt_grow.h"
 #include "private/tiled_files.h"
 #include "private/tiler_io.h"
 
@@ -25,12 +26,18 @@ struct tr_out {
     pthread_cond_t cv;
     uint64_t ready;       /* tiles with their .tri file */
     int quit;             /* the caller gives up: stop at the next tile */
+    const gdt_trim_graph *tg; /* set once, after the merge (src.trim) */
+    gdt_trim_counts tc;   /* the tiles' faces and drops so far (src.trim) */
+    uint32_t *cut;        /* the current tile's trim section: cut faces */
+    uint32_t *cand;       /* candidates (face, label) */
+    size_t cap_cut, cap_cand;
     gdt_status st;
     gdt_error err;
     double *xyz;          /* 3 TR_CHUNK */
     gdt_point *pts;       /* TR_CHUNK */
     int32_t *tri;         /* 3 TR_CHUNK */
     unsigned char *raw;   /* 12 TR_CHUNK */
+    uint8_t *drop;        /* TR_CHUNK marks: faces trimmed */
 };
 
 static int stopped(const tr_out *o)
@@ -39,12 +46,78 @@ static int stopped(const tr_out *o)
 }
 
 /* Converts m face records (3 x u32 output indices, little-endian) from
- * o->raw and appends them to the PLY. */
-static gdt_status put_face_records(tr_out *o, size_t m, gdt_error *err)
+ * o->raw and appends them to the PLY, less those drop marks (drop may be
+ * NULL: none). */
+static gdt_status put_face_records(tr_out *o, size_t m, const uint8_t *drop, gdt_error *err)
 {
-    for (size_t i = 0; i < 3 * m; i++)
-        o->tri[i] = (int32_t)tr_get_u32(o->raw + 4 * i);
-    return gdt_ply_write_faces(o->w, o->tri, m, err);
+    size_t n = 0;
+    for (size_t f = 0; f < m; f++) {
+        if (drop != NULL && drop[f])
+            continue;
+        for (int q = 0; q < 3; q++)
+            o->tri[3 * n + q] = (int32_t)tr_get_u32(o->raw + 4 * (3 * f + q));
+        n++;
+    }
+    return gdt_ply_write_faces(o->w, o->tri, n, err);
+}
+
+/* The trim section of tile k's .tri file at path (nf faces, section at
+ * offset at): its cut faces and candidates into o->cut and o->cand,
+ * checked (strictly increasing faces below nf, labels below nf); counts
+ * into *tc. */
+static gdt_status read_trim(tr_out *o, const char *path, uint64_t at, uint64_t nf,
+                            tr_trim_counts *tc, gdt_error *err)
+{
+    unsigned char th[TT_HEADER];
+    struct stat sb;
+    FILE *f = fopen(path, "rb");
+    gdt_status st = GDT_OK;
+    size_t got = 0;
+
+    if (f == NULL || fstat(fileno(f), &sb) != 0 || fseeko(f, (off_t)at, SEEK_SET) != 0 ||
+        (got = fread(th, 1, TT_HEADER, f)) != TT_HEADER) {
+        st = got != 0 || f == NULL
+                 ? gdt_error_set(err, GDT_EIO, 4805, "%s: cannot read: %s", path,
+                                 strerror(errno))
+                 : gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
+        goto done;
+    }
+    if (tr_trim_check(th, at, (uint64_t)sb.st_size, nf, tc) != 0) {
+        st = gdt_error_set(err, GDT_EJOB, 6802, "%s: its trim section does not fit the file",
+                           path);
+        goto done;
+    }
+    if (gdt_grow(&o->cut, &o->cap_cut, (size_t)tc->ncut + 1, sizeof *o->cut, 256) != 0 ||
+        gdt_grow(&o->cand, &o->cap_cand, 2 * (size_t)tc->ncand + 2, sizeof *o->cand, 256) != 0) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        goto done;
+    }
+    for (uint64_t i = 0; i < tc->ncut + 2 * tc->ncand; i++) {
+        unsigned char b[4];
+        uint32_t v;
+        int bad;
+        if (fread(b, 1, 4, f) != 4) {
+            st = gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
+            goto done;
+        }
+        v = tr_get_u32(b);
+        if (i < tc->ncut) {
+            o->cut[i] = v;
+            bad = v >= nf || (i > 0 && v <= o->cut[i - 1]);
+        } else {
+            uint64_t j = i - tc->ncut;
+            o->cand[j] = v;
+            bad = v >= nf || (j % 2 == 0 && j > 0 && v <= o->cand[j - 2]);
+        }
+        if (bad) {
+            st = gdt_error_set(err, GDT_EJOB, 6802, "%s: its trim section is damaged", path);
+            goto done;
+        }
+    }
+done:
+    if (f != NULL)
+        fclose(f);
+    return st;
 }
 
 /* Copies nf face records from the current position of f to the PLY,
@@ -57,7 +130,10 @@ static gdt_status copy_face_records(tr_out *o, FILE *f, const char *path, uint64
         gdt_status st;
         if (fread(o->raw, 12, m, f) != m)
             return gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
-        st = put_face_records(o, m, err);
+        if (o->tg != NULL)
+            for (size_t i = 0; i < m; i++)
+                o->drop[i] = (uint8_t)gdt_trim_graph_face_dropped(o->tg, done + i);
+        st = put_face_records(o, m, o->tg != NULL ? o->drop : NULL, err);
         if (st != GDT_OK)
             return st;
         done += m;
@@ -74,7 +150,8 @@ static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
     char *path = NULL;
     tr_dread r;
     size_t got = 0;
-    uint64_t nf;
+    uint64_t nf, ic = 0, ia = 0;
+    tr_trim_counts tc = {0, 0, 0};
     gdt_status st = gdt_tiler_tile_info(o->src.tiler, k, &d, err);
 
     memset(&r, 0, sizeof r);
@@ -90,15 +167,37 @@ static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
                          tr_get_u64(hdr + 16) != d.points))
         st = gdt_error_set(err, GDT_EJOB, 6801, "%s: not the tile file this run wrote", path);
     nf = st == GDT_OK ? tr_get_u64(hdr + 24) : 0;
+    if (st == GDT_OK && o->src.trim)
+        st = read_trim(o, path,
+                       TR_HEADER + 12 * nf + 24 * tr_get_u64(hdr + 32) + 16 * tr_get_u64(hdr + 40),
+                       nf, &tc, err);
     for (uint64_t done = 0; st == GDT_OK && done < nf;) {
         size_t m = nf - done < TR_CHUNK ? (size_t)(nf - done) : TR_CHUNK;
         st = tr_dread_bytes(&r, o->raw, 12 * m, &got, err);
         if (st == GDT_OK && got != 12 * m)
             st = gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
+        if (st == GDT_OK && o->src.trim) {
+            /* cut and candidates are by increasing face: two cursors */
+            memset(o->drop, 0, m);
+            for (; ic < tc.ncut && o->cut[ic] < done + m; ic++) {
+                o->drop[o->cut[ic] - done] = 1;
+                o->tc.cut++;
+            }
+            for (; ia < tc.ncand && o->cand[2 * ia] < done + m; ia++) {
+                if (o->tg == NULL || !gdt_trim_graph_tile_dropped(o->tg, k, o->cand[2 * ia + 1]))
+                    continue;
+                o->tc.peeled++;
+                o->drop[o->cand[2 * ia] - done] = 1;
+            }
+            for (size_t i = 0; i < m; i++)
+                o->tc.dropped += o->drop[i];
+        }
         if (st == GDT_OK)
-            st = put_face_records(o, m, err);
+            st = put_face_records(o, m, o->src.trim ? o->drop : NULL, err);
         done += m;
     }
+    if (st == GDT_OK)
+        o->tc.faces += nf;
     tr_dread_close(&r);
     free(path);
     return st;
@@ -216,6 +315,19 @@ static int wait_ready(tr_out *o, uint64_t k)
     return go;
 }
 
+/* Waits until the trim graph is set (tr_out_set_trim); 0 when the caller
+ * gives up. */
+static int wait_trim(tr_out *o)
+{
+    int go;
+    pthread_mutex_lock(&o->mu);
+    while (o->tg == NULL && !o->quit)
+        pthread_cond_wait(&o->cv, &o->mu);
+    go = !o->quit;
+    pthread_mutex_unlock(&o->mu);
+    return go;
+}
+
 /* 1 when the caller gave up (tr_out_abort). */
 static int quitting(tr_out *o)
 {
@@ -234,6 +346,8 @@ static gdt_status write_tiles(tr_out *o, gdt_error *err)
     for (uint64_t k = 0; st == GDT_OK && k < n; k++)
         st = stopped(o) || quitting(o) ? tr_interrupted(o->src.job, "the output", err)
                                        : write_vertices(o, k, err);
+    if (st == GDT_OK && o->src.concavity && (!wait_trim(o) || stopped(o)))
+        st = tr_interrupted(o->src.job, "the output", err);
     for (uint64_t k = 0; st == GDT_OK && k < n; k++) {
         if (!wait_ready(o, k) || stopped(o))
             st = tr_interrupted(o->src.job, "the output", err);
@@ -264,6 +378,9 @@ static void out_free(tr_out *o)
     free(o->pts);
     free(o->tri);
     free(o->raw);
+    free(o->drop);
+    free(o->cut);
+    free(o->cand);
     free(o);
 }
 
@@ -280,7 +397,9 @@ gdt_status tr_out_start(tr_out **out, const tr_out_src *src, gdt_error *err)
     o->pts = malloc(TR_CHUNK * sizeof *o->pts);
     o->tri = malloc(3 * TR_CHUNK * sizeof *o->tri);
     o->raw = malloc(12 * TR_CHUNK);
-    if (o->xyz == NULL || o->pts == NULL || o->tri == NULL || o->raw == NULL) {
+    o->drop = malloc(TR_CHUNK);
+    if (o->xyz == NULL || o->pts == NULL || o->tri == NULL || o->raw == NULL ||
+        o->drop == NULL) {
         out_free(o);
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     }
@@ -300,6 +419,14 @@ void tr_out_ready(tr_out *o, uint64_t n)
     pthread_mutex_unlock(&o->mu);
 }
 
+void tr_out_set_trim(tr_out *o, const gdt_trim_graph *g)
+{
+    pthread_mutex_lock(&o->mu);
+    o->tg = g;
+    pthread_cond_signal(&o->cv);
+    pthread_mutex_unlock(&o->mu);
+}
+
 /* Joins the writer (asking it to stop first if quit). */
 static void out_join(tr_out *o, int quit)
 {
@@ -316,7 +443,7 @@ static void out_join(tr_out *o, int quit)
 }
 
 gdt_status tr_out_finish(tr_out *o, const char *merge_path, uint64_t merge_faces,
-                         gdt_error *err)
+                         gdt_trim_counts *tc, gdt_error *err)
 {
     gdt_status st;
     tr_out_ready(o, o->src.ntiles);
@@ -334,6 +461,14 @@ gdt_status tr_out_finish(tr_out *o, const char *merge_path, uint64_t merge_faces
     if (st == GDT_OK) {
         st = gdt_ply_finish(o->w, err);
         o->w = NULL;
+    }
+    *tc = o->tc;
+    if (o->tg != NULL) {
+        gdt_trim_counts m = gdt_trim_graph_merge_counts(o->tg);
+        tc->faces += m.faces;
+        tc->cut += m.cut;
+        tc->peeled += m.peeled;
+        tc->dropped += m.dropped;
     }
     out_free(o);
     return st;

@@ -6,6 +6,7 @@
 #include <errno.h>
 #include <fcntl.h>
 #include <inttypes.h>
+#include <math.h>
 #include <pthread.h>
 #include <signal.h>
 #include <stdarg.h>
@@ -34,6 +35,7 @@
 #include "private/run_stats.h"
 #include "private/tiled_files.h"
 #include "private/tiled_out.h"
+#include "private/trim_report.h"
 #include "private/tiler_io.h"
 
 typedef struct tr_summary {
@@ -46,6 +48,7 @@ typedef struct tr_summary {
     char device[256];
     int resumed, pass2_reused;
     uint64_t tiles_reused, tiles_redone;
+    gdt_trim_counts trim; /* faces before trimming and the drops (with a rule on) */
 } tr_summary;
 
 /* A finished tile file waiting for its journal record. */
@@ -70,9 +73,9 @@ typedef struct tr_ctx tr_ctx;
 /* The post stage of a tile (certification, seam, sorted faces, .tri file,
  * pending record) runs on its own thread while the main thread loads the
  * next tile and runs the core on it.  While it runs it alone touches cert,
- * count, fbuf, seam, seam_total, pending/npending/nsynced, t_flushed and s.cert,
- * s.certified, s.t_certify, s.t_post; the main thread reads them only after
- * post_join. */
+ * count, fbuf, seam, seam_total, pending/npending/nsynced, t_flushed, ttile and
+ * s.cert, s.certified, s.t_certify, s.t_post; the main thread reads them only
+ * after post_join. */
 typedef struct tr_post {
     pthread_t tid;
     int running;        /* a thread was started and not yet joined */
@@ -117,6 +120,11 @@ struct tr_ctx {
     unsigned char *fbuf; /* the .tri file image */
     size_t cap_fbuf;
     gdt_seam seam;      /* one tile's seam (tile stage), one row's (merge) */
+    gdt_trim_rule trim; /* --max-edge, --concavity with the lattice steps */
+    gdt_trim_tile ttile; /* one tile's trim section (post stage) */
+    gdt_trim_graph *tgraph; /* the run's long edges (merge), with a rule on */
+    gdt_trim_open *topen; /* one tile's open edges (merge) */
+    size_t ntopen, cap_topen;
     uint64_t seam_total; /* seam vertices of all tiles (merge progress) */
     gdt_job *jobdb;
     uint64_t job_id[2];   /* seeds every checksum the journal records */
@@ -250,9 +258,10 @@ fail:
  * The mesh's triangle array is the sort's scratch: the certified faces are
  * compacted into its front, rotated (face k is written after triangle t >= k
  * is read), so the slot's triangles are consumed.  The 3 * nf sorted values
- * go to out as little-endian 32-bit words (the .tri file image). */
-static gdt_status sort_faces(tr_ctx *c, gdt_mesh *m, size_t nf, uint32_t base,
-                             unsigned char *out, gdt_error *err)
+ * go to out as the tile's vertex indices in host order; faces_to_output
+ * makes them the .tri file image. */
+static gdt_status sort_faces(tr_ctx *c, gdt_mesh *m, size_t nf, unsigned char *out,
+                             gdt_error *err)
 {
     size_t nv = m->nverts, k = 0;
     uint32_t *tmp = (uint32_t *)(void *)m->tri, *sorted = (uint32_t *)(void *)out;
@@ -304,16 +313,73 @@ static gdt_status sort_faces(tr_ctx *c, gdt_mesh *m, size_t nf, uint32_t base,
             memcpy(&sorted[3 * b], f, sizeof f);
         }
     }
-    /* to output indices, little-endian in place (a plain vector add on a
-     * little-endian host) */
+    return GDT_OK;
+}
+
+/* The nf sorted faces at out (tile vertex indices) to output indices,
+ * little-endian in place (a plain vector add on a little-endian host). */
+static void faces_to_output(unsigned char *out, size_t nf, uint32_t base)
+{
+    uint32_t *f = (uint32_t *)(void *)out;
     for (size_t i = 0; i < 3 * nf; i++) {
-        uint32_t v = sorted[i] + base;
+        uint32_t v = f[i] + base;
 #if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
         v = __builtin_bswap32(v);
 #endif
-        sorted[i] = v;
+        f[i] = v;
     }
-    return GDT_OK;
+}
+
+/* reserve_blocks that keeps the first keep bytes. */
+static int reserve_blocks_keep(unsigned char **p, size_t *cap, size_t need, size_t keep)
+{
+    void *q;
+    if (need <= *cap)
+        return 0;
+    if (posix_memalign(&q, GDT_DIO_BLOCK, need) != 0)
+        return -1;
+    memcpy(q, *p, keep);
+    free(*p);
+    *p = q;
+    *cap = need;
+    return 0;
+}
+
+/* The trim section of the tile whose faces (sorted, tile vertex indices)
+ * are at c->fbuf + TR_HEADER: computed into c->ttile; *bytes its size in
+ * the file. */
+static gdt_status trim_tile(tr_ctx *c, const gdt_mesh *m, size_t nf, uint64_t base,
+                            size_t *bytes, gdt_error *err)
+{
+    const uint32_t *f = (const uint32_t *)(const void *)(c->fbuf + TR_HEADER);
+    gdt_status st;
+    *bytes = 0;
+    if (!gdt_trim_on(&c->trim))
+        return GDT_OK;
+    st = gdt_trim_tile_run(&c->ttile, &c->trim, f, nf, m->pts, base, err);
+    if (st == GDT_OK)
+        *bytes = TT_HEADER + 4 * c->ttile.ncut + 8 * c->ttile.ncand + 20 * c->ttile.nopen;
+    return st;
+}
+
+/* Writes c->ttile as the trim section at p. */
+static void put_trim(const tr_ctx *c, unsigned char *p)
+{
+    const gdt_trim_tile *t = &c->ttile;
+    memcpy(p, TT_MAGIC, 8);
+    tr_put_u64(p + 8, t->ncut);
+    tr_put_u64(p + 16, t->ncand);
+    tr_put_u64(p + 24, t->nopen);
+    p += TT_HEADER;
+    for (size_t i = 0; i < t->ncut; i++, p += 4)
+        tr_put_u32(p, t->cut[i]);
+    for (size_t i = 0; i < 2 * t->ncand; i++, p += 4)
+        tr_put_u32(p, t->cand[i]);
+    for (size_t i = 0; i < t->nopen; i++, p += 20) {
+        tr_put_u64(p, t->open[i].a);
+        tr_put_u64(p + 8, t->open[i].b);
+        tr_put_u32(p + 16, t->open[i].label);
+    }
 }
 
 /* --threads K, 0 = the online cores. */
@@ -401,7 +467,7 @@ static gdt_status post_tile_run(tr_ctx *c, tr_slot *sl, gdt_error *err)
     const gdt_mesh *m = &sl->mesh;
     uint64_t k = sl->k;
     gdt_cert_region r;
-    size_t nf, len;
+    size_t nf, len, tbytes = 0;
     int64_t h = pl->halo * pl->cell;
     char *path = NULL;
     unsigned char *p;
@@ -441,9 +507,14 @@ static gdt_status post_tile_run(tr_ctx *c, tr_slot *sl, gdt_error *err)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     /* the sorted faces go straight into the file image (64-byte aligned
      * offset); the slot's triangles are not needed after this */
-    st = sort_faces(c, &sl->mesh, nf, (uint32_t)c->base[k], c->fbuf + TR_HEADER, err);
+    st = sort_faces(c, &sl->mesh, nf, c->fbuf + TR_HEADER, err);
+    if (st == GDT_OK)
+        st = trim_tile(c, m, nf, c->base[k], &tbytes, err);
     if (st != GDT_OK)
         return st;
+    faces_to_output(c->fbuf + TR_HEADER, nf, (uint32_t)c->base[k]);
+    if (reserve_blocks_keep(&c->fbuf, &c->cap_fbuf, len + tbytes, TR_HEADER + 12 * nf) != 0)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     c->s.certified += nf;
 
     p = c->fbuf;
@@ -466,6 +537,9 @@ static gdt_status post_tile_run(tr_ctx *c, tr_slot *sl, gdt_error *err)
         tr_put_u64(p, c->seam.e[i].a);
         tr_put_u64(p + 8, c->seam.e[i].b);
     }
+    if (tbytes > 0)
+        put_trim(c, p);
+    len += tbytes;
     st = tr_tile_path(c->tiles_dir, d, "tri", &path, err);
     /* durability comes in batches: see sync_tiles */
     if (st == GDT_OK)
@@ -649,12 +723,17 @@ static gdt_status reuse_tile(tr_ctx *c, uint64_t k, uint64_t size, uint64_t sum,
     if (f != NULL)
         fclose(f);
     if (why == NULL) {
-        tr_tri_expect ex = {c->base[k], d.points, c->job_id};
+        tr_tri_expect ex = {c->base[k], d.points, c->job_id, gdt_trim_on(&c->trim)};
         tr_tri_verdict v = tr_tri_check_header(c->fbuf, size, &ex, &nf, &nv, &ne);
+        tr_trim_counts tc;
         if (v == TR_TRI_FOREIGN || v == TR_TRI_SIZE)
             why = "its header does not fit the tile";
         else if (v == TR_TRI_JOB)
             why = "its header names another job";
+        else if (ex.trim && tr_trim_check(c->fbuf + TR_HEADER + 12 * nf + 24 * nv + 16 * ne,
+                                          TR_HEADER + 12 * nf + 24 * nv + 16 * ne, size, nf,
+                                          &tc) != 0)
+            why = "its trim section does not fit the file";
     }
     if (why != NULL) {
         gdt_log_warn(&c->log, 6803, "%s: redoing the tile: %s", path, why);
@@ -688,8 +767,14 @@ static gdt_status read_seam(tr_ctx *c, uint64_t k, gdt_error *err)
     if (st == GDT_OK && reserve(&c->fbuf, &c->cap_fbuf, 24 * (size_t)TR_CHUNK, 1) != 0)
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     if (st == GDT_OK) {
-        tr_tri_expect ex = {c->base[k], d.points, c->job_id};
+        tr_tri_expect ex = {c->base[k], d.points, c->job_id, c->tgraph != NULL};
         st = tr_tri_read_seam(f, size, &ex, &c->seam, c->fbuf, path, err);
+        /* the tile's open edges meet the merge faces in the trim graph */
+        if (st == GDT_OK && ex.trim)
+            st = tr_tri_read_open(f, size, &ex, &c->topen, &c->ntopen, &c->cap_topen, c->fbuf,
+                                  path, err);
+        if (st == GDT_OK && ex.trim)
+            st = gdt_trim_graph_add_tile(c->tgraph, k, c->topen, c->ntopen, err);
     }
     if (f != NULL)
         fclose(f);
@@ -765,6 +850,8 @@ static gdt_status merge_rows(tr_ctx *c, gdt_error *err)
             k1++;
         }
         st = gdt_merger_round(m, &c->seam, y_next, k1 == ntiles, &f, &nf, err);
+        if (st == GDT_OK && c->tgraph != NULL)
+            st = gdt_trim_graph_add_faces(c->tgraph, f, gdt_merger_face_points(m), nf, err);
         if (st != GDT_OK)
             goto fail;
         for (size_t i = 0; i < nf; i++) {
@@ -795,6 +882,8 @@ static gdt_status merge_rows(tr_ctx *c, gdt_error *err)
     if (st != GDT_OK)
         goto fail;
     st = tl_sync_dir(c->job, err);
+    if (st == GDT_OK && c->tgraph != NULL)
+        st = gdt_trim_graph_resolve(c->tgraph, err);
     c->s.merge = *gdt_merger_stats(m);
     c->s.merge_faces = nmf;
 fail:
@@ -859,7 +948,8 @@ static gdt_status write_summary(const tr_ctx *c, gdt_error *err)
     gdt_json_uint(&j, "points_read", s->points_read);
     gdt_filter_report_json(&j, c->cloud);
     gdt_json_uint(&j, "vertices", s->vertices);
-    gdt_json_uint(&j, "faces", s->faces);
+    gdt_json_uint(&j, "faces", s->faces - s->trim.dropped);
+    gdt_trim_report_json(&j, &c->opts->trim, &s->trim);
     gdt_json_uint(&j, "tiles", s->tiles);
     gdt_json_uint(&j, "tile", (uint64_t)pl->tile);
     gdt_json_int(&j, "cell", pl->cell);
@@ -976,6 +1066,8 @@ static gdt_status build_params(const gdt_options *o, char **out, gdt_error *err)
              o->halo, (int)o->dup, o->quantum);
     gdt_filter_describe(&o->filter, filter, sizeof filter);
     text_add(&t, "filter=%s\n", filter);
+    if (gdt_trim_on(&o->trim))
+        text_add(&t, "trim=%.17g %.17g\n", o->trim.max_edge, o->trim.concavity);
     text_add(&t, "inputs=%zu\n", o->ninputs);
     for (size_t i = 0; i < o->ninputs; i++) {
         if (strchr(o->inputs[i], '\n') != NULL) {
@@ -1330,7 +1422,8 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     double t_start = gdt_now(), t0;
     /* the PLY header's filter line: lives until the writer is done */
     char filter_comment[GDT_FILTER_COMMENT_MAX], ftext[160];
-    const char *filter_comments[1] = {filter_comment};
+    char trim_comment[GDT_TRIM_TEXT_MAX], ttext[GDT_TRIM_TEXT_MAX];
+    const char *filter_comments[2] = {filter_comment, trim_comment};
     gdt_filter_counts fcounts;
     gdt_status st;
 
@@ -1475,14 +1568,22 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     {
         const gdt_cloud_info *ci = gdt_cloud_get_info(c.cloud);
         tr_out_src os;
+        c.trim = opts->trim;
+        c.trim.sx = ci->lattice.sx;
+        c.trim.sy = ci->lattice.sy;
+        if (gdt_trim_on(&c.trim) && (st = gdt_trim_graph_create(&c.tgraph, &c.trim, err)) != GDT_OK)
+            goto fail;
         memset(&os, 0, sizeof os);
         os.output = opts->output;
         os.meta.lattice = ci->lattice;
         os.meta.epsg = ci->epsg;
         os.meta.crs_wkt = ci->crs_wkt;
         gdt_filter_report_comment(c.cloud, filter_comment, sizeof filter_comment);
+        gdt_trim_report_comment(&opts->trim, trim_comment, sizeof trim_comment);
         os.meta.comments = filter_comments;
-        os.meta.ncomments = 1;
+        os.meta.ncomments = trim_comment[0] != '\0' ? 2 : 1;
+        os.trim = c.tgraph != NULL;
+        os.concavity = c.trim.concavity > 0;
         os.tiler = c.tiler;
         os.tiles_dir = c.tiles_dir;
         os.job = c.job;
@@ -1550,6 +1651,9 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     gdt_seam_free(&c.seam);
     c.s.faces = c.s.certified + c.s.merge_faces;
     c.s.t_merge = gdt_now() - t0;
+    /* the writer may copy trimmed faces from now on */
+    if (c.tgraph != NULL)
+        tr_out_set_trim(c.out, c.tgraph);
 
     /* Euler: a triangulation of V points with h on the hull has 2V - h - 2
      * faces (none when the points are collinear: then the seam holds them
@@ -1570,7 +1674,7 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     {
         char *mf = tr_path_join(c.job, MF_NAME);
         st = mf == NULL ? gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory")
-                        : tr_out_finish(c.out, mf, c.s.merge_faces, err);
+                        : tr_out_finish(c.out, mf, c.s.merge_faces, &c.s.trim, err);
         if (mf == NULL)
             tr_out_abort(c.out);
         c.out = NULL;
@@ -1600,12 +1704,14 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     }
     fcounts = gdt_cloud_total_counts(c.cloud);
     gdt_filter_counts_text(&opts->filter, &fcounts, ftext, sizeof ftext);
+    gdt_trim_report_text(&opts->trim, &c.s.trim, ttext, sizeof ttext);
     if (opts->verbosity >= 0)
         fprintf(stderr,
                 "gdt-tile: %s: %" PRIu64 " points%s, %" PRIu64 " vertices, %" PRIu64
-                " faces in %" PRIu64 " tiles (%.1f%% certified, %" PRIu64
+                " faces%s in %" PRIu64 " tiles (%.1f%% certified, %" PRIu64
                 " seam vertices) on %s, %.2f s%s%s\n",
-                opts->output, c.s.points_read, ftext, c.s.vertices, c.s.faces, c.s.tiles,
+                opts->output, c.s.points_read, ftext, c.s.vertices,
+                c.s.faces - c.s.trim.dropped, ttext, c.s.tiles,
                 c.s.faces > 0 ? 100.0 * (double)c.s.certified / (double)c.s.faces : 100.0,
                 c.s.merge.seam_vertices, c.s.device, c.s.t_total,
                 c.s.resumed ? ", resumed" : "", c.s.checked ? ", checked exactly" : "");
@@ -1639,6 +1745,9 @@ fail:
         gdt_progress_abort(&c.prog);
     free(c.pending);
     gdt_seam_free(&c.seam);
+    gdt_trim_graph_destroy(c.tgraph);
+    gdt_trim_tile_free(&c.ttile);
+    free(c.topen);
     free(c.fbuf);
     free(c.count);
     free(c.cert);
@@ -1748,6 +1857,19 @@ gdt_status gdt_cli_resume(const gdt_options *opts, gdt_error *err)
         st = gdt_error_set(err, GDT_EJOB, 6905, "%s: job record has a bad filter '%s'",
                            opts->resume, v);
         goto done;
+    }
+    free(v);
+    v = param_get(params, "trim", NULL);
+    if (v != NULL) {
+        char *end = NULL;
+        o.trim.max_edge = strtod(v, &end);
+        o.trim.concavity = strtod(end, &end);
+        if (*end != '\0' || !(o.trim.max_edge >= 0) || !(o.trim.concavity >= 0) ||
+            !isfinite(o.trim.max_edge) || !isfinite(o.trim.concavity)) {
+            st = gdt_error_set(err, GDT_EJOB, 6905, "%s: job record has a bad trim '%s'",
+                               opts->resume, v);
+            goto done;
+        }
     }
     NEED("inputs");
     n = (size_t)strtoull(v, NULL, 10);

@@ -62,7 +62,7 @@ static void one(const char *what, const img *m, uint64_t base, uint64_t points,
                 tr_tri_verdict want_v, int want_code, size_t nv, size_t ne)
 {
     static unsigned char scratch[24 * (size_t)TR_CHUNK];
-    tr_tri_expect ex = {base, points, JOB};
+    tr_tri_expect ex = {base, points, JOB, 0};
     gdt_seam s;
     gdt_error err;
     uint64_t f_nf, f_nv, f_ne;

@@ -58,7 +58,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     static unsigned char *scratch;
     const char *path = NULL;
     uint64_t job[2] = {word(data, size, 48), word(data, size, 56)};
-    tr_tri_expect ex = {word(data, size, 8), word(data, size, 16), job};
+    tr_tri_expect ex = {word(data, size, 8), word(data, size, 16), job, 0};
     tr_tri_verdict v = TR_TRI_FOREIGN;
     uint64_t nf = 0, nv = 0, ne = 0;
     gdt_seam s;

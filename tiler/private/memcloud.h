@@ -42,16 +42,19 @@ gdt_status gdt_memcloud_load(gdt_memcloud *mc, const gdt_options *opts, gdt_log 
 void gdt_memcloud_free(gdt_memcloud *mc);
 
 /* Writes opts->output: vertex i = mc->pts[i] (mesh vertex i), faces in
- * canonical order.  returns: the PLY writer's errors. */
+ * canonical order, less those opts->trim drops (gdt_trim_mesh); *tc gets
+ * the faces before trimming and the drops.  returns: the PLY writer's
+ * errors, gdt_trim_mesh's. */
 gdt_status gdt_memcloud_write(const gdt_memcloud *mc, const gdt_options *opts,
-                              const gdt_mesh *mesh, gdt_error *err);
+                              const gdt_mesh *mesh, gdt_trim_counts *tc, gdt_error *err);
 
 /* With opts->check, verifies mesh exactly (gdt_check_mesh, then
  * gdt_check_delaunay; *t_check, *checked set), then writes it
  * (gdt_memcloud_write; *t_write).  pred accumulates the counters. */
 gdt_status gdt_memcloud_finish(const gdt_memcloud *mc, const gdt_options *opts,
                                const gdt_mesh *mesh, gdt_pred_stats *pred, double *t_check,
-                               double *t_write, int *checked, gdt_error *err);
+                               double *t_write, int *checked, gdt_trim_counts *tc,
+                               gdt_error *err);
 
 /* Opens the --json summary of an in-memory mode and writes its head: mode,
  * output, inputs, points read, vertices, duplicates merged, faces and crs,
@@ -59,6 +62,7 @@ gdt_status gdt_memcloud_finish(const gdt_memcloud *mc, const gdt_options *opts,
  * gdt_json_end_object and gdt_json_close.  returns: gdt_json_open's
  * errors. */
 gdt_status gdt_memcloud_json_head(gdt_json *j, const gdt_memcloud *mc, const gdt_options *opts,
-                                  const char *mode, uint64_t faces, gdt_error *err);
+                                  const char *mode, uint64_t faces, const gdt_trim_counts *tc,
+                                  gdt_error *err);
 
 #endif

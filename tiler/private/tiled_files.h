@@ -11,6 +11,7 @@
 #include "gdt_direct_io.h"
 #include "gdt_error.h"
 #include "gdt_seam.h"
+#include "gdt_trim.h"
 #include "gdt_tiler.h"
 #include "private/tiler_io.h"
 
@@ -20,6 +21,14 @@
 #define MF_NAME "merge.faces"
 #define MF_MAGIC "GDTMRG01"
 #define MF_HEADER 16
+/* The trim section that ends a .tri file in a job with --max-edge or
+ * --concavity (gdt_trim.h), after the barrier edges: "GDTTRM01", u64 cut
+ * faces, u64 candidates, u64 open edges; then the cut faces (u32, strictly
+ * increasing), the candidates (u32 face, strictly increasing; u32 label, a
+ * face number), the open edges (u64 a < u64 b, vertices of the tile; u32
+ * label). */
+#define TT_MAGIC "GDTTRM01"
+#define TT_HEADER 32
 
 /* Little-endian words (tl_le64/tl_le32 of tiler_io.h: whole-word memcpy,
  * since byte loops are not always merged by the compiler). */
@@ -64,7 +73,19 @@ typedef struct tr_tri_expect {
     uint64_t base;          /* id of the tile's first vertex */
     uint64_t points;        /* the tile's point count */
     const uint64_t *job_id; /* 2 words, or NULL: not checked */
+    int trim;               /* the file ends with a trim section */
 } tr_tri_expect;
+
+/* The counts of a trim section. */
+typedef struct tr_trim_counts {
+    uint64_t ncut, ncand, nopen;
+} tr_trim_counts;
+
+/* Checks the trim section header th, at offset `at` of a .tri file of size
+ * bytes with nf certified faces: magic, and the counts add up to the
+ * file's end, without overflow.  Returns 0 and *tc when it fits. */
+int tr_trim_check(const unsigned char th[TT_HEADER], uint64_t at, uint64_t size, uint64_t nf,
+                  tr_trim_counts *tc);
 
 /* The verdicts of tr_tri_check_header, in the order it tests them. */
 typedef enum tr_tri_verdict {
@@ -75,7 +96,9 @@ typedef enum tr_tri_verdict {
 } tr_tri_verdict;
 
 /* Checks the header hdr (TR_HEADER bytes) of a .tri file of size bytes:
- * TR_HEADER + 12 nf + 24 nv + 16 ne == size, computed without overflow
+ * TR_HEADER + 12 nf + 24 nv + 16 ne == size (with ex->trim: that plus
+ * TT_HEADER at most size; tr_trim_check then checks the rest), computed
+ * without overflow
  * (each count is first bounded by size), and at most one seam vertex per
  * point.  The counts go to *nf, *nv, *ne (also on failure: for messages).
  * A tile whose base + points overflows is foreign: no run numbers its
@@ -104,6 +127,16 @@ gdt_status tr_open_tri(const char *tiles_dir, const gdt_tile_desc *d, FILE **f, 
  * header), 6802 (its size or content does not match its header);
  * GDT_EINTERNAL 7001. */
 gdt_status tr_tri_read_seam(FILE *f, uint64_t size, const tr_tri_expect *ex, gdt_seam *s,
+                            unsigned char *scratch, const char *path, gdt_error *err);
+
+/* With ex->trim, after tr_tri_read_seam on the same f: the open edges of the
+ * trim section into *open (grown as needed, replacing what it held; *nopen
+ * set).  Every edge must join two vertices of the tile in increasing order
+ * and carry a label below the tile's face count.
+ * returns: GDT_OK; GDT_EIO 4805; GDT_EJOB 6802 (section damaged);
+ * GDT_EINTERNAL 7001. */
+gdt_status tr_tri_read_open(FILE *f, uint64_t size, const tr_tri_expect *ex,
+                            gdt_trim_open **open, size_t *nopen, size_t *cap_open,
                             unsigned char *scratch, const char *path, gdt_error *err);
 
 /* Direct I/O for the large tile files, which are written once and read

@@ -22,6 +22,7 @@
 #include "gdt_error.h"
 #include "gdt_ply.h"
 #include "gdt_tiler.h"
+#include "gdt_trim.h"
 
 typedef struct tr_out tr_out;
 
@@ -34,6 +35,10 @@ typedef struct tr_out_src {
     const uint64_t *base;        /* ntiles + 1: output index of each tile's first vertex */
     uint64_t ntiles;
     volatile sig_atomic_t *stop; /* nonzero: stop (may be NULL) */
+    int trim;                    /* the .tri files end with a trim section: faces it
+                                  * drops are not written (tiled_files.h) */
+    int concavity;               /* --concavity: no face is written before
+                                  * tr_out_set_trim */
 } tr_out_src;
 
 /* Starts the writer (src is copied; the arrays and strings it points to
@@ -45,14 +50,19 @@ gdt_status tr_out_start(tr_out **out, const tr_out_src *src, gdt_error *err);
 /* Tiles 0..n-1 have their .tri files (n never decreases). */
 void tr_out_ready(tr_out *o, uint64_t n);
 
+/* With src.trim, after the merge: the resolved trim graph (it must outlive
+ * the writer), which decides the candidates' and the merge faces' fate. */
+void tr_out_set_trim(tr_out *o, const gdt_trim_graph *g);
+
 /* Waits until every tile's faces are written, then appends the merge's
- * merge_faces faces from merge_path and completes the PLY.  Consumes o
+ * merge_faces faces from merge_path and completes the PLY; *tc gets the
+ * faces before trimming and the drops (zeros without src.trim).  Consumes o
  * (also on failure, when the temporary file is removed).
  * returns: GDT_OK; the PLY writer's errors (GDT_EIO 4xxx); GDT_EIO 4805,
  * GDT_EJOB 6801-6802 (a job file missing, foreign or short);
  * GDT_EINTERRUPTED 1302. */
 gdt_status tr_out_finish(tr_out *o, const char *merge_path, uint64_t merge_faces,
-                         gdt_error *err);
+                         gdt_trim_counts *tc, gdt_error *err);
 
 /* Stops the writer and removes its temporary file.  o may be NULL. */
 void tr_out_abort(tr_out *o);
