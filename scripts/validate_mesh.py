@@ -3,6 +3,8 @@
 
   validate_mesh.py MESH.ply [--input CLOUD.las|.pcd|.xyz ...] [--quantum Q]
                    [--chunk N] [--tmpdir DIR] [-v]
+  validate_mesh.py TRIMMED.ply --trimmed-from FULL.ply [--max-edge L]
+                   [--concavity L] [--input ...]
 
 Recovers the lattice integers of every vertex from "comment lattice sx sy ox
 oy" and checks, in exact integer arithmetic: valid CCW faces, edge-manifold
@@ -11,6 +13,14 @@ included), F = 2V - h - 2, no duplicate vertices, every interior edge locally
 Delaunay with the Dyken-Floater tie-break (d1 = (1,0), d2 = (1,1)); with
 --input, that the distinct (x, y) lattice points of the inputs are exactly the
 vertices.  See gdtmesh/validate.py for the argument and the memory bound.
+
+A mesh written with --max-edge or --concavity is no triangulation of its
+vertices: check it against the untrimmed mesh of the same input with
+--trimmed-from FULL.ply.  FULL is checked exactly as above; then the trimmed
+mesh must have the same vertices and exactly the faces of FULL that the rules
+keep, applied by brute force (the rules from TRIMMED's "comment trim" line
+unless --max-edge/--concavity are given; see gdtmesh/trim.py, which holds
+the faces in memory).
 
 Prints one line: "OK: V vertices, F faces, h hull vertices, E interior edges
 checked" or "FAIL: <counts and first example per kind of violation>".
@@ -57,11 +67,30 @@ def main(argv=None):
                          "(default 1048576)")
     ap.add_argument("--tmpdir", metavar="DIR",
                     help="directory for temporary bucket files (default: the system's)")
+    ap.add_argument("--trimmed-from", metavar="FULL.ply",
+                    help="MESH is trimmed (--max-edge, --concavity): check it against this "
+                         "untrimmed mesh of the same input")
+    ap.add_argument("--max-edge", type=positive_float, metavar="L",
+                    help="with --trimmed-from: the --max-edge rule (default: MESH's comment)")
+    ap.add_argument("--concavity", type=positive_float, metavar="L",
+                    help="with --trimmed-from: the --concavity rule (default: MESH's comment)")
     ap.add_argument("-v", "--verbose", action="store_true",
                     help="progress and predicate statistics on stderr")
     args = ap.parse_args(argv)
-    code, line = validate(args.mesh, args.input, args.quantum, args.chunk, args.tmpdir,
+    if (args.max_edge or args.concavity) and not args.trimmed_from:
+        ap.error("--max-edge and --concavity go with --trimmed-from")
+    full = args.trimmed_from or args.mesh
+    code, line = validate(full, args.input, args.quantum, args.chunk, args.tmpdir,
                           log=sys.stderr if args.verbose else None)
+    if code == EXIT_OK and args.trimmed_from:
+        from gdtmesh.ply import MeshFileError
+        from gdtmesh.trim import check_trimmed
+        try:
+            code, line = check_trimmed(args.mesh, full, args.max_edge, args.concavity)
+        except (MeshFileError, ValueError) as e:
+            code, line = 3, f"FAIL: {e}"
+    elif args.trimmed_from:
+        line = f"{line} (in the untrimmed mesh {full})"
     print(line, file=sys.stdout if code in (EXIT_OK, 1) else sys.stderr)
     return code
 
