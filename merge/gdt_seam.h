@@ -193,11 +193,14 @@
 extern "C" {
 #endif
 
-/* A seam vertex: its output vertex index and its coordinates in the merge
- * frame (lattice minus the cloud's lattice minimum, so in [0, 2^31 - 1]). */
+/* A seam vertex: its output vertex index, its coordinates in the merge
+ * frame (lattice minus the cloud's lattice minimum, so in [0, 2^31 - 1])
+ * and its z (carried for the outputs that interpolate the merge's faces;
+ * the merge itself never reads it). */
 typedef struct gdt_seam_vertex {
     uint64_t id;
     int64_t x, y;
+    double z;
 } gdt_seam_vertex;
 
 /* A barrier edge a -> b (output vertex indices), certified side on the left. */
@@ -217,13 +220,15 @@ typedef struct gdt_seam {
 void gdt_seam_free(gdt_seam *s);
 
 /* Appends the seam of one tile to s: m is T_{d1,d2} of the tile's points in
- * tile-local coordinates, vertex i has output index id_base + i and merge
- * frame coordinates pts[i] + (dx, dy); cert holds m->ntris certification
- * flags.  Vertices are appended in increasing index, edges sorted.
+ * tile-local coordinates, vertex i has output index id_base + i, merge
+ * frame coordinates pts[i] + (dx, dy) and z[i] (0 when z is NULL); cert
+ * holds m->ntris certification flags.  Vertices are appended in increasing
+ * index, edges sorted.
  * Errors: GDT_EINPUT 3811 (a merge-frame coordinate outside
  * [0, 2^31 - 1]), 7001 out of memory. */
 gdt_status gdt_seam_extract(gdt_seam *s, const gdt_mesh *m, const uint8_t *cert,
-                            uint64_t id_base, int64_t dx, int64_t dy, gdt_error *err);
+                            const double *z, uint64_t id_base, int64_t dx, int64_t dy,
+                            gdt_error *err);
 
 /* Counters of a merge; the sums run over all rounds. */
 typedef struct gdt_merge_stats {
@@ -281,9 +286,10 @@ gdt_status gdt_merger_round(gdt_merger *m, const gdt_seam *row, int64_t y_next, 
                             const uint64_t **faces, size_t *nfaces, gdt_error *err);
 
 /* After a successful gdt_merger_round: the merge-frame coordinates of the
- * vertices of its *faces, 3 per face in the same order (owned by m, valid
- * until the next call on m). */
+ * vertices of its *faces, 3 per face in the same order, and their z (each
+ * owned by m, valid until the next call on m). */
 const gdt_ipt *gdt_merger_face_points(const gdt_merger *m);
+const double *gdt_merger_face_z(const gdt_merger *m);
 
 /* The counters so far (owned by m). */
 const gdt_merge_stats *gdt_merger_stats(const gdt_merger *m);

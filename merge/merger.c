@@ -48,7 +48,8 @@ struct gdt_merger {
     uint64_t *faces;
     size_t cap_faces;
     gdt_ipt *fpts; /* the faces' vertices (merge frame) */
-    size_t cap_fpts;
+    double *fz;    /* and their z */
+    size_t cap_fpts, cap_fz;
     size_t nw_carried;    /* band vertices handed on by the last triangulated round */
     size_t nwall_carried; /* walls handed on by it (the first walls of the list) */
     uint64_t last_id; /* largest id so far (valid when have_id) */
@@ -165,7 +166,7 @@ static uint64_t held_bytes(const gdt_merger *m)
     b += m->dt.cap_verts * (sizeof *m->dt.pts + (m->dt.ids != NULL ? sizeof *m->dt.ids : 0));
     b += m->dt.cap_tris * 3 * (sizeof *m->dt.tri + sizeof *m->dt.opp);
     b += m->em.cap * (sizeof *m->em.key + sizeof *m->em.val);
-    b += m->cap_fpts * sizeof *m->fpts;
+    b += m->cap_fpts * sizeof *m->fpts + m->cap_fz * sizeof *m->fz;
     b += m->cap_slot + m->cap_tri + m->cap_keep + m->cap_stack * sizeof *m->stack +
          m->cap_faces * sizeof *m->faces;
     return b;
@@ -207,12 +208,18 @@ void gdt_merger_destroy(gdt_merger *m)
     free(m->stack);
     free(m->faces);
     free(m->fpts);
+    free(m->fz);
     free(m);
 }
 
 const gdt_ipt *gdt_merger_face_points(const gdt_merger *m)
 {
     return m->fpts;
+}
+
+const double *gdt_merger_face_z(const gdt_merger *m)
+{
+    return m->fz;
 }
 
 const gdt_merge_stats *gdt_merger_stats(const gdt_merger *m)
@@ -443,7 +450,8 @@ gdt_status gdt_merger_round(gdt_merger *m, const gdt_seam *row, int64_t y_next, 
     m->st.faces += nf;
     /* their coordinates, while the band still holds every vertex (by
      * increasing id) */
-    if (grow(&m->fpts, &m->cap_fpts, 3 * nf + 3, sizeof *m->fpts) != 0) {
+    if (grow(&m->fpts, &m->cap_fpts, 3 * nf + 3, sizeof *m->fpts) != 0 ||
+        grow(&m->fz, &m->cap_fz, 3 * nf + 3, sizeof *m->fz) != 0) {
         st = no_memory(err);
         goto fail;
     }
@@ -458,6 +466,7 @@ gdt_status gdt_merger_round(gdt_merger *m, const gdt_seam *row, int64_t y_next, 
         }
         m->fpts[i].x = m->w[lo].x;
         m->fpts[i].y = m->w[lo].y;
+        m->fz[i] = m->w[lo].z;
     }
 
     /* Walls handed on: right side pending or outside the hull. */

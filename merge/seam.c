@@ -30,7 +30,8 @@ static int cmp_edge(const void *pa, const void *pb)
 }
 
 gdt_status gdt_seam_extract(gdt_seam *s, const gdt_mesh *m, const uint8_t *cert,
-                            uint64_t id_base, int64_t dx, int64_t dy, gdt_error *err)
+                            const double *z, uint64_t id_base, int64_t dx, int64_t dy,
+                            gdt_error *err)
 {
     uint8_t *in_u = calloc(m->nverts > 0 ? m->nverts : 1, 1);
     size_t e0 = s->ne;
@@ -86,6 +87,7 @@ gdt_status gdt_seam_extract(gdt_seam *s, const gdt_mesh *m, const uint8_t *cert,
         s->v[s->nv].id = id_base + i;
         s->v[s->nv].x = x;
         s->v[s->nv].y = y;
+        s->v[s->nv].z = z != NULL ? z[i] : 0.0;
         s->nv++;
     }
     if (s->ne > e0)

@@ -283,11 +283,12 @@ gdt_status gdt_tiler_load_tile(gdt_tiler *t, uint64_t k, gdt_point_buf *pts,
 
 /* As gdt_tiler_load_tile, but the tile's own points go to xy (the caller's,
  * room for gdt_tile_desc.points) as coordinates relative to (x0, y0), in
- * the same order, and *n receives their count: the records are read
- * through a small buffer and never held whole.  The caller chooses x0, y0
- * so that the differences fit its coordinate range. */
+ * the same order, their z to z (the same room; NULL: not wanted), and *n
+ * receives their count: the records are read through a small buffer and
+ * never held whole.  The caller chooses x0, y0 so that the differences fit
+ * its coordinate range. */
 gdt_status gdt_tiler_load_tile_local(gdt_tiler *t, uint64_t k, int64_t x0, int64_t y0,
-                                     gdt_ipt *xy, size_t *n, gdt_point_buf *halo,
+                                     gdt_ipt *xy, double *z, size_t *n, gdt_point_buf *halo,
                                      gdt_error *err);
 
 const gdt_tiler_stats *gdt_tiler_get_stats(const gdt_tiler *t);

@@ -85,11 +85,11 @@ static gdt_status add_neighbour(gdt_tiler *t, uint64_t k, uint64_t u, int64_t bx
 }
 
 /* Tile k's own points from its .pts file (sorted by ordinal): into pts as
- * records or, when pts is NULL, into xy[0..points) as (x - x0, y - y0),
- * through a small chunk, so that the records are never held whole.  *n
- * receives their count. */
+ * records or, when pts is NULL, into xy[0..points) as (x - x0, y - y0) and
+ * z[0..points) (when z is not NULL), through a small chunk, so that the
+ * records are never held whole.  *n receives their count. */
 static gdt_status load_own(gdt_tiler *t, uint64_t k, gdt_point_buf *pts, gdt_ipt *xy,
-                           int64_t x0, int64_t y0, size_t *n, gdt_error *err)
+                           double *z, int64_t x0, int64_t y0, size_t *n, gdt_error *err)
 {
     const tl_tile *tl = &t->tiles[k];
     gdt_point chunk[LOCAL_CHUNK];
@@ -120,6 +120,8 @@ static gdt_status load_own(gdt_tiler *t, uint64_t k, gdt_point_buf *pts, gdt_ipt
                 xy[*n + i].x = chunk[i].x - x0;
                 xy[*n + i].y = chunk[i].y - y0;
             }
+            for (size_t i = 0; z != NULL && i < m; i++)
+                z[*n + i] = chunk[i].z;
             *n += m;
         }
     }
@@ -129,8 +131,9 @@ static gdt_status load_own(gdt_tiler *t, uint64_t k, gdt_point_buf *pts, gdt_ipt
 
 /* Both loaders: the own points (see load_own; *nown their count), then the
  * halo. */
-static gdt_status load(gdt_tiler *t, uint64_t k, gdt_point_buf *pts, gdt_ipt *xy, int64_t x0,
-                       int64_t y0, size_t *nown, gdt_point_buf *halo, gdt_error *err)
+static gdt_status load(gdt_tiler *t, uint64_t k, gdt_point_buf *pts, gdt_ipt *xy, double *z,
+                       int64_t x0, int64_t y0, size_t *nown, gdt_point_buf *halo,
+                       gdt_error *err)
 {
     const int64_t T = t->plan.span, h = t->plan.halo * t->plan.cell;
     const uint64_t limit = t->budget / 2 / sizeof(gdt_point);
@@ -149,7 +152,7 @@ static gdt_status load(gdt_tiler *t, uint64_t k, gdt_point_buf *pts, gdt_ipt *xy
     tl = &t->tiles[k];
     if (tl->points > limit)
         return too_large(t, k, limit, err);
-    st = load_own(t, k, pts, xy, x0, y0, &n, err);
+    st = load_own(t, k, pts, xy, z, x0, y0, &n, err);
     if (st != GDT_OK)
         return st;
     *nown = n;
@@ -194,14 +197,14 @@ gdt_status gdt_tiler_load_tile(gdt_tiler *t, uint64_t k, gdt_point_buf *pts,
     size_t n = 0;
     gdt_status st;
     pts->n = 0;
-    st = load(t, k, pts, NULL, 0, 0, &n, halo, err);
+    st = load(t, k, pts, NULL, NULL, 0, 0, &n, halo, err);
     pts->n = n;
     return st;
 }
 
 gdt_status gdt_tiler_load_tile_local(gdt_tiler *t, uint64_t k, int64_t x0, int64_t y0,
-                                     gdt_ipt *xy, size_t *n, gdt_point_buf *halo,
+                                     gdt_ipt *xy, double *z, size_t *n, gdt_point_buf *halo,
                                      gdt_error *err)
 {
-    return load(t, k, NULL, xy, x0, y0, n, halo, err);
+    return load(t, k, NULL, xy, z, x0, y0, n, halo, err);
 }

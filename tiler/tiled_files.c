@@ -44,13 +44,14 @@ tr_tri_verdict tr_tri_check_header(const unsigned char hdr[TR_HEADER], uint64_t 
     if (memcmp(hdr, TR_MAGIC, 8) != 0 || tr_get_u64(hdr + 8) != ex->base ||
         tr_get_u64(hdr + 16) != ex->points || ex->points > UINT64_MAX - ex->base)
         return TR_TRI_FOREIGN;
-    /* no overflow in the sum: with 12 nf, 24 nv and 16 ne each at most
-     * size, and size at most 2^62, it is at most 64 + 3 size < 2^64 */
-    if (size < TR_HEADER || size > UINT64_MAX / 4 || *nf > size / 12 || *nv > size / 24 ||
+    /* no overflow in the sum: with 12 nf, 32 nv and 16 ne each at most
+     * size, and size at most 2^62, it is at most 64 + 3 size + 32 < 2^64 */
+    if (size < TR_HEADER || size > UINT64_MAX / 4 || *nf > size / 12 ||
+        *nv > size / TR_SEAM_VERTEX ||
         *ne > size / 16 || *nv > ex->points)
         return TR_TRI_SIZE;
-    if (ex->trim ? TR_HEADER + 12 * *nf + 24 * *nv + 16 * *ne + TT_HEADER > size
-                 : TR_HEADER + 12 * *nf + 24 * *nv + 16 * *ne != size)
+    if (ex->trim ? TR_HEADER + 12 * *nf + TR_SEAM_VERTEX * *nv + 16 * *ne + TT_HEADER > size
+                 : TR_HEADER + 12 * *nf + TR_SEAM_VERTEX * *nv + 16 * *ne != size)
         return TR_TRI_SIZE;
     if (ex->job_id != NULL &&
         (tr_get_u64(hdr + 48) != ex->job_id[0] || tr_get_u64(hdr + 56) != ex->job_id[1]))
@@ -124,13 +125,16 @@ gdt_status tr_tri_read_seam(FILE *f, uint64_t size, const tr_tri_expect *ex, gdt
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     for (uint64_t done = 0; done < nv;) {
         size_t m = nv - done < TR_CHUNK ? (size_t)(nv - done) : TR_CHUNK;
-        if (fread(scratch, 24, m, f) != m)
+        if (fread(scratch, TR_SEAM_VERTEX, m, f) != m)
             return gdt_error_set(err, GDT_EIO, 4805, "%s: read failed", path);
         for (size_t i = 0; i < m; i++) {
             gdt_seam_vertex *sv = &s->v[s->nv];
-            sv->id = tr_get_u64(scratch + 24 * i);
-            sv->x = (int64_t)tr_get_u64(scratch + 24 * i + 8);
-            sv->y = (int64_t)tr_get_u64(scratch + 24 * i + 16);
+            const unsigned char *r = scratch + TR_SEAM_VERTEX * i;
+            uint64_t zb = tr_get_u64(r + 24);
+            sv->id = tr_get_u64(r);
+            sv->x = (int64_t)tr_get_u64(r + 8);
+            sv->y = (int64_t)tr_get_u64(r + 16);
+            memcpy(&sv->z, &zb, sizeof sv->z);
             if (sv->id < lo || sv->id >= hi || sv->x < 0 || sv->y < 0 ||
                 sv->x > GDT_COORD_MAX || sv->y > GDT_COORD_MAX)
                 return gdt_error_set(err, GDT_EJOB, 6802,
@@ -173,7 +177,7 @@ gdt_status tr_tri_read_open(FILE *f, uint64_t size, const tr_tri_expect *ex,
         return gdt_error_set(err, GDT_EIO, 4805, "%s: read failed", path);
     if (tr_tri_check_header(hdr, size, ex, &nf, &nv, &ne) != TR_TRI_FITS)
         return gdt_error_set(err, GDT_EJOB, 6801, "%s: not the tile file this run wrote", path);
-    at = TR_HEADER + 12 * nf + 24 * nv + 16 * ne;
+    at = TR_HEADER + 12 * nf + TR_SEAM_VERTEX * nv + 16 * ne;
     if (fseeko(f, (off_t)at, SEEK_SET) != 0 || fread(th, 1, TT_HEADER, f) != TT_HEADER)
         return gdt_error_set(err, GDT_EIO, 4805, "%s: read failed", path);
     if (tr_trim_check(th, at, size, nf, &tc) != 0)

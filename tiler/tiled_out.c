@@ -169,7 +169,8 @@ static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
     nf = st == GDT_OK ? tr_get_u64(hdr + 24) : 0;
     if (st == GDT_OK && o->src.trim)
         st = read_trim(o, path,
-                       TR_HEADER + 12 * nf + 24 * tr_get_u64(hdr + 32) + 16 * tr_get_u64(hdr + 40),
+                       TR_HEADER + 12 * nf + TR_SEAM_VERTEX * tr_get_u64(hdr + 32) +
+                           16 * tr_get_u64(hdr + 40),
                        nf, &tc, err);
     for (uint64_t done = 0; st == GDT_OK && done < nf;) {
         size_t m = nf - done < TR_CHUNK ? (size_t)(nf - done) : TR_CHUNK;

@@ -66,6 +66,8 @@ typedef struct tr_slot {
     gdt_ipt *lh;        /* nh halo points, tile-local; owned */
     size_t cap_lh;
     gdt_mesh mesh;      /* the core's triangulation of the own points */
+    double *z;          /* their z, by vertex; owned */
+    size_t cap_z;
 } tr_slot;
 
 typedef struct tr_ctx tr_ctx;
@@ -94,7 +96,7 @@ typedef struct tr_reclaim {
     int running;        /* a thread was started and not yet joined */
     gdt_core *core;
     gdt_mesh mesh[2];
-    void *bufs[3];
+    void *bufs[5];
 } tr_reclaim;
 
 struct tr_ctx {
@@ -403,9 +405,11 @@ static gdt_status core_tile(tr_ctx *c, uint64_t k, tr_slot *sl, gdt_error *err)
      * leaves them in (kept from tile to tile: fresh pages cost more than
      * the memory) */
     st = gdt_mesh_reserve(&sl->mesh, (size_t)d->points + 1, 0, 0, err);
+    if (st == GDT_OK && reserve(&sl->z, &sl->cap_z, (size_t)d->points + 1, sizeof *sl->z) != 0)
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     if (st == GDT_OK)
-        st = gdt_tiler_load_tile_local(c->tiler, k, d->local_x0, d->local_y0, sl->mesh.pts, &n,
-                                       &c->halo, err);
+        st = gdt_tiler_load_tile_local(c->tiler, k, d->local_x0, d->local_y0, sl->mesh.pts,
+                                       sl->z, &n, &c->halo, err);
     if (st != GDT_OK)
         return st;
     sl->n = n;
@@ -497,12 +501,12 @@ static gdt_status post_tile_run(tr_ctx *c, tr_slot *sl, gdt_error *err)
         nf += c->cert[t];
     c->seam.nv = 0;
     c->seam.ne = 0;
-    st = gdt_seam_extract(&c->seam, m, c->cert, c->base[k], d->local_x0 - pl->min_x,
+    st = gdt_seam_extract(&c->seam, m, c->cert, sl->z, c->base[k], d->local_x0 - pl->min_x,
                           d->local_y0 - pl->min_y, err);
     if (st != GDT_OK)
         return st;
     c->seam_total += c->seam.nv;
-    len = TR_HEADER + 12 * nf + 24 * c->seam.nv + 16 * c->seam.ne;
+    len = TR_HEADER + 12 * nf + TR_SEAM_VERTEX * c->seam.nv + 16 * c->seam.ne;
     if (reserve_blocks(&c->fbuf, &c->cap_fbuf, len) != 0)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     /* the sorted faces go straight into the file image (64-byte aligned
@@ -528,10 +532,13 @@ static gdt_status post_tile_run(tr_ctx *c, tr_slot *sl, gdt_error *err)
     tr_put_u64(p + 48, c->job_id[0]);
     tr_put_u64(p + 56, c->job_id[1]);
     p += TR_HEADER + 12 * nf;
-    for (size_t i = 0; i < c->seam.nv; i++, p += 24) {
+    for (size_t i = 0; i < c->seam.nv; i++, p += TR_SEAM_VERTEX) {
+        uint64_t zb;
+        memcpy(&zb, &c->seam.v[i].z, sizeof zb);
         tr_put_u64(p, c->seam.v[i].id);
         tr_put_u64(p + 8, (uint64_t)c->seam.v[i].x);
         tr_put_u64(p + 16, (uint64_t)c->seam.v[i].y);
+        tr_put_u64(p + 24, zb);
     }
     for (size_t i = 0; i < c->seam.ne; i++, p += 16) {
         tr_put_u64(p, c->seam.e[i].a);
@@ -578,7 +585,7 @@ static void *reclaim_main(void *arg)
     gdt_core_destroy(r->core);
     for (int i = 0; i < 2; i++)
         gdt_mesh_free(&r->mesh[i]);
-    for (int i = 0; i < 3; i++)
+    for (int i = 0; i < 5; i++)
         free(r->bufs[i]);
     return NULL;
 }
@@ -597,6 +604,10 @@ static void reclaim_start(tr_ctx *c)
     r->bufs[0] = c->fbuf;
     r->bufs[1] = c->count;
     r->bufs[2] = c->cert;
+    r->bufs[3] = c->slot[0].z;
+    r->bufs[4] = c->slot[1].z;
+    c->slot[0].z = c->slot[1].z = NULL;
+    c->slot[0].cap_z = c->slot[1].cap_z = 0;
     c->fbuf = NULL;
     c->count = NULL;
     c->cert = NULL;
@@ -730,9 +741,10 @@ static gdt_status reuse_tile(tr_ctx *c, uint64_t k, uint64_t size, uint64_t sum,
             why = "its header does not fit the tile";
         else if (v == TR_TRI_JOB)
             why = "its header names another job";
-        else if (ex.trim && tr_trim_check(c->fbuf + TR_HEADER + 12 * nf + 24 * nv + 16 * ne,
-                                          TR_HEADER + 12 * nf + 24 * nv + 16 * ne, size, nf,
-                                          &tc) != 0)
+        else if (ex.trim &&
+                 tr_trim_check(c->fbuf + TR_HEADER + 12 * nf + TR_SEAM_VERTEX * nv + 16 * ne,
+                               TR_HEADER + 12 * nf + TR_SEAM_VERTEX * nv + 16 * ne, size, nf,
+                               &tc) != 0)
             why = "its trim section does not fit the file";
     }
     if (why != NULL) {
@@ -764,7 +776,7 @@ static gdt_status read_seam(tr_ctx *c, uint64_t k, gdt_error *err)
 
     if (st == GDT_OK)
         st = tr_open_tri(c->tiles_dir, &d, &f, &size, &path, err);
-    if (st == GDT_OK && reserve(&c->fbuf, &c->cap_fbuf, 24 * (size_t)TR_CHUNK, 1) != 0)
+    if (st == GDT_OK && reserve(&c->fbuf, &c->cap_fbuf, TR_SEAM_VERTEX * (size_t)TR_CHUNK, 1) != 0)
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     if (st == GDT_OK) {
         tr_tri_expect ex = {c->base[k], d.points, c->job_id, c->tgraph != NULL};
@@ -1754,6 +1766,7 @@ fail:
     for (int i = 0; i < 2; i++) {
         gdt_mesh_free(&c.slot[i].mesh);
         free(c.slot[i].lh);
+        free(c.slot[i].z);
     }
     gdt_point_buf_free(&c.halo);
     free(c.base);

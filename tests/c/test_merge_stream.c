@@ -23,6 +23,12 @@
 
 #include "gdt_certify.h"
 #include "gdt_check.h"
+
+/* The z given to the point at lattice (x, y). */
+static double test_z(int64_t x, int64_t y)
+{
+    return 0.25 * (double)x - 1.5 * (double)y + 1000.0;
+}
 #include "gdt_reference.h"
 #include "gdt_seam.h"
 
@@ -265,8 +271,15 @@ static int run_tiles(gdt_checks *ck, const char *label, cloud *c, int64_t span, 
                           in_ref(rule->ref, k + (uint64_t)m.tri[3 * q],
                                  k + (uint64_t)m.tri[3 * q + 1], k + (uint64_t)m.tri[3 * q + 2]);
         }
-        if (st == GDT_OK)
-            st = gdt_seam_extract(&ts, &m, cert, (uint64_t)k, x0, y0, &err);
+        if (st == GDT_OK) {
+            /* z is carried through the seam to the merge's faces */
+            double *z = malloc((k1 - k + 1) * sizeof *z);
+            for (size_t i = 0; z != NULL && i < k1 - k; i++)
+                z[i] = test_z(c->p[k + i].x, c->p[k + i].y);
+            st = z == NULL ? GDT_EINTERNAL
+                           : gdt_seam_extract(&ts, &m, cert, z, (uint64_t)k, x0, y0, &err);
+            free(z);
+        }
         GDT_CHECK(ck, st == GDT_OK, "%s: certify/extract: GDT-%d %s", label, err.code, err.msg);
         if (st != GDT_OK) {
             gdt_seam_free(&ts);
@@ -296,7 +309,9 @@ done:
     return rc;
 }
 
-/* Runs the merger over t's rows; faces in order of emission. */
+/* Runs the merger over t's rows; faces in order of emission.  Every face's
+ * vertex coordinates and z (gdt_merger_face_points, gdt_merger_face_z) must
+ * be those its seam vertices carried. */
 static int merge_by_rows(gdt_checks *ck, const char *label, const tiled *t, faces *F,
                          gdt_merge_stats *ms)
 {
@@ -321,6 +336,11 @@ static int merge_by_rows(gdt_checks *ck, const char *label, const tiled *t, face
             GDT_CHECK(ck, i == 0 || cmp_face(&f[3 * i - 3], &f[3 * i]) < 0,
                       "%s: faces of round %zu not sorted", label, r);
             push_face(F, f[3 * i], f[3 * i + 1], f[3 * i + 2]);
+            for (int q = 0; q < 3; q++) {
+                gdt_ipt p = gdt_merger_face_points(m)[3 * i + q];
+                GDT_CHECK_QUIET_AFTER(ck, 5, gdt_merger_face_z(m)[3 * i + q] == test_z(p.x, p.y),
+                                      "%s: round %zu face %zu: z not its vertex's", label, r, i);
+            }
         }
     }
     *ms = *gdt_merger_stats(m);
@@ -676,7 +696,7 @@ static void test_random_certification(gdt_checks *ck, int cases)
 /* The merger's refusals. */
 static void test_errors(gdt_checks *ck)
 {
-    gdt_seam_vertex v[4] = {{10, 0, 0}, {11, 100, 0}, {12, 0, 100}, {13, 100, 100}};
+    gdt_seam_vertex v[4] = {{10, 0, 0, 0.0}, {11, 100, 0, 0.0}, {12, 0, 100, 0.0}, {13, 100, 100, 0.0}};
     gdt_seam_edge bogus = {11, 12}, missing = {10, 99};
     gdt_seam row = {v, 4, 4, NULL, 0, 0}, back = {v, 2, 2, NULL, 0, 0};
     gdt_merger *m = NULL;
@@ -741,7 +761,7 @@ static void test_errors(gdt_checks *ck)
         gdt_merger_destroy(m);
     }
     {
-        gdt_seam_vertex low[2] = {{20, 0, 49}, {21, 100, 120}};
+        gdt_seam_vertex low[2] = {{20, 0, 49, 0.0}, {21, 100, 120, 0.0}};
         gdt_seam below = {low, 2, 2, NULL, 0, 0};
         gdt_error_clear(&err);
         gdt_merger_create(&m, 0, 100, &err);

@@ -300,16 +300,19 @@ static void check_run(gdt_tiler *t, const char *job, const gdt_point *in, size_t
             /* the local loader: the same points relative to the tile's
              * local origin, the same halo */
             gdt_ipt *xy = malloc((d.points + 1) * sizeof *xy);
+            double *zl = malloc((d.points + 1) * sizeof *zl);
             gdt_point_buf h2 = {0};
             size_t nl = 0;
             gdt_error_clear(&err);
-            CHECK(xy != NULL && gdt_tiler_load_tile_local(t, k, d.local_x0, d.local_y0, xy, &nl,
-                                                          &h2, &err) == GDT_OK,
+            CHECK(xy != NULL && zl != NULL &&
+                      gdt_tiler_load_tile_local(t, k, d.local_x0, d.local_y0, xy, zl, &nl,
+                                                &h2, &err) == GDT_OK,
                   "%s: local load: %s", what, err.msg);
             CHECK(nl == pts.n && h2.n == halo.n, "%s: local load of tile %" PRIu64
                   ": %zu points, %zu halo (expected %zu, %zu)", what, k, nl, h2.n, pts.n, halo.n);
             for (size_t q = 0; xy != NULL && q < nl && q < pts.n; q++)
-                if (xy[q].x != pts.pts[q].x - d.local_x0 || xy[q].y != pts.pts[q].y - d.local_y0) {
+                if (xy[q].x != pts.pts[q].x - d.local_x0 || xy[q].y != pts.pts[q].y - d.local_y0 ||
+                    memcmp(&zl[q], &pts.pts[q].z, sizeof zl[q]) != 0) {
                     CHECK(0, "%s: local load of tile %" PRIu64 ": point %zu differs", what, k, q);
                     break;
                 }
@@ -321,6 +324,7 @@ static void check_run(gdt_tiler *t, const char *job, const gdt_point *in, size_t
                 }
             gdt_point_buf_free(&h2);
             free(xy);
+            free(zl);
         }
         sum_points += pts.n;
         /* .edge: exactly the tile's points within h of its border, by ord. */

@@ -53,6 +53,7 @@ static void vertex(img *m, uint64_t id, int64_t x, int64_t y)
     put(m, id);
     put(m, (uint64_t)x);
     put(m, (uint64_t)y);
+    put(m, UINT64_C(0x4059000000000000)); /* z = 100.0 */
 }
 
 /* Reads m as tile (base, points) of job JOB into a seam holding one
@@ -61,7 +62,7 @@ static void vertex(img *m, uint64_t id, int64_t x, int64_t y)
 static void one(const char *what, const img *m, uint64_t base, uint64_t points,
                 tr_tri_verdict want_v, int want_code, size_t nv, size_t ne)
 {
-    static unsigned char scratch[24 * (size_t)TR_CHUNK];
+    static unsigned char scratch[TR_SEAM_VERTEX * (size_t)TR_CHUNK];
     tr_tri_expect ex = {base, points, JOB, 0};
     gdt_seam s;
     gdt_error err;
@@ -77,7 +78,7 @@ static void one(const char *what, const img *m, uint64_t base, uint64_t points,
         return;
     }
     s.nv = s.ne = s.cap_v = s.cap_e = 1;
-    s.v[0] = (gdt_seam_vertex){9, 1, 1};
+    s.v[0] = (gdt_seam_vertex){9, 1, 1, 0.0};
     s.e[0] = (gdt_seam_edge){9, 8};
     if (m->n >= TR_HEADER)
         CHECK(tr_tri_check_header(m->b, m->n, &ex, &f_nf, &f_nv, &f_ne) == want_v,
@@ -120,13 +121,13 @@ int main(void)
     header(&m, 0, 4, 0, 0, 0, JOB[1] + 1);
     one("another job", &m, 0, 4, TR_TRI_JOB, 6801, 0, 0);
     header(&m, 0, 4, 0, 0, 0, JOB[1]);
-    m.b[7] = '2';
+    m.b[7] = '9';
     one("magic", &m, 0, 4, TR_TRI_FOREIGN, 6801, 0, 0);
-    /* 12 * 2^62, 24 * 2^61 and 16 * 2^60 are 0 modulo 2^64 */
+    /* 12 * 2^62, 32 * 2^59 and 16 * 2^60 are 0 modulo 2^64 */
     header(&m, 0, 4, (uint64_t)1 << 62, 1, 0, JOB[1]);
     vertex(&m, 1, 1, 1);
     one("faces wrap", &m, 0, 4, TR_TRI_SIZE, 6802, 0, 0);
-    header(&m, 0, 4, 0, ((uint64_t)1 << 61) + 1, 0, JOB[1]);
+    header(&m, 0, 4, 0, ((uint64_t)1 << 59) + 1, 0, JOB[1]);
     vertex(&m, 1, 1, 1);
     one("seam vertices wrap", &m, 0, 4, TR_TRI_SIZE, 6802, 0, 0);
     header(&m, 0, 4, 0, 1, (uint64_t)1 << 60, JOB[1]);

@@ -66,7 +66,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     gdt_status st;
     FILE *f = NULL;
 
-    if (scratch == NULL && (scratch = malloc(24 * (size_t)TR_CHUNK)) == NULL)
+    if (scratch == NULL && (scratch = malloc(TR_SEAM_VERTEX * (size_t)TR_CHUNK)) == NULL)
         gdt_fuzz_die("scratch buffer");
     if (gdt_fuzz_memfile(data, size, &path) != 0 || (f = fopen(path, "rb")) == NULL)
         gdt_fuzz_die("input file");

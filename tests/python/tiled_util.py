@@ -25,9 +25,9 @@ from gdtmesh.ply import PlyMesh, to_lattice  # noqa: E402
 
 SCALE = 0.01
 OFFSET = (500000.0, 4000000.0)
-TRI_MAGIC = b"GDTTRI01"
+TRI_MAGIC = b"GDTTRI02"
 TRI_HEADER = struct.Struct("<8s7Q")
-SEAM_DTYPE = np.dtype([("id", "<u8"), ("gx", "<i8"), ("gy", "<i8")])
+SEAM_DTYPE = np.dtype([("id", "<u8"), ("gx", "<i8"), ("gy", "<i8"), ("z", "<f8")])
 EDGE_DTYPE = np.dtype([("a", "<u8"), ("b", "<u8")])
 TRI_NAME = re.compile(r"^tile_(-?\d+)_(-?\d+)\.tri$")
 SUMMARY_KEYS = ("tiles", "vertices", "faces", "certified_faces", "merge_faces",

@@ -15,8 +15,9 @@
 #include "gdt_tiler.h"
 #include "private/tiler_io.h"
 
-#define TR_MAGIC "GDTTRI01"
+#define TR_MAGIC "GDTTRI02"
 #define TR_HEADER 64
+#define TR_SEAM_VERTEX 32 /* bytes of a seam vertex record */
 #define TR_CHUNK 65536 /* records per read or write */
 #define MF_NAME "merge.faces"
 #define MF_MAGIC "GDTMRG01"
@@ -96,7 +97,7 @@ typedef enum tr_tri_verdict {
 } tr_tri_verdict;
 
 /* Checks the header hdr (TR_HEADER bytes) of a .tri file of size bytes:
- * TR_HEADER + 12 nf + 24 nv + 16 ne == size (with ex->trim: that plus
+ * TR_HEADER + 12 nf + 32 nv + 16 ne == size (with ex->trim: that plus
  * TT_HEADER at most size; tr_trim_check then checks the rest), computed
  * without overflow
  * (each count is first bounded by size), and at most one seam vertex per
@@ -119,7 +120,7 @@ gdt_status tr_open_tri(const char *tiles_dir, const gdt_tile_desc *d, FILE **f, 
  * appends the seam vertices and barrier edges to s (grown as needed; the
  * entries it had are kept).  Every vertex id and edge end must lie in
  * [ex->base, ex->base + ex->points) and every coordinate in the merge
- * frame [0, GDT_COORD_MAX].  scratch holds 24 * TR_CHUNK bytes.  On
+ * frame [0, GDT_COORD_MAX].  scratch holds TR_SEAM_VERTEX * TR_CHUNK bytes.  On
  * failure s may hold some of the file's entries after its own.  path names
  * f in messages.
  * returns: GDT_OK; GDT_EIO 4805 (seek or read failed); GDT_EJOB 6801 (not

@@ -22,12 +22,13 @@
  * --halo, --dup and --quantum.  The face count is checked against Euler's
  * relation F = 2V - h - 2 before the PLY is completed.
  *
- * .tri layout (little-endian): 64-byte header = "GDTTRI01", u64 vertex base,
+ * .tri layout (little-endian): 64-byte header = "GDTTRI02", u64 vertex base,
  * u64 vertices, u64 certified faces, u64 seam vertices, u64 barrier edges,
  * the job's 128-bit id as two u64 (so another job's file never passes for
  * this job's, even where its faces are the same); faces as 3 x u32 output indices (counter-clockwise, each
  * rotated to its smallest index, sorted); seam vertices as u64 index,
- * i64 x, i64 y (merge frame); barrier edges as u64 a, u64 b. */
+ * i64 x, i64 y (merge frame), f64 z; barrier edges as u64 a, u64 b; with
+ * --max-edge or --concavity the trim section (tiled_files.h) ends it. */
 #ifndef GDT_TILED_RUN_H
 #define GDT_TILED_RUN_H
 
