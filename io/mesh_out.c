@@ -152,6 +152,8 @@ static size_t fmt_double_c(char *out, size_t cap, double d)
         int n = snprintf(out, cap, "%.*g", prec, d);
         if (n <= 0 || (size_t)n >= cap)
             return 0;
+        /* 17 significant digits always read back as the same double
+         * (IEEE 754 binary64); the check there guards the C library only */
         if (strtod(out, NULL) == d)
             return (size_t)n;
     }

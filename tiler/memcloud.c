@@ -186,6 +186,7 @@ gdt_status gdt_memcloud_json_head(gdt_json *j, const gdt_memcloud *mc, const gdt
     gdt_json_begin_object(j, NULL);
     gdt_json_string(j, "mode", mode);
     gdt_json_string(j, "output", opts->output);
+    gdt_json_string(j, "output_format", gdt_mesh_format_name(gdt_mesh_format_of(opts->output)));
     gdt_json_uint(j, "inputs", ci->ninputs);
     gdt_json_uint(j, "points", mc->read);
     gdt_json_uint(j, "vertices", mc->kept);

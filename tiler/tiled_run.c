@@ -863,6 +863,8 @@ static gdt_status write_summary(const tr_ctx *c, gdt_error *err)
     gdt_json_begin_object(&j, NULL);
     gdt_json_string(&j, "mode", "tiled");
     gdt_json_string(&j, "output", c->opts->output);
+    gdt_json_string(&j, "output_format",
+                    gdt_mesh_format_name(gdt_mesh_format_of(c->opts->output)));
     gdt_json_string(&j, "device", s->device);
     gdt_json_uint(&j, "points_read", s->points_read);
     gdt_filter_report_json(&j, c->cloud);
@@ -1474,8 +1476,8 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     c.s.vertices = c.base[ntiles];
     if (c.s.vertices > (uint64_t)INT32_MAX) {
         st = gdt_error_set(err, GDT_EINPUT, 3801,
-                           "%s: %" PRIu64 " distinct points; a PLY face index holds at most "
-                           "2^31 - 1",
+                           "%s: %" PRIu64 " distinct points; a face index of the output "
+                           "holds at most 2^31 - 1",
                            opts->inputs[0], c.s.vertices);
         goto fail;
     }

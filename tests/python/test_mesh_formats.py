@@ -3,6 +3,7 @@
 independent parsers (trimesh for OBJ, lxml for LandXML, pyproj for the WKT);
 every mode writes them, a resumed job writes the format it recorded, and a
 refused output path leaves nothing behind."""
+import json
 import os
 import pathlib
 import sys
@@ -190,10 +191,14 @@ def test_extension_is_case_insensitive(gdt_bin, runner, cloud, tmp_path):
 
 @pytest.mark.parametrize("ext", ["obj", "xml"])
 def test_check_of_a_text_output(gdt_bin, runner, cloud, tmp_path, ext):
-    out, job = tmp_path / f"m.{ext}", tmp_path / "job"
-    r = runner([gdt_bin, cloud, "--tile", 64, "--check", "--keep-job", "--job", job, "-o", out])
+    out, job, js = tmp_path / f"m.{ext}", tmp_path / "job", tmp_path / "run.json"
+    r = runner([gdt_bin, cloud, "--tile", 64, "--check", "--keep-job", "--job", job, "-o", out,
+                "--json", js])
     assert r.returncode == 0, r.stderr
     assert "checked exactly" in r.stderr
+    summary = json.loads(js.read_text())
+    assert summary["checked"] is True
+    assert summary["output_format"] == {"obj": "OBJ", "xml": "LandXML"}[ext]
     assert not (job / "check.ply").exists()  # the PLY copy goes after the check
     assert temporaries(tmp_path) == []
 
