@@ -300,3 +300,44 @@ def test_help_names_the_formats(gdt_bin, runner):
     r = runner([gdt_bin, "--help"])
     assert r.returncode == 0
     assert ".obj" in r.stdout and ".xml" in r.stdout and "LandXML" in r.stdout
+
+
+def _limit_file_size(limit):
+    def pre():
+        import resource
+        import signal
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # write() fails with EFBIG instead
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, resource.RLIM_INFINITY))
+    return pre
+
+
+@pytest.fixture(scope="module")
+def big_cloud(tmp_path_factory, runner):
+    # its text meshes exceed 16 MiB; the job's files and the OpenCL kernel
+    # cache stay far below
+    return gen(runner, tmp_path_factory.mktemp("big") / "b.las", 300000, 9)
+
+
+@pytest.mark.parametrize("ext", ["obj", "xml"])
+@pytest.mark.parametrize("mode", [["--reference"], ["--tile", "128"]])
+def test_write_failure_leaves_the_earlier_output(gdt_bin, runner, big_cloud, tmp_path, ext,
+                                                 mode):
+    """A write that fails half-way (the file size limit: EFBIG, as on a full
+    disk) exits 4 and leaves the files of an earlier run as they were: no
+    half-written mesh, no new .prj beside the old mesh, no temporaries."""
+    out, prj, job = tmp_path / f"m.{ext}", tmp_path / "m.prj", tmp_path / "job"
+    jobargs = [] if mode == ["--reference"] else ["--job", job]
+    out.write_bytes(b"earlier mesh\n")
+    prj.write_bytes(b"earlier prj\n")
+    r = runner([gdt_bin, big_cloud, *mode, "-q", *jobargs, "-o", out],
+               preexec_fn=_limit_file_size(16 << 20))
+    assert r.returncode == 4 and "GDT-4712" in r.stderr, r.stderr
+    assert out.read_bytes() == b"earlier mesh\n"
+    assert prj.read_bytes() == b"earlier prj\n"
+    assert temporaries(tmp_path) == []
+    if jobargs:  # the job stays: the same command completes it
+        r = runner([gdt_bin, big_cloud, *mode, "-q", *jobargs, "-o", out])
+        assert r.returncode == 0, r.stderr
+        assert out.read_bytes().startswith(b"# gdt-tile " if ext == "obj" else b"<?xml ")
+        assert (ext == "obj") == (prj.read_bytes() != b"earlier prj\n")
+        assert temporaries(tmp_path) == []
