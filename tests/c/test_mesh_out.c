@@ -19,7 +19,12 @@
  *  - the bytes do not depend on LC_NUMERIC (a comma-decimal locale, made
  *    with localedef in the work folder when none is installed; skipped with
  *    a note when that is impossible);
- *  - the format follows the extension, case-insensitively.
+ *  - the format follows the extension, case-insensitively;
+ *  - the linear unit of WKT 1 and WKT 2 strings (foot, US survey foot,
+ *    metre; the base CRS's degree ignored), and hostile WKT (unbalanced
+ *    brackets, open quotes) read without fault;
+ *  - pyproj-independent facts of the WKT made for UTM codes (name, central
+ *    meridian, false northing; tests/python checks them against pyproj).
  */
 #include <dirent.h>
 #include <errno.h>
@@ -36,6 +41,7 @@
 
 #include "gdt_check.h"
 #include "gdt_mesh_out.h"
+#include "private/mesh_crs.h"
 
 typedef struct tctx {
     char dir[4096];
@@ -554,6 +560,67 @@ static void test_locale(tctx *t)
     unlink(path);
 }
 
+static void test_crs(tctx *t)
+{
+    static const struct {
+        const char *wkt;
+        int foot;
+    } cases[] = {
+        {"PROJCS[\"NAD83 / California zone 3 (ftUS)\",GEOGCS[\"NAD83\",UNIT[\"degree\","
+         "0.0174532925199433]],PROJECTION[\"Lambert_Conformal_Conic_2SP\"],"
+         "UNIT[\"US survey foot\",0.304800609601219]]",
+         2},
+        {"PROJCS[\"x\",GEOGCS[\"y\",UNIT[\"degree\",0.01745]],UNIT[\"foot\",0.3048]]", 1},
+        {"PROJCS[\"x\",GEOGCS[\"y\",UNIT[\"degree\",0.01745]],UNIT[\"metre\",1]]", 0},
+        {"COMPD_CS[\"c\",PROJCS[\"x\",GEOGCS[\"y\",UNIT[\"degree\",1]],UNIT[\"Foot_US\","
+         "0.3048006096]],VERT_CS[\"v\",UNIT[\"metre\",1]]]",
+         2},
+        {"PROJCRS[\"NAD83(2011) / Texas Central (ftUS)\",BASEGEOGCRS[\"NAD83(2011)\","
+         "ANGLEUNIT[\"degree\",0.0174532925199433]],CONVERSION[\"c\",METHOD[\"LCC\"],"
+         "PARAMETER[\"Latitude\",30,ANGLEUNIT[\"degree\",0.01745],LENGTHUNIT[\"metre\",1]]],"
+         "CS[Cartesian,2],AXIS[\"easting (X)\",east,ORDER[1],LENGTHUNIT[\"US survey foot\","
+         "0.304800609601219]]]",
+         2},
+        {"PROJCRS[\"WGS 84 / UTM zone 33N\",BASEGEOGCRS[\"WGS 84\",ANGLEUNIT[\"degree\","
+         "0.0174532925199433]],CS[Cartesian,2],AXIS[\"(E)\",east,LENGTHUNIT[\"metre\",1]]]",
+         0},
+        {"GEOGCS[\"WGS 84\",UNIT[\"degree\",0.0174532925199433]]", 0},
+        {"PROJCS[\"unterminated", 0},
+        {"PROJCS[[[[[[[[", 0},
+        {"]]]]PROJCS[\"a\"]]]]UNIT[\"foot\"", 0},
+        {"PROJCS(\"a\",UNIT(\"feet\",0.3048))", 1},
+        {"PROJCS[\"a \"\"quoted\"\" UNIT[\"\"foot\",UNIT[\"metre\",1]]", 0},
+        {"", 0},
+    };
+    char *s;
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++)
+        CHECK(t, gdt_mesh_crs_wkt_foot(cases[i].wkt) == cases[i].foot, "case %zu (%s): %d", i,
+              cases[i].wkt, gdt_mesh_crs_wkt_foot(cases[i].wkt));
+    CHECK(t, gdt_mesh_crs_wkt_foot(NULL) == 0, "NULL WKT");
+    s = gdt_mesh_crs_wkt_of_epsg(32719, NULL);
+    CHECK(t, s != NULL && strstr(s, "\"WGS 84 / UTM zone 19S\"") != NULL &&
+                 strstr(s, "\"central_meridian\",-69]") != NULL &&
+                 strstr(s, "\"false_northing\",10000000]") != NULL && gdt_mesh_crs_wkt_foot(s) == 0,
+          "32719: %s", s ? s : "NULL");
+    free(s);
+    s = gdt_mesh_crs_wkt_of_epsg(26901, NULL);
+    CHECK(t, s != NULL && strstr(s, "\"NAD83 / UTM zone 1N\"") != NULL &&
+                 strstr(s, "\"central_meridian\",-177]") != NULL,
+          "26901: %s", s ? s : "NULL");
+    free(s);
+    s = gdt_mesh_crs_wkt_of_epsg(32761, NULL);
+    CHECK(t, s != NULL && strstr(s, "UPS South") != NULL &&
+                 strstr(s, "\"latitude_of_origin\",-90]") != NULL,
+          "32761: %s", s ? s : "NULL");
+    free(s);
+    static const int none[] = {0, 4326, 26924, 32600, 32662, 32700, 2227, 3857, -1};
+    for (size_t i = 0; i < sizeof none / sizeof none[0]; i++) {
+        s = gdt_mesh_crs_wkt_of_epsg(none[i], NULL);
+        CHECK(t, s == NULL, "EPSG %d has WKT: %s", none[i], s);
+        free(s);
+    }
+}
+
 /* Removes the work folder (files, and the locale folder if made). */
 static void remove_workdir(const tctx *t)
 {
@@ -587,6 +654,7 @@ int main(int argc, char **argv)
     test_xml(&t);
     test_sticky(&t);
     test_locale(&t);
+    test_crs(&t);
 
     rc = gdt_check_finish(&t.c, "test_mesh_out");
     if (rc == 0)
