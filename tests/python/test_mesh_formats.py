@@ -341,3 +341,32 @@ def test_write_failure_leaves_the_earlier_output(gdt_bin, runner, big_cloud, tmp
         assert out.read_bytes().startswith(b"# gdt-tile " if ext == "obj" else b"<?xml ")
         assert (ext == "obj") == (prj.read_bytes() != b"earlier prj\n")
         assert temporaries(tmp_path) == []
+
+
+def _dead_pid():
+    pid = 4000000
+    while True:
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return pid
+        except PermissionError:
+            pass
+        pid -= 1
+
+
+def test_tiled_run_removes_temporaries_of_killed_writers(gdt_bin, runner, cloud, tmp_path):
+    """A killed run leaves its "<name>.tmp-<pid>" files; the next tiled run
+    removes those of dead processes, the .prj's included, and leaves a live
+    process's alone."""
+    out = tmp_path / "m.obj"
+    dead, live = _dead_pid(), os.getpid()
+    stale = [tmp_path / f"m.obj.tmp-{dead}", tmp_path / f"m.prj.tmp-{dead}"]
+    kept = tmp_path / f"m.prj.tmp-{live}"
+    for p in stale + [kept]:
+        p.write_bytes(b"half-written\n")
+    r = runner([gdt_bin, cloud, "--tile", 64, "-q", "-o", out])
+    assert r.returncode == 0, r.stderr
+    assert not any(p.exists() for p in stale)
+    assert kept.exists()
+    assert out.exists() and (tmp_path / "m.prj").exists()
