@@ -96,8 +96,8 @@ typedef struct gdt_mesh_meta {
     const char *crs_wkt;         /* the CRS as WKT (the input's), or NULL */
     const char *const *comments; /* printable ASCII lines (PLY: "comment" lines) */
     size_t ncomments;
-    int64_t stamp;               /* LandXML date/time, seconds since 1970 UTC */
-    gdt_log *log;                /* warning 3720; may be NULL */
+    int64_t stamp; /* LandXML date/time, seconds since 1970 UTC */
+    gdt_log *log;  /* warning 3720; may be NULL */
 } gdt_mesh_meta;
 
 typedef struct gdt_mesh_writer gdt_mesh_writer;
@@ -112,14 +112,12 @@ gdt_status gdt_mesh_create(gdt_mesh_writer **out, const char *path, gdt_mesh_for
 
 /* Appends n vertices (3n finite doubles x, y, z), only before the first
  * face.  returns: 3710/3701, 7713/7704, 7716/7707, 7710/7701, 4712/4702. */
-gdt_status gdt_mesh_write_vertices(gdt_mesh_writer *w, const double *xyz, size_t n,
-                                   gdt_error *err);
+gdt_status gdt_mesh_write_vertices(gdt_mesh_writer *w, const double *xyz, size_t n, gdt_error *err);
 
 /* Appends n faces (3n 0-based vertex indices, CCW; each in [0, vertices
  * written) and distinct within a face).  returns: 7714/7705, 7715/7706,
  * 7710/7701, 4712/4702. */
-gdt_status gdt_mesh_write_faces(gdt_mesh_writer *w, const int32_t *tri, size_t n,
-                                gdt_error *err);
+gdt_status gdt_mesh_write_faces(gdt_mesh_writer *w, const int32_t *tri, size_t n, gdt_error *err);
 
 uint64_t gdt_mesh_vertex_count(const gdt_mesh_writer *w);
 uint64_t gdt_mesh_face_count(const gdt_mesh_writer *w);

@@ -38,7 +38,7 @@ struct gdt_mesh_writer {
     char *path;
     char *tmp_path;
     char *dir_path;
-    char *prj_path;     /* OBJ only */
+    char *prj_path; /* OBJ only */
     char *prj_tmp;
     char *prj_wkt;
     int fd;
@@ -250,8 +250,8 @@ static gdt_status flush_buf(gdt_mesh_writer *w, gdt_error *err)
 {
     int e = w->fill > 0 ? gdt_fd_write_all(w->fd, w->buf, w->fill, -1) : 0;
     if (e != 0)
-        return wfail(w, err, GDT_EIO, 4712, "%s: write failed (temporary %s removed): %s",
-                     w->path, w->tmp_path, strerror(e));
+        return wfail(w, err, GDT_EIO, 4712, "%s: write failed (temporary %s removed): %s", w->path,
+                     w->tmp_path, strerror(e));
     w->fill = 0;
     return GDT_OK;
 }
@@ -304,8 +304,7 @@ static gdt_status put_xml_text(gdt_mesh_writer *w, const char *s, gdt_error *err
 
 /* Appends s on one line: control characters as spaces, bytes >= 0x80 as
  * '?'; in an XML comment (xml_comment) "--" is broken up as well. */
-static gdt_status put_line_text(gdt_mesh_writer *w, const char *s, int xml_comment,
-                                gdt_error *err)
+static gdt_status put_line_text(gdt_mesh_writer *w, const char *s, int xml_comment, gdt_error *err)
 {
     char prev = '\0';
     for (const unsigned char *p = (const unsigned char *)s; *p != '\0'; p++) {
@@ -361,8 +360,8 @@ static gdt_status check_meta(const char *path, const gdt_mesh_meta *meta, gdt_er
 }
 
 /* "sx sy ox oy" of the lattice, each exact. */
-static gdt_status lattice_text(gdt_mesh_writer *w, const gdt_lattice *L, char *out,
-                               size_t cap, gdt_error *err)
+static gdt_status lattice_text(gdt_mesh_writer *w, const gdt_lattice *L, char *out, size_t cap,
+                               gdt_error *err)
 {
     char num[4][40];
     const double v[4] = {L->sx, L->sy, L->ox, L->oy};
@@ -432,7 +431,8 @@ static gdt_status xml_header(gdt_mesh_writer *w, const gdt_mesh_meta *meta, cons
         return w->fail.status;
     snprintf(line, sizeof line,
              "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
-             "<!-- gdt-tile " GDT_VERSION " TIN; lattice %s -->\n", lat);
+             "<!-- gdt-tile " GDT_VERSION " TIN; lattice %s -->\n",
+             lat);
     if (puts_(w, line, err) != GDT_OK)
         return w->fail.status;
     for (size_t i = 0; i < meta->ncomments; i++)
@@ -477,9 +477,11 @@ static gdt_status xml_header(gdt_mesh_writer *w, const gdt_mesh_meta *meta, cons
         if (puts_(w, "/>\n", err) != GDT_OK)
             return w->fail.status;
     }
-    if (puts_(w, "<Application name=\"gdt-tile\" version=\"" GDT_VERSION "\" "
-                 "desc=\"exact Delaunay TIN of a point cloud\"/>\n"
-                 "<Surfaces>\n<Surface name=\"", err) != GDT_OK ||
+    if (puts_(w,
+              "<Application name=\"gdt-tile\" version=\"" GDT_VERSION "\" "
+              "desc=\"exact Delaunay TIN of a point cloud\"/>\n"
+              "<Surfaces>\n<Surface name=\"",
+              err) != GDT_OK ||
         put_stem_xml(w, err) != GDT_OK ||
         puts_(w, "\">\n<Definition surfType=\"TIN\">\n<Pnts>\n", err) != GDT_OK)
         return w->fail.status;
@@ -516,8 +518,7 @@ static gdt_status create_ply(gdt_mesh_writer *w, const char *path, const gdt_mes
 
 /* The .prj of an OBJ: its path checked, and either a WKT to write at
  * finish or a warning that there is none. */
-static gdt_status plan_prj(gdt_mesh_writer *w, const gdt_mesh_meta *meta, char *wkt,
-                           gdt_error *err)
+static gdt_status plan_prj(gdt_mesh_writer *w, const gdt_mesh_meta *meta, char *wkt, gdt_error *err)
 {
     struct stat sb;
     gdt_status st;
@@ -606,8 +607,7 @@ gdt_status gdt_mesh_create(gdt_mesh_writer **out, const char *path, gdt_mesh_for
     w->buf = malloc(GDT_MESH_BUFFER_BYTES);
     w->cloc = newlocale(LC_NUMERIC_MASK, "C", (locale_t)0);
     wkt = crs_wkt_of(meta, &oom);
-    if (w->path == NULL || w->dir_path == NULL || w->tmp_path == NULL || w->buf == NULL ||
-        oom) {
+    if (w->path == NULL || w->dir_path == NULL || w->tmp_path == NULL || w->buf == NULL || oom) {
         free(wkt);
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         goto fail;
@@ -671,8 +671,8 @@ static gdt_status text_vertices(gdt_mesh_writer *w, const double *xyz, size_t n,
         char *p;
         if (!isfinite(v[0]) || !isfinite(v[1]) || !isfinite(v[2]))
             return wfail(w, err, GDT_EINTERNAL, 7716,
-                         "%s: vertex %" PRIu64 " is not finite (%g %g %g)", w->path,
-                         w->nvert + i, v[0], v[1], v[2]);
+                         "%s: vertex %" PRIu64 " is not finite (%g %g %g)", w->path, w->nvert + i,
+                         v[0], v[1], v[2]);
         if (room(w, err) != GDT_OK)
             return w->fail.status;
         p = w->buf + w->fill;
@@ -704,8 +704,7 @@ static gdt_status text_vertices(gdt_mesh_writer *w, const double *xyz, size_t n,
     return GDT_OK;
 }
 
-gdt_status gdt_mesh_write_vertices(gdt_mesh_writer *w, const double *xyz, size_t n,
-                                   gdt_error *err)
+gdt_status gdt_mesh_write_vertices(gdt_mesh_writer *w, const double *xyz, size_t n, gdt_error *err)
 {
     gdt_status st;
     locale_t prev;
@@ -735,8 +734,7 @@ gdt_status gdt_mesh_write_vertices(gdt_mesh_writer *w, const double *xyz, size_t
     return st;
 }
 
-gdt_status gdt_mesh_write_faces(gdt_mesh_writer *w, const int32_t *tri, size_t n,
-                                gdt_error *err)
+gdt_status gdt_mesh_write_faces(gdt_mesh_writer *w, const int32_t *tri, size_t n, gdt_error *err)
 {
     int xml;
 
@@ -814,8 +812,8 @@ static gdt_status write_prj_tmp(gdt_mesh_writer *w, gdt_error *err)
     int fd = open(w->prj_tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
     int e;
     if (fd < 0)
-        return wfail(w, err, GDT_EIO, 4717, "%s: cannot create temporary file %s: %s",
-                     w->prj_path, w->prj_tmp, strerror(errno));
+        return wfail(w, err, GDT_EIO, 4717, "%s: cannot create temporary file %s: %s", w->prj_path,
+                     w->prj_tmp, strerror(errno));
     w->prj_tmp_exists = 1;
     e = gdt_fd_write_all(fd, w->prj_wkt, strlen(w->prj_wkt), -1);
     if (e == 0)
@@ -861,13 +859,13 @@ static gdt_status finish_text(gdt_mesh_writer *w, gdt_error *err)
     if (flush_buf(w, err) != GDT_OK)
         return w->fail.status;
     if (fsync(w->fd) != 0)
-        return wfail(w, err, GDT_EIO, 4713, "%s: fsync failed (temporary %s removed): %s",
-                     w->path, w->tmp_path, strerror(errno));
+        return wfail(w, err, GDT_EIO, 4713, "%s: fsync failed (temporary %s removed): %s", w->path,
+                     w->tmp_path, strerror(errno));
     e = close(w->fd);
     w->fd = -1;
     if (e != 0)
-        return wfail(w, err, GDT_EIO, 4714, "%s: close failed (temporary %s removed): %s",
-                     w->path, w->tmp_path, strerror(errno));
+        return wfail(w, err, GDT_EIO, 4714, "%s: close failed (temporary %s removed): %s", w->path,
+                     w->tmp_path, strerror(errno));
     if (w->prj_wkt != NULL && write_prj_tmp(w, err) != GDT_OK)
         return w->fail.status;
     if (recheck(w, w->path, err) != GDT_OK)
@@ -878,8 +876,8 @@ static gdt_status finish_text(gdt_mesh_writer *w, gdt_error *err)
         if (w->prj_wkt != NULL) {
             if (rename(w->prj_tmp, w->prj_path) != 0)
                 return wfail(w, err, GDT_EIO, 4715,
-                             "%s: cannot rename %s to it (temporaries removed): %s",
-                             w->prj_path, w->prj_tmp, strerror(errno));
+                             "%s: cannot rename %s to it (temporaries removed): %s", w->prj_path,
+                             w->prj_tmp, strerror(errno));
             w->prj_tmp_exists = 0;
             prj_placed = 1;
         } else if (unlink(w->prj_path) != 0 && errno != ENOENT) {
@@ -893,9 +891,9 @@ static gdt_status finish_text(gdt_mesh_writer *w, gdt_error *err)
         int re = errno;
         if (prj_placed)
             unlink(w->prj_path);
-        return wfail(w, err, GDT_EIO, 4715,
-                     "%s: cannot rename %s to it (temporary removed%s): %s", w->path,
-                     w->tmp_path, prj_placed ? ", and the new .prj with it" : "", strerror(re));
+        return wfail(w, err, GDT_EIO, 4715, "%s: cannot rename %s to it (temporary removed%s): %s",
+                     w->path, w->tmp_path, prj_placed ? ", and the new .prj with it" : "",
+                     strerror(re));
     }
     w->tmp_exists = 0;
     e = sync_dir(w->dir_path);

@@ -60,8 +60,8 @@ char *gdt_mesh_crs_wkt_of_epsg(int epsg, int *oom)
                  "PARAMETER[\"scale_factor\",0.9996],PARAMETER[\"false_easting\",500000],"
                  "PARAMETER[\"false_northing\",%d],%s,AXIS[\"Easting\",EAST],"
                  "AXIS[\"Northing\",NORTH],AUTHORITY[\"EPSG\",\"%d\"]]",
-                 datum, zone, south ? 'S' : 'N', geog, 6 * zone - 183, south ? 10000000 : 0,
-                 METRE, epsg);
+                 datum, zone, south ? 'S' : 'N', geog, 6 * zone - 183, south ? 10000000 : 0, METRE,
+                 epsg);
     return s;
 }
 

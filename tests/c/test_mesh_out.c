@@ -217,15 +217,15 @@ static void test_format_of(tctx *t)
         const char *path;
         gdt_mesh_format f;
     } cases[] = {
-        {"a.obj", GDT_MESH_OBJ},      {"A.OBJ", GDT_MESH_OBJ},   {"d/x.Obj", GDT_MESH_OBJ},
-        {"a.xml", GDT_MESH_LANDXML},  {"b.XmL", GDT_MESH_LANDXML}, {"a.ply", GDT_MESH_PLY},
-        {"a.obj.ply", GDT_MESH_PLY},  {"dir.obj/mesh", GDT_MESH_PLY}, {"mesh", GDT_MESH_PLY},
-        {".obj", GDT_MESH_PLY},       {"a.objx", GDT_MESH_PLY},  {"a.stl", GDT_MESH_PLY},
+        {"a.obj", GDT_MESH_OBJ},     {"A.OBJ", GDT_MESH_OBJ},        {"d/x.Obj", GDT_MESH_OBJ},
+        {"a.xml", GDT_MESH_LANDXML}, {"b.XmL", GDT_MESH_LANDXML},    {"a.ply", GDT_MESH_PLY},
+        {"a.obj.ply", GDT_MESH_PLY}, {"dir.obj/mesh", GDT_MESH_PLY}, {"mesh", GDT_MESH_PLY},
+        {".obj", GDT_MESH_PLY},      {"a.objx", GDT_MESH_PLY},       {"a.stl", GDT_MESH_PLY},
     };
     char *p;
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++)
-        CHECK(t, gdt_mesh_format_of(cases[i].path) == cases[i].f, "%s: format %d",
-              cases[i].path, (int)gdt_mesh_format_of(cases[i].path));
+        CHECK(t, gdt_mesh_format_of(cases[i].path) == cases[i].f, "%s: format %d", cases[i].path,
+              (int)gdt_mesh_format_of(cases[i].path));
     CHECK(t, gdt_mesh_format_of(NULL) == GDT_MESH_PLY, "NULL path");
     p = gdt_mesh_prj_path("d.v/x.OBJ", GDT_MESH_OBJ);
     CHECK(t, p != NULL && strcmp(p, "d.v/x.prj") == 0, "prj of d.v/x.OBJ: %s", p ? p : "NULL");
@@ -236,9 +236,9 @@ static void test_format_of(tctx *t)
 }
 
 /* A unit square split into two CCW triangles, plus a centre point. */
-static const double SQ_XYZ[3 * 5] = {480000.0, 4860000.0, 10.5,  480001.0,  4860000.0,
-                                     11.0,     480001.0,  4860001.0, 0.1, 480000.0,
-                                     4860001.0, -2.25,    480000.5,  4860000.5, 190.64000000000001};
+static const double SQ_XYZ[3 * 5] = {
+    480000.0, 4860000.0, 10.5,      480001.0, 4860000.0, 11.0,      480001.0,          4860001.0,
+    0.1,      480000.0,  4860001.0, -2.25,    480000.5,  4860000.5, 190.64000000000001};
 static const int32_t SQ_TRI[3 * 4] = {0, 1, 4, 1, 2, 4, 2, 3, 4, 3, 0, 4};
 
 static gdt_status write_square(const char *path, gdt_mesh_format f, const gdt_mesh_meta *m,
@@ -299,9 +299,10 @@ static void test_obj(tctx *t)
           got ? got : "(none)", expect);
     free(got);
     p = slurp(prj, &n);
-    CHECK(t, p != NULL && strncmp(p, "PROJCS[\"WGS 84 / UTM zone 33N\",GEOGCS[\"WGS 84\"", 45) == 0 &&
-                 strstr(p, "PARAMETER[\"central_meridian\",15]") != NULL &&
-                 strstr(p, "AUTHORITY[\"EPSG\",\"32633\"]]\n") != NULL,
+    CHECK(t,
+          p != NULL && strncmp(p, "PROJCS[\"WGS 84 / UTM zone 33N\",GEOGCS[\"WGS 84\"", 45) == 0 &&
+              strstr(p, "PARAMETER[\"central_meridian\",15]") != NULL &&
+              strstr(p, "AUTHORITY[\"EPSG\",\"32633\"]]\n") != NULL,
           "prj: %s", p ? p : "(none)");
     free(p);
 
@@ -363,21 +364,24 @@ static void test_xml(tctx *t)
           "namespace");
     CHECK(t, strstr(got, "version=\"1.2\" date=\"2023-11-14\" time=\"22:13:20\">") != NULL,
           "date and time from the stamp");
-    CHECK(t, strstr(got, "<Units><Imperial areaUnit=\"squareFoot\" linearUnit=\"USSurveyFoot\"") !=
-                 NULL,
+    CHECK(t,
+          strstr(got, "<Units><Imperial areaUnit=\"squareFoot\" linearUnit=\"USSurveyFoot\"") !=
+              NULL,
           "imperial units for a US survey foot CRS");
-    CHECK(t, strstr(got, "epsgCode=\"2227\" ogcWktCode=\"PROJCS[&quot;NAD83 / California zone 3 "
-                         "(ftUS)&quot;,") != NULL,
+    CHECK(t,
+          strstr(got, "epsgCode=\"2227\" ogcWktCode=\"PROJCS[&quot;NAD83 / California zone 3 "
+                      "(ftUS)&quot;,") != NULL,
           "CoordinateSystem");
-    CHECK(t, strstr(got, "<Surface name=\"Surf&amp;1\">\n<Definition surfType=\"TIN\">\n<Pnts>\n"
-                         "<P id=\"1\">4860000 480000 10.5</P>\n"
-                         "<P id=\"2\">4860000 480001 11</P>\n"
-                         "<P id=\"3\">4860001 480001 0.1</P>\n"
-                         "<P id=\"4\">4860001 480000 -2.25</P>\n"
-                         "<P id=\"5\">4860000.5 480000.5 190.64000000000001</P>\n"
-                         "</Pnts>\n<Faces>\n<F>1 2 5</F>\n<F>2 3 5</F>\n<F>3 4 5</F>\n"
-                         "<F>4 1 5</F>\n</Faces>\n</Definition>\n</Surface>\n</Surfaces>\n"
-                         "</LandXML>\n") != NULL,
+    CHECK(t,
+          strstr(got, "<Surface name=\"Surf&amp;1\">\n<Definition surfType=\"TIN\">\n<Pnts>\n"
+                      "<P id=\"1\">4860000 480000 10.5</P>\n"
+                      "<P id=\"2\">4860000 480001 11</P>\n"
+                      "<P id=\"3\">4860001 480001 0.1</P>\n"
+                      "<P id=\"4\">4860001 480000 -2.25</P>\n"
+                      "<P id=\"5\">4860000.5 480000.5 190.64000000000001</P>\n"
+                      "</Pnts>\n<Faces>\n<F>1 2 5</F>\n<F>2 3 5</F>\n<F>3 4 5</F>\n"
+                      "<F>4 1 5</F>\n</Faces>\n</Definition>\n</Surface>\n</Surfaces>\n"
+                      "</LandXML>\n") != NULL,
           "surface:\n%s", got);
     free(got);
     unlink(path);
@@ -388,9 +392,11 @@ static void test_xml(tctx *t)
     gdt_error_clear(&err);
     CHECK(t, write_square(path, GDT_MESH_LANDXML, &m, &err) == GDT_OK, "write: %s", err.msg);
     got = slurp(path, &n);
-    CHECK(t, got != NULL && strstr(got, "<Units><Metric areaUnit=\"squareMeter\" "
-                                        "linearUnit=\"meter\"") != NULL &&
-                 strstr(got, "<CoordinateSystem") == NULL,
+    CHECK(t,
+          got != NULL &&
+              strstr(got, "<Units><Metric areaUnit=\"squareMeter\" "
+                          "linearUnit=\"meter\"") != NULL &&
+              strstr(got, "<CoordinateSystem") == NULL,
           "metric, no CoordinateSystem: %s", got ? got : "(none)");
     free(got);
     unlink(path);
@@ -410,8 +416,7 @@ static void test_sticky(tctx *t)
         path_in(t, path, sizeof path, f == GDT_MESH_OBJ ? "sticky.obj" : "sticky.xml");
         /* vertices after faces */
         gdt_error_clear(&err);
-        CHECK(t, gdt_mesh_create(&w, path, (gdt_mesh_format)f, &m, &err) == GDT_OK, "%s",
-              err.msg);
+        CHECK(t, gdt_mesh_create(&w, path, (gdt_mesh_format)f, &m, &err) == GDT_OK, "%s", err.msg);
         CHECK(t, gdt_mesh_write_vertices(w, SQ_XYZ, 5, &err) == GDT_OK, "%s", err.msg);
         CHECK(t, gdt_mesh_write_faces(w, SQ_TRI, 1, &err) == GDT_OK, "%s", err.msg);
         gdt_error_clear(&err);
@@ -428,8 +433,7 @@ static void test_sticky(tctx *t)
 
         /* an index out of range */
         gdt_error_clear(&err);
-        CHECK(t, gdt_mesh_create(&w, path, (gdt_mesh_format)f, &m, &err) == GDT_OK, "%s",
-              err.msg);
+        CHECK(t, gdt_mesh_create(&w, path, (gdt_mesh_format)f, &m, &err) == GDT_OK, "%s", err.msg);
         CHECK(t, gdt_mesh_write_vertices(w, SQ_XYZ, 5, &err) == GDT_OK, "%s", err.msg);
         CHECK(t, gdt_mesh_write_faces(w, bad_tri, 1, &err) == GDT_EINTERNAL && err.code == 7714,
               "bad index: %d %s", err.code, err.msg);
@@ -472,8 +476,8 @@ static void test_sticky(tctx *t)
         CHECK(t, gdt_mesh_write_faces(w, SQ_TRI, 0, &err) == GDT_EIO && err.code == 4712,
               "sticky faces: %d %s", err.code, err.msg);
         gdt_error_clear(&err);
-        CHECK(t, gdt_mesh_finish(w, &err) == GDT_EIO && err.code == 4712,
-              "sticky finish: %d %s", err.code, err.msg);
+        CHECK(t, gdt_mesh_finish(w, &err) == GDT_EIO && err.code == 4712, "sticky finish: %d %s",
+              err.code, err.msg);
         CHECK(t, !exists(path) && count_temps(t) == 0, "files left after the write failure");
         free(xyz);
     }
@@ -515,8 +519,8 @@ static int comma_locale(const tctx *t)
         /* none installed: make one in the work folder, if localedef can */
         path_in(t, loc, sizeof loc, "locale");
         mkdir(loc, 0755);
-        snprintf(cmd, sizeof cmd,
-                 "localedef -i de_DE -f UTF-8 '%s/de_DE.UTF-8' >/dev/null 2>&1", loc);
+        snprintf(cmd, sizeof cmd, "localedef -i de_DE -f UTF-8 '%s/de_DE.UTF-8' >/dev/null 2>&1",
+                 loc);
         if (system(cmd) != 0)
             break;
         setenv("LOCPATH", loc, 1);
@@ -598,19 +602,22 @@ static void test_crs(tctx *t)
               cases[i].wkt, gdt_mesh_crs_wkt_foot(cases[i].wkt));
     CHECK(t, gdt_mesh_crs_wkt_foot(NULL) == 0, "NULL WKT");
     s = gdt_mesh_crs_wkt_of_epsg(32719, NULL);
-    CHECK(t, s != NULL && strstr(s, "\"WGS 84 / UTM zone 19S\"") != NULL &&
-                 strstr(s, "\"central_meridian\",-69]") != NULL &&
-                 strstr(s, "\"false_northing\",10000000]") != NULL && gdt_mesh_crs_wkt_foot(s) == 0,
+    CHECK(t,
+          s != NULL && strstr(s, "\"WGS 84 / UTM zone 19S\"") != NULL &&
+              strstr(s, "\"central_meridian\",-69]") != NULL &&
+              strstr(s, "\"false_northing\",10000000]") != NULL && gdt_mesh_crs_wkt_foot(s) == 0,
           "32719: %s", s ? s : "NULL");
     free(s);
     s = gdt_mesh_crs_wkt_of_epsg(26901, NULL);
-    CHECK(t, s != NULL && strstr(s, "\"NAD83 / UTM zone 1N\"") != NULL &&
-                 strstr(s, "\"central_meridian\",-177]") != NULL,
+    CHECK(t,
+          s != NULL && strstr(s, "\"NAD83 / UTM zone 1N\"") != NULL &&
+              strstr(s, "\"central_meridian\",-177]") != NULL,
           "26901: %s", s ? s : "NULL");
     free(s);
     s = gdt_mesh_crs_wkt_of_epsg(32761, NULL);
-    CHECK(t, s != NULL && strstr(s, "UPS South") != NULL &&
-                 strstr(s, "\"latitude_of_origin\",-90]") != NULL,
+    CHECK(t,
+          s != NULL && strstr(s, "UPS South") != NULL &&
+              strstr(s, "\"latitude_of_origin\",-90]") != NULL,
           "32761: %s", s ? s : "NULL");
     free(s);
     static const int none[] = {0, 4326, 26924, 32600, 32662, 32700, 2227, 3857, -1};
