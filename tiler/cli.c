@@ -40,7 +40,7 @@ typedef struct opt_spec {
 
 static const opt_spec OPTIONS[] = {
     {OPT_OUTPUT, "--output", "-o", "OUT.ply", "out.ply",
-     "output mesh (binary little-endian PLY)"},
+     "output mesh, by its extension (any case): .obj OBJ (+ .prj), .xml LandXML, else PLY"},
     {OPT_TILE, "--tile", NULL, "N", "4096",
      "tile size in texels per side: a power of two, 64..16384"},
     {OPT_CELL, "--cell", NULL, "S", "auto",
@@ -76,7 +76,9 @@ static const opt_spec OPTIONS[] = {
      "drop triangles from the convex hull inwards across edges longer than L, until no "
      "boundary edge is longer (water, voids and the hull's bridges)"},
     {OPT_CHECK, "--check", NULL, NULL, NULL,
-     "validate the written mesh exactly (not with --max-edge or --concavity)"},
+     "validate the written mesh exactly (a tiled .obj/.xml output: through a PLY copy of the "
+     "same records in the job directory; --reference/--single-tile: the mesh in memory); "
+     "not with --max-edge or --concavity"},
     {OPT_JSON, "--json", NULL, "FILE", NULL, "write a machine-readable run summary"},
     {OPT_QUIET, "--quiet", "-q", NULL, NULL, "no progress and no warnings on stderr"},
     {OPT_VERBOSE, "--verbose", "-v", NULL, NULL, "more detail (predicate counters, stages)"},
@@ -102,7 +104,11 @@ void gdt_cli_print_help(FILE *out)
             "       gdt-tile INPUT [INPUT ...] --info\n"
             "       gdt-tile --resume DIR\n\n"
             "INPUT: LAS 1.0-1.4 (point formats 0-10) or PCD (ascii, binary,\n"
-            "binary_compressed); several inputs form one cloud.\n\noptions:\n",
+            "binary_compressed); several inputs form one cloud.\n"
+            "OUT: .ply (binary PLY), .obj (Wavefront OBJ, 1-based CCW faces, and OUT.prj\n"
+            "with the CRS as WKT when known), .xml (LandXML 1.2 TIN surface: points as\n"
+            "northing easting elevation); written under a temporary name, then renamed.\n"
+            "\noptions:\n",
             GDT_VERSION);
     for (size_t i = 0; i < NOPTIONS; i++) {
         const opt_spec *o = &OPTIONS[i];

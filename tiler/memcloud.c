@@ -5,8 +5,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "gdt_ply.h"
+#include "gdt_mesh_out.h"
 #include "private/filter_report.h"
+#include "private/mesh_meta.h"
 #include "private/trim_report.h"
 #include "private/cli_modes.h"
 #include "private/run_stats.h"
@@ -58,6 +59,7 @@ gdt_status gdt_memcloud_load(gdt_memcloud *mc, const gdt_options *opts, gdt_log 
     gdt_status st;
 
     memset(mc, 0, sizeof *mc);
+    mc->log = log;
     memset(&co, 0, sizeof co);
     co.log = log;
     co.quantum = opts->quantum;
@@ -148,8 +150,8 @@ gdt_status gdt_memcloud_write(const gdt_memcloud *mc, const gdt_options *opts,
                               const gdt_mesh *mesh, gdt_trim_counts *tc, gdt_error *err)
 {
     const gdt_cloud_info *ci = gdt_cloud_get_info(mc->cloud);
-    gdt_ply_writer *w = NULL;
-    gdt_ply_meta meta;
+    gdt_mesh_writer *w = NULL;
+    gdt_mesh_meta meta;
     int64_t *canon = malloc((mesh->ntris > 0 ? 3 * mesh->ntris : 1) * sizeof *canon);
     double *xyz = malloc(3 * MC_CHUNK * sizeof *xyz);
     int32_t *tri = malloc(3 * MC_CHUNK * sizeof *tri);
@@ -158,14 +160,8 @@ gdt_status gdt_memcloud_write(const gdt_memcloud *mc, const gdt_options *opts,
     uint8_t *keep = NULL;
     gdt_status st;
 
-    memset(&meta, 0, sizeof meta);
-    meta.lattice = ci->lattice;
-    meta.epsg = ci->epsg;
-    meta.crs_wkt = ci->crs_wkt;
-    gdt_filter_report_comment(mc->cloud, filter, sizeof filter);
-    gdt_trim_report_comment(&opts->trim, trim, sizeof trim);
-    meta.comments = comments;
-    meta.ncomments = trim[0] != '\0' ? 2 : 1;
+    gdt_run_mesh_meta(mc->cloud, mc->log, &opts->trim, filter, sizeof filter, trim, sizeof trim,
+                      comments, &meta);
     if (xyz == NULL || tri == NULL || canon == NULL) {
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         goto fail;
@@ -173,7 +169,7 @@ gdt_status gdt_memcloud_write(const gdt_memcloud *mc, const gdt_options *opts,
     gdt_mesh_canonical(mesh, canon);
     st = trim_faces(mc, opts, canon, mesh->ntris, &keep, tc, err);
     if (st == GDT_OK)
-        st = gdt_ply_create(&w, opts->output, &meta, err);
+        st = gdt_mesh_create(&w, opts->output, gdt_mesh_format_of(opts->output), &meta, err);
     for (size_t i = 0; st == GDT_OK && i < mesh->nverts; i += MC_CHUNK) {
         size_t m = mesh->nverts - i < MC_CHUNK ? mesh->nverts - i : MC_CHUNK;
         for (size_t k = 0; k < m; k++) {
@@ -182,7 +178,7 @@ gdt_status gdt_memcloud_write(const gdt_memcloud *mc, const gdt_options *opts,
             xyz[3 * k + 1] = ci->lattice.oy + ci->lattice.sy * (double)p->y;
             xyz[3 * k + 2] = p->z;
         }
-        st = gdt_ply_write_vertices(w, xyz, m, err);
+        st = gdt_mesh_write_vertices(w, xyz, m, err);
     }
     for (size_t i = 0; st == GDT_OK && i < mesh->ntris; i += MC_CHUNK) {
         size_t m = mesh->ntris - i < MC_CHUNK ? mesh->ntris - i : MC_CHUNK, n = 0;
@@ -193,14 +189,14 @@ gdt_status gdt_memcloud_write(const gdt_memcloud *mc, const gdt_options *opts,
                 tri[3 * n + q] = (int32_t)canon[3 * (i + k) + q];
             n++;
         }
-        st = gdt_ply_write_faces(w, tri, n, err);
+        st = gdt_mesh_write_faces(w, tri, n, err);
     }
     if (st == GDT_OK) {
-        st = gdt_ply_finish(w, err);
+        st = gdt_mesh_finish(w, err);
         w = NULL;
     }
 fail:
-    gdt_ply_abort(w);
+    gdt_mesh_abort(w);
     free(keep);
     free(canon);
     free(tri);
@@ -241,6 +237,7 @@ gdt_status gdt_memcloud_json_head(gdt_json *j, const gdt_memcloud *mc, const gdt
     gdt_json_begin_object(j, NULL);
     gdt_json_string(j, "mode", mode);
     gdt_json_string(j, "output", opts->output);
+    gdt_json_string(j, "output_format", gdt_mesh_format_name(gdt_mesh_format_of(opts->output)));
     gdt_json_uint(j, "inputs", ci->ninputs);
     gdt_json_uint(j, "points", mc->read);
     gdt_json_uint(j, "vertices", mc->kept);

@@ -9,6 +9,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "gdt_mesh_out.h"
 #include "gdt_source.h"
 
 /* What a path is, for comparing paths: the same file when both exist with
@@ -231,17 +232,30 @@ done:
 
 gdt_status gdt_cli_check_paths(const gdt_options *opts, const char *job, gdt_error *err)
 {
-    gdt_outpath outs[3];
+    gdt_outpath outs[4];
     size_t n = 0;
+    char *prj = NULL;
+    gdt_status st;
 
     for (size_t i = 0; i < opts->ninputs; i++) {
-        gdt_status st = gdt_source_check_path(opts->inputs[i], err);
+        st = gdt_source_check_path(opts->inputs[i], err);
         if (st != GDT_OK)
             return st;
     }
-    if (opts->mode != GDT_MODE_INFO)
+    if (opts->mode != GDT_MODE_INFO) {
+        gdt_mesh_format f = gdt_mesh_format_of(opts->output);
         outs[n++] = (gdt_outpath){"-o", opts->output, 0};
+        /* an OBJ's CRS file is written and renamed like the mesh itself */
+        if (f == GDT_MESH_OBJ) {
+            prj = gdt_mesh_prj_path(opts->output, f);
+            if (prj == NULL)
+                return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+            outs[n++] = (gdt_outpath){"-o (its .prj)", prj, 0};
+        }
+    }
     outs[n++] = (gdt_outpath){"--json", opts->json, 0};
     outs[n++] = (gdt_outpath){"--job", job, 1};
-    return gdt_outpaths_check(opts->inputs, opts->ninputs, outs, n, err);
+    st = gdt_outpaths_check(opts->inputs, opts->ninputs, outs, n, err);
+    free(prj);
+    return st;
 }

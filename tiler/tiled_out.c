@@ -1,7 +1,8 @@
-/* tiled_out.c — the PLY of a tiled run, written beside the tile stage (see
+/* tiled_out.c — the mesh of a tiled run, written beside the tile stage (see
  * private/tiled_out.h). */
 #include "private/tiled_out.h"
 #include "gdt_grow.h"
+#include "gdt_ply.h"
 #include "private/tiled_files.h"
 #include "private/tiler_io.h"
 
@@ -19,7 +20,8 @@
  * quit is set once, by the caller. */
 struct tr_out {
     tr_out_src src;
-    gdt_ply_writer *w;    /* the writer thread's until it is joined */
+    gdt_mesh_writer *w;   /* the writer thread's until it is joined */
+    gdt_ply_writer *cw;   /* the check copy (src.check_ply), or NULL; likewise */
     pthread_t tid;
     int running;          /* a thread was started and not yet joined */
     pthread_mutex_t mu;
@@ -46,11 +48,12 @@ static int stopped(const tr_out *o)
 }
 
 /* Converts m face records (3 x u32 output indices, little-endian) from
- * o->raw and appends them to the PLY, less those drop marks (drop may be
- * NULL: none). */
+ * o->raw and appends them to the mesh (and its check copy), less those drop
+ * marks (drop may be NULL: none). */
 static gdt_status put_face_records(tr_out *o, size_t m, const uint8_t *drop, gdt_error *err)
 {
     size_t n = 0;
+    gdt_status st;
     for (size_t f = 0; f < m; f++) {
         if (drop != NULL && drop[f])
             continue;
@@ -58,7 +61,10 @@ static gdt_status put_face_records(tr_out *o, size_t m, const uint8_t *drop, gdt
             o->tri[3 * n + q] = (int32_t)tr_get_u32(o->raw + 4 * (3 * f + q));
         n++;
     }
-    return gdt_ply_write_faces(o->w, o->tri, n, err);
+    st = gdt_mesh_write_faces(o->w, o->tri, n, err);
+    if (st == GDT_OK && o->cw != NULL)
+        st = gdt_ply_write_faces(o->cw, o->tri, n, err);
+    return st;
 }
 
 /* The trim section of tile k's .tri file at path (nf faces, section at
@@ -256,7 +262,9 @@ static gdt_status write_vertices(tr_out *o, uint64_t k, gdt_error *err)
             o->xyz[3 * i + 1] = L->oy + L->sy * (double)o->pts[i].y;
             o->xyz[3 * i + 2] = o->pts[i].z;
         }
-        st = gdt_ply_write_vertices(o->w, o->xyz, m, err);
+        st = gdt_mesh_write_vertices(o->w, o->xyz, m, err);
+        if (st == GDT_OK && o->cw != NULL)
+            st = gdt_ply_write_vertices(o->cw, o->xyz, m, err);
         if (st != GDT_OK)
             break;
     }
@@ -265,7 +273,7 @@ static gdt_status write_vertices(tr_out *o, uint64_t k, gdt_error *err)
 }
 
 /* Removes what a killed writer left beside the output: "<name>.tmp-<pid>"
- * files (gdt_ply.h) whose process no longer exists. */
+ * files (gdt_mesh_out.h) whose process no longer exists. */
 static void remove_stale_temps(const char *output)
 {
     const char *slash = strrchr(output, '/');
@@ -339,11 +347,29 @@ static int quitting(tr_out *o)
     return q;
 }
 
-/* The writer: the PLY's header and vertices, then each tile's faces. */
+/* The PLY meta of the check copy. */
+static gdt_ply_meta check_meta(const gdt_mesh_meta *m)
+{
+    gdt_ply_meta p;
+    memset(&p, 0, sizeof p);
+    p.lattice = m->lattice;
+    p.epsg = m->epsg;
+    p.crs_wkt = m->crs_wkt;
+    p.comments = m->comments;
+    p.ncomments = m->ncomments;
+    return p;
+}
+
+/* The writer: the mesh's header and vertices, then each tile's faces. */
 static gdt_status write_tiles(tr_out *o, gdt_error *err)
 {
     uint64_t n = o->src.ntiles;
-    gdt_status st = gdt_ply_create(&o->w, o->src.output, &o->src.meta, err);
+    gdt_status st = gdt_mesh_create(&o->w, o->src.output, gdt_mesh_format_of(o->src.output),
+                                    &o->src.meta, err);
+    if (st == GDT_OK && o->src.check_ply != NULL) {
+        gdt_ply_meta pm = check_meta(&o->src.meta);
+        st = gdt_ply_create(&o->cw, o->src.check_ply, &pm, err);
+    }
     for (uint64_t k = 0; st == GDT_OK && k < n; k++)
         st = stopped(o) || quitting(o) ? tr_interrupted(o->src.job, "the output", err)
                                        : write_vertices(o, k, err);
@@ -372,7 +398,8 @@ static void *out_main(void *arg)
 
 static void out_free(tr_out *o)
 {
-    gdt_ply_abort(o->w);
+    gdt_mesh_abort(o->w);
+    gdt_ply_abort(o->cw);
     pthread_cond_destroy(&o->cv);
     pthread_mutex_destroy(&o->mu);
     free(o->xyz);
@@ -405,6 +432,14 @@ gdt_status tr_out_start(tr_out **out, const tr_out_src *src, gdt_error *err)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     }
     remove_stale_temps(src->output);
+    {
+        char *prj = gdt_mesh_prj_path(src->output, gdt_mesh_format_of(src->output));
+        if (prj != NULL)
+            remove_stale_temps(prj);
+        free(prj);
+    }
+    if (src->check_ply != NULL)
+        remove_stale_temps(src->check_ply);
     o->running = pthread_create(&o->tid, NULL, out_main, o) == 0;
     *out = o;
     return GDT_OK;
@@ -459,8 +494,12 @@ gdt_status tr_out_finish(tr_out *o, const char *merge_path, uint64_t merge_faces
     if (st == GDT_OK)
         st = stopped(o) ? tr_interrupted(o->src.job, "the output", err)
                         : copy_merge_faces(o, merge_path, merge_faces, err);
+    if (st == GDT_OK && o->cw != NULL) {
+        st = gdt_ply_finish(o->cw, err);
+        o->cw = NULL;
+    }
     if (st == GDT_OK) {
-        st = gdt_ply_finish(o->w, err);
+        st = gdt_mesh_finish(o->w, err);
         o->w = NULL;
     }
     *tc = o->tc;

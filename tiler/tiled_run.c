@@ -22,6 +22,7 @@
 #include "gdt_grow.h"
 #include "gdt_mesh.h"
 #include "gdt_ocl.h"
+#include "gdt_mesh_out.h"
 #include "gdt_ply.h"
 #include "gdt_plycheck.h"
 #include "gdt_seam.h"
@@ -29,6 +30,7 @@
 #include "private/filter_report.h"
 #include "private/cli_modes.h"
 #include "private/job.h"
+#include "private/mesh_meta.h"
 #include "private/json_out.h"
 #include "private/outpaths.h"
 #include "private/progress.h"
@@ -114,7 +116,8 @@ struct tr_ctx {
     tr_slot slot[2];    /* tile k uses slot[k & 1] */
     tr_post post;
     tr_reclaim reclaim;
-    tr_out *out;        /* the PLY writer, from the tile stage on */
+    tr_out *out;        /* the mesh writer, from the tile stage on */
+    char *check_ply;    /* --check of a text output: the PLY copy in the job; owned */
     uint8_t *cert;
     size_t cap_cert;
     uint32_t *count;    /* bucket counts for the face sort */
@@ -910,27 +913,30 @@ fail:
     return st;
 }
 
-/* Appends the faces of <job>/merge.faces to the PLY; the file must hold
- * exactly the c->s.merge_faces faces the merge counted. */
-/* --check: the exact streaming validator on the written PLY (bounded
- * memory, temporary files in the job directory).  A mesh that fails is
- * renamed to OUT.ply.rejected, so no invalid file stays at the output path. */
+/* --check: the exact streaming validator on the written mesh (bounded
+ * memory, temporary files in the job directory).  A PLY output is read
+ * back itself; an OBJ or LandXML output through the PLY copy of the same
+ * records that the writer thread wrote beside it (every number of the text
+ * was verified to read back as the same double when written).  A mesh
+ * that fails is renamed to OUT.rejected, so no invalid file stays at the
+ * output path. */
 static gdt_status check_output(tr_ctx *c, gdt_error *err)
 {
     gdt_plycheck_opts po;
     gdt_plycheck_result res;
     gdt_status st;
+    const char *path = c->check_ply != NULL ? c->check_ply : c->opts->output;
 
     gdt_plycheck_opts_init(&po);
     if (c->opts->mem_budget != 0)
         po.mem_budget = (size_t)c->opts->mem_budget;
     po.temp_dir = c->job;
-    st = gdt_ply_check(&po, c->opts->output, &res, err);
+    st = gdt_ply_check(&po, path, &res, err);
     if (st == GDT_OK && (res.vertices != c->s.vertices || res.faces != c->s.faces))
         st = gdt_error_set(err, GDT_EINTERNAL, 7821,
                            "%s: holds %" PRIu64 " vertices and %" PRIu64 " faces, the run made %"
                            PRIu64 " and %" PRIu64,
-                           c->opts->output, res.vertices, res.faces, c->s.vertices, c->s.faces);
+                           path, res.vertices, res.faces, c->s.vertices, c->s.faces);
     if (st == GDT_EINTERNAL) {
         size_t l = strlen(c->opts->output);
         char *bad = malloc(l + 10);
@@ -942,6 +948,8 @@ static gdt_status check_output(tr_ctx *c, gdt_error *err)
             free(bad);
         }
     }
+    if (c->check_ply != NULL)
+        unlink(c->check_ply);
     return st;
 }
 
@@ -956,6 +964,8 @@ static gdt_status write_summary(const tr_ctx *c, gdt_error *err)
     gdt_json_begin_object(&j, NULL);
     gdt_json_string(&j, "mode", "tiled");
     gdt_json_string(&j, "output", c->opts->output);
+    gdt_json_string(&j, "output_format",
+                    gdt_mesh_format_name(gdt_mesh_format_of(c->opts->output)));
     gdt_json_string(&j, "device", s->device);
     gdt_json_uint(&j, "points_read", s->points_read);
     gdt_filter_report_json(&j, c->cloud);
@@ -1168,7 +1178,7 @@ static void remove_job_files(const char *job, int final, int own_dir)
 {
     static const char *const names[] = {"job.db", "job.db-wal", "job.db-shm", "job.db-journal",
                                         "index.vdb", "index.vdb.tmp", MF_NAME,
-                                        MF_NAME ".tmp"};
+                                        MF_NAME ".tmp", CHECK_PLY_NAME};
     char *tiles = tr_path_join(job, "tiles");
     /* the journal first: a removal cut short by a crash must not leave a
      * journal that vouches for files already gone */
@@ -1571,8 +1581,8 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     c.s.vertices = c.base[ntiles];
     if (c.s.vertices > (uint64_t)INT32_MAX) {
         st = gdt_error_set(err, GDT_EINPUT, 3801,
-                           "%s: %" PRIu64 " distinct points; a PLY face index holds at most "
-                           "2^31 - 1",
+                           "%s: %" PRIu64 " distinct points; a face index of the output "
+                           "holds at most 2^31 - 1",
                            opts->inputs[0], c.s.vertices);
         goto fail;
     }
@@ -1587,15 +1597,18 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
             goto fail;
         memset(&os, 0, sizeof os);
         os.output = opts->output;
-        os.meta.lattice = ci->lattice;
-        os.meta.epsg = ci->epsg;
-        os.meta.crs_wkt = ci->crs_wkt;
-        gdt_filter_report_comment(c.cloud, filter_comment, sizeof filter_comment);
-        gdt_trim_report_comment(&opts->trim, trim_comment, sizeof trim_comment);
-        os.meta.comments = filter_comments;
-        os.meta.ncomments = trim_comment[0] != '\0' ? 2 : 1;
+        gdt_run_mesh_meta(c.cloud, &c.log, &opts->trim, filter_comment, sizeof filter_comment,
+                          trim_comment, sizeof trim_comment, filter_comments, &os.meta);
         os.trim = c.tgraph != NULL;
         os.concavity = c.trim.concavity > 0;
+        if (opts->check && gdt_mesh_format_of(opts->output) != GDT_MESH_PLY) {
+            c.check_ply = tr_path_join(c.job, CHECK_PLY_NAME);
+            if (c.check_ply == NULL) {
+                st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+                goto fail;
+            }
+            os.check_ply = c.check_ply;
+        }
         os.tiler = c.tiler;
         os.tiles_dir = c.tiles_dir;
         os.job = c.job;
@@ -1795,6 +1808,9 @@ fail:
     }
     gdt_job_close(c.jobdb);
     gdt_job_unlock(c.job, c.lock_fd, 0);
+    if (c.check_ply != NULL)
+        unlink(c.check_ply); /* a second copy of the mesh is no state to keep */
+    free(c.check_ply);
     free(c.tiles_dir);
     free(c.job);
     return st;

@@ -28,6 +28,7 @@ typedef struct gdt_memcloud {
     size_t kept;        /* after the --dup merge */
     int64_t min_x, min_y;
     double t_read;      /* seconds: open, read, merge, sort */
+    gdt_log *log;       /* the caller's (warnings of the writer); not owned */
 } gdt_memcloud;
 
 /* Opens the inputs of opts, reads every point, merges duplicates (--dup),
@@ -41,10 +42,11 @@ gdt_status gdt_memcloud_load(gdt_memcloud *mc, const gdt_options *opts, gdt_log 
                              const char *mode, gdt_error *err);
 void gdt_memcloud_free(gdt_memcloud *mc);
 
-/* Writes opts->output: vertex i = mc->pts[i] (mesh vertex i), faces in
- * canonical order, less those opts->trim drops (gdt_trim_mesh); *tc gets
- * the faces before trimming and the drops.  returns: the PLY writer's
- * errors, gdt_trim_mesh's. */
+/* Writes opts->output in the format of its extension (gdt_mesh_out.h):
+ * vertex i = mc->pts[i] (mesh vertex i), faces in canonical order, less
+ * those opts->trim drops (gdt_trim_mesh); *tc gets the faces before
+ * trimming and the drops.  returns: the mesh writer's errors,
+ * gdt_trim_mesh's. */
 gdt_status gdt_memcloud_write(const gdt_memcloud *mc, const gdt_options *opts,
                               const gdt_mesh *mesh, gdt_trim_counts *tc, gdt_error *err);
 

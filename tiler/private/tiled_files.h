@@ -20,6 +20,8 @@
 #define TR_SEAM_VERTEX 32 /* bytes of a seam vertex record */
 #define TR_CHUNK 65536 /* records per read or write */
 #define MF_NAME "merge.faces"
+/* --check of an OBJ or LandXML output: the PLY copy the checker reads */
+#define CHECK_PLY_NAME "check.ply"
 #define MF_MAGIC "GDTMRG01"
 #define MF_HEADER 16
 /* The trim section that ends a .tri file in a job with --max-edge or

@@ -1,6 +1,7 @@
-/* tiled_out.h — the PLY of a tiled run, written beside the tile stage.
+/* tiled_out.h — the mesh of a tiled run, written beside the tile stage.
  *
- * A writer thread creates the PLY under its temporary name (gdt_ply.h) and
+ * A writer thread creates the mesh (PLY, OBJ or LandXML by the output's
+ * extension: gdt_mesh_out.h) under its temporary name and
  * writes every vertex (tile by tile, from the .pts files); then, in tile
  * order, the certified faces of each tile (from its .tri file) as soon as
  * the tile stage reports the file written (tr_out_ready).  tr_out_finish
@@ -20,15 +21,17 @@
 #include <stdint.h>
 
 #include "gdt_error.h"
-#include "gdt_ply.h"
+#include "gdt_mesh_out.h"
 #include "gdt_tiler.h"
 #include "gdt_trim.h"
 
 typedef struct tr_out tr_out;
 
 typedef struct tr_out_src {
-    const char *output;          /* the PLY path */
-    gdt_ply_meta meta;           /* its strings outlive the writer */
+    const char *output;          /* the mesh path; its extension picks the format */
+    gdt_mesh_meta meta;          /* its strings outlive the writer */
+    const char *check_ply;       /* NULL, or a PLY path that receives the same records
+                                  * (--check of a text output: the checker reads PLY) */
     const gdt_tiler *tiler;      /* the tiles (read only while the writer runs) */
     const char *tiles_dir;
     const char *job;             /* for messages */
@@ -55,10 +58,11 @@ void tr_out_ready(tr_out *o, uint64_t n);
 void tr_out_set_trim(tr_out *o, const gdt_trim_graph *g);
 
 /* Waits until every tile's faces are written, then appends the merge's
- * merge_faces faces from merge_path and completes the PLY; *tc gets the
- * faces before trimming and the drops (zeros without src.trim).  Consumes o
- * (also on failure, when the temporary file is removed).
- * returns: GDT_OK; the PLY writer's errors (GDT_EIO 4xxx); GDT_EIO 4805,
+ * merge_faces faces from merge_path and completes the mesh (and the
+ * check_ply copy); *tc gets the faces before trimming and the drops (zeros
+ * without src.trim).  Consumes o (also on failure, when the temporary files
+ * are removed).
+ * returns: GDT_OK; the mesh writer's errors (GDT_EIO 47xx); GDT_EIO 4805,
  * GDT_EJOB 6801-6802 (a job file missing, foreign or short);
  * GDT_EINTERRUPTED 1302. */
 gdt_status tr_out_finish(tr_out *o, const char *merge_path, uint64_t merge_faces,

@@ -14,7 +14,7 @@
  *      written under a temporary name, fsync'd, renamed; a resumed run
  *      redoes the merge).  Memory: one row of seams and the merger's band,
  *      never all seams;
- *   4. the PLY (tiled_out.h, written by a thread from the start of stage 2
+ *   4. the mesh (tiled_out.h, written by a thread from the start of stage 2
  *      on): vertices tile by tile (each tile's points by lowest input
  *      ordinal), then every tile's certified faces, then the merge's faces
  *      round by round (each round's sorted).
