@@ -68,7 +68,7 @@ def trimmed(gdt_bin, las, out, *args):
     ("lidar", ("--max-edge", 1.5)),
     ("lidar", ("--concavity", 1.2)),
     ("voids", ("--concavity", 1.0)),
-    ("voids", ("--concavity", 0.6, "--max-edge", 2.0)),
+    pytest.param("voids", ("--concavity", 0.6, "--max-edge", 2.0), marks=pytest.mark.sanitize),
 ])
 def test_trim_equals_brute_force_for_every_tiling(gdt_bin, clouds, tmp_path, kind, rules):
     las = clouds[kind]
@@ -179,7 +179,8 @@ def test_rules_enter_the_job(gdt_bin, clouds, tmp_path):
     assert out.read_bytes() != first
 
 
-@pytest.mark.parametrize("stage,offset", [("tiles", 0.3), ("merge", 0.0)])
+@pytest.mark.parametrize("stage,offset", [("tiles", 0.3),
+                                          pytest.param("merge", 0.0, marks=pytest.mark.sanitize)])
 def test_killed_run_resumes_to_the_same_bytes(gdt_bin, clouds, tmp_path, stage, offset):
     las = clouds["lidar"]
     rules = ["--concavity", "1.2", "--max-edge", "3"]
