@@ -2,10 +2,12 @@
 #include "private/memcloud.h"
 
 #include <inttypes.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "gdt_ply.h"
+#include "gdt_raster.h"
 #include "private/filter_report.h"
 #include "private/cli_modes.h"
 #include "private/run_stats.h"
@@ -159,7 +161,63 @@ fail:
     return st;
 }
 
-gdt_status gdt_memcloud_finish(const gdt_memcloud *mc, const gdt_options *opts,
+gdt_status gdt_memcloud_dem(gdt_memcloud *mc, const gdt_options *opts, const gdt_mesh *mesh,
+                            gdt_pred_stats *pred, gdt_error *err)
+{
+    const gdt_cloud_info *ci = gdt_cloud_get_info(mc->cloud);
+    gdt_raster_grid grid;
+    gdt_dem_opts dop;
+    gdt_dem *w = NULL;
+    int64_t max_x = mc->min_x, max_y = mc->min_y;
+    double t0 = gdt_now();
+    gdt_status st;
+
+    for (size_t i = 0; i < mc->kept; i++) {
+        if (mc->pts[i].x > max_x) max_x = mc->pts[i].x;
+        if (mc->pts[i].y > max_y) max_y = mc->pts[i].y;
+    }
+    st = gdt_raster_grid_define(&grid, &ci->lattice, mc->min_x, mc->min_y, max_x, max_y,
+                                mc->kept, opts->dem_res, "--dem-res", err);
+    if (st != GDT_OK)
+        return st;
+    memset(&dop, 0, sizeof dop);
+    dop.nodata = opts->dem_nodata;
+    dop.mem_budget = opts->mem_budget;
+    dop.epsg = ci->epsg;
+    dop.crs_wkt = ci->crs_wkt;
+    dop.preview = opts->preview;
+    st = gdt_dem_create(&w, &grid.geo, opts->dem, &dop, err);
+    if (st == GDT_OK)
+        st = gdt_raster_faces(&grid, pred, mc->pts, mc->kept, mesh->tri, mesh->ntris,
+                              gdt_dem_sink, w, err);
+    if (st == GDT_OK)
+        st = gdt_cli_check_stop(opts, "the DEM", err);
+    if (st != GDT_OK) {
+        gdt_dem_abort(w);
+        return st;
+    }
+    st = gdt_dem_finish(w, &mc->dem_stats, err);
+    if (st != GDT_OK)
+        return st;
+    mc->dem_done = 1;
+    mc->dem_geo = grid.geo;
+    mc->t_dem = gdt_now() - t0;
+    return GDT_OK;
+}
+
+void gdt_memcloud_print_dem(const gdt_memcloud *mc, const gdt_options *opts)
+{
+    if (!mc->dem_done || opts->verbosity < 0)
+        return;
+    fprintf(stderr,
+            "gdt-tile: %s: DEM of %" PRId64 " x %" PRId64 " cells of %.17g, %" PRIu64
+            " with a value%s%s\n",
+            opts->dem, mc->dem_geo.ncols, mc->dem_geo.nrows, mc->dem_geo.res_x,
+            mc->dem_stats.cells_written, opts->preview != NULL ? "; preview " : "",
+            opts->preview != NULL ? opts->preview : "");
+}
+
+gdt_status gdt_memcloud_finish(gdt_memcloud *mc, const gdt_options *opts,
                                const gdt_mesh *mesh, gdt_pred_stats *pred, double *t_check,
                                double *t_write, int *checked, gdt_error *err)
 {
@@ -177,6 +235,8 @@ gdt_status gdt_memcloud_finish(const gdt_memcloud *mc, const gdt_options *opts,
     t0 = gdt_now();
     st = gdt_memcloud_write(mc, opts, mesh, err);
     *t_write = gdt_now() - t0;
+    if (st == GDT_OK && opts->dem != NULL)
+        st = gdt_memcloud_dem(mc, opts, mesh, pred, err);
     return st;
 }
 
@@ -196,6 +256,23 @@ gdt_status gdt_memcloud_json_head(gdt_json *j, const gdt_memcloud *mc, const gdt
     gdt_json_uint(j, "duplicates_merged", mc->read - mc->kept);
     gdt_json_uint(j, "faces", faces);
     gdt_json_string(j, "crs", ci->crs_desc);
+    if (mc->dem_done) {
+        gdt_json_begin_object(j, "dem");
+        gdt_json_string(j, "path", opts->dem);
+        if (opts->preview != NULL)
+            gdt_json_string(j, "preview", opts->preview);
+        gdt_json_double(j, "res", mc->dem_geo.res_x);
+        gdt_json_uint(j, "cols", (uint64_t)mc->dem_geo.ncols);
+        gdt_json_uint(j, "rows", (uint64_t)mc->dem_geo.nrows);
+        gdt_json_double(j, "west", mc->dem_geo.west);
+        gdt_json_double(j, "north", mc->dem_geo.north);
+        gdt_json_uint(j, "cells_with_value", mc->dem_stats.cells_written);
+        gdt_json_uint(j, "blocks", mc->dem_stats.blocks);
+        gdt_json_uint(j, "cache_blocks", mc->dem_stats.cache_blocks);
+        gdt_json_uint(j, "spills", mc->dem_stats.spills);
+        gdt_json_double(j, "seconds", mc->t_dem);
+        gdt_json_end_object(j);
+    }
     gdt_filter_report_json(j, mc->cloud);
     return GDT_OK;
 }

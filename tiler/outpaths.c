@@ -231,7 +231,7 @@ done:
 
 gdt_status gdt_cli_check_paths(const gdt_options *opts, const char *job, gdt_error *err)
 {
-    gdt_outpath outs[3];
+    gdt_outpath outs[5];
     size_t n = 0;
 
     for (size_t i = 0; i < opts->ninputs; i++) {
@@ -242,6 +242,8 @@ gdt_status gdt_cli_check_paths(const gdt_options *opts, const char *job, gdt_err
     if (opts->mode != GDT_MODE_INFO)
         outs[n++] = (gdt_outpath){"-o", opts->output, 0};
     outs[n++] = (gdt_outpath){"--json", opts->json, 0};
+    outs[n++] = (gdt_outpath){"--dem", opts->dem, 0};
+    outs[n++] = (gdt_outpath){"--preview", opts->preview, 0};
     outs[n++] = (gdt_outpath){"--job", job, 1};
     return gdt_outpaths_check(opts->inputs, opts->ninputs, outs, n, err);
 }

@@ -17,6 +17,7 @@
 #include "gdt_cloud.h"
 #include "gdt_error.h"
 #include "gdt_mesh.h"
+#include "gdt_dem.h"
 #include "gdt_predicates.h"
 #include "private/json_out.h"
 
@@ -28,6 +29,11 @@ typedef struct gdt_memcloud {
     size_t kept;        /* after the --dup merge */
     int64_t min_x, min_y;
     double t_read;      /* seconds: open, read, merge, sort */
+    /* --dem, once written (gdt_memcloud_finish) */
+    int dem_done;
+    gdt_dem_geo dem_geo;
+    gdt_dem_stats dem_stats;
+    double t_dem;       /* seconds: rasterise and write the DEM (and preview) */
 } gdt_memcloud;
 
 /* Opens the inputs of opts, reads every point, merges duplicates (--dup),
@@ -46,15 +52,30 @@ void gdt_memcloud_free(gdt_memcloud *mc);
 gdt_status gdt_memcloud_write(const gdt_memcloud *mc, const gdt_options *opts,
                               const gdt_mesh *mesh, gdt_error *err);
 
+/* With opts->dem: the DEM of mesh (vertex i = mc->pts[i]) on the grid of
+ * opts->dem_res over the cloud's bounding box (gdt_raster_grid_define),
+ * every face rasterised into the streaming writer (budget
+ * opts->mem_budget, scratch files beside the DEM), and the preview;
+ * mc->dem_* filled.  returns: the grid's, the rasteriser's and the
+ * writer's errors. */
+gdt_status gdt_memcloud_dem(gdt_memcloud *mc, const gdt_options *opts, const gdt_mesh *mesh,
+                            gdt_pred_stats *pred, gdt_error *err);
+
+/* The summary line of the DEM on stderr (unless -q), when one was written. */
+void gdt_memcloud_print_dem(const gdt_memcloud *mc, const gdt_options *opts);
+
 /* With opts->check, verifies mesh exactly (gdt_check_mesh, then
  * gdt_check_delaunay; *t_check, *checked set), then writes it
- * (gdt_memcloud_write; *t_write).  pred accumulates the counters. */
-gdt_status gdt_memcloud_finish(const gdt_memcloud *mc, const gdt_options *opts,
+ * (gdt_memcloud_write; *t_write), then the DEM with opts->dem
+ * (gdt_memcloud_dem).  pred accumulates the counters. */
+gdt_status gdt_memcloud_finish(gdt_memcloud *mc, const gdt_options *opts,
                                const gdt_mesh *mesh, gdt_pred_stats *pred, double *t_check,
                                double *t_write, int *checked, gdt_error *err);
 
 /* Opens the --json summary of an in-memory mode and writes its head: mode,
- * output, inputs, points read, vertices, duplicates merged, faces and crs,
+ * output, inputs, points read, vertices, duplicates merged, faces, crs and
+ * with --dem a "dem" object (path, res, cols, rows, cells, blocks, spills,
+ * seconds),
  * inside the top-level object the caller goes on filling and closes with
  * gdt_json_end_object and gdt_json_close.  returns: gdt_json_open's
  * errors. */
