@@ -250,9 +250,15 @@ def test_real_samples_equal_the_oracle(gdt_bin, runner, tmp_path, data_dir):
         assert_same_cells(ours, oracle)
         header = read_ply(ply)[0]
         crs = [ln for ln in header.splitlines() if ln.startswith("comment crs ")]
+        wkt = info.get("coordinateSystem", {}).get("wkt", "").replace("\n", "")
         if crs and crs[0].startswith("comment crs EPSG:"):
             code = crs[0].split("EPSG:")[1].split()[0]
-            assert f'ID["EPSG",{code}]]' in info["coordinateSystem"]["wkt"].replace("\n", "")[-40:]
+            assert wkt.endswith(f'ID["EPSG",{code}]]')
+        elif crs and crs[0].startswith("comment crs PROJCS["):
+            name = crs[0].split('PROJCS["')[1].split('"')[0]
+            assert wkt.startswith(f'PROJCRS["{name}"')
+        else:
+            assert wkt == ""
 
 
 # ---- gdal_grid ------------------------------------------------------------
