@@ -283,6 +283,11 @@ gdt_status gdt_merger_round(gdt_merger *m, const gdt_seam *row, int64_t y_next, 
 /* The counters so far (owned by m). */
 const gdt_merge_stats *gdt_merger_stats(const gdt_merger *m);
 
+/* The band the last round kept for the next (by increasing id; owned by m,
+ * valid until the next call on m): the only vertices later faces can name
+ * besides the later rows'. */
+const gdt_seam_vertex *gdt_merger_band(const gdt_merger *m, size_t *n);
+
 /* The whole merge in one round (all seams at once, memory growing with
  * them): s->v sorted by strictly increasing id.  On success *faces
  * (malloc'ed, caller frees) holds 3 * *nfaces output indices: the triangles

@@ -206,6 +206,12 @@ void gdt_merger_destroy(gdt_merger *m)
     free(m);
 }
 
+const gdt_seam_vertex *gdt_merger_band(const gdt_merger *m, size_t *n)
+{
+    *n = m->nw;
+    return m->w;
+}
+
 const gdt_merge_stats *gdt_merger_stats(const gdt_merger *m)
 {
     return &m->st;

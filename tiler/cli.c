@@ -73,8 +73,7 @@ static const opt_spec OPTIONS[] = {
      "keep LAS points flagged withheld (dropped by default: the LAS spec deletes them)"},
     {OPT_DEM, "--dem", NULL, "OUT.tif", NULL,
      "also write the TIN as a DEM: a Cloud Optimized GeoTIFF (float32, the input's CRS), "
-     "each cell centre linearly interpolated in its triangle (--reference and "
-     "--single-tile only, for now)"},
+     "each cell centre linearly interpolated in its triangle"},
     {OPT_DEM_RES, "--dem-res", NULL, "R", "auto",
      "DEM cell size in CRS units, a multiple of the lattice step; grid aligned to "
      "multiples of R (auto: twice the mean point spacing, rounded to a lattice multiple)"},
@@ -483,10 +482,6 @@ static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
         return gdt_error_set(err, GDT_EUSAGE, 2606,
                              "--dem only applies to a triangulation run (not --info or "
                              "--resume)");
-    if (opts->dem != NULL && opts->mode == GDT_MODE_RUN && !opts->single_tile)
-        return gdt_error_set(err, GDT_EUSAGE, 2607,
-                             "--dem is not available in the tiled run yet: use --reference "
-                             "or --single-tile (the whole mesh in memory) for a DEM");
     return GDT_OK;
 }
 

@@ -4,6 +4,8 @@
 #include "private/tiled_files.h"
 #include "private/tiler_io.h"
 
+#include "gdt_grow.h"
+
 #include <dirent.h>
 #include <errno.h>
 #include <pthread.h>
@@ -31,6 +33,8 @@ struct tr_out {
     gdt_point *pts;       /* TR_CHUNK */
     int32_t *tri;         /* 3 TR_CHUNK */
     unsigned char *raw;   /* 12 TR_CHUNK */
+    gdt_point *tile_pts;  /* with a DEM: the points of the tile whose faces are copied */
+    size_t cap_tile_pts;
 };
 
 static int stopped(const tr_out *o)
@@ -65,8 +69,39 @@ static gdt_status copy_face_records(tr_out *o, FILE *f, const char *path, uint64
     return GDT_OK;
 }
 
+/* With a DEM: tile k's points (d->points of them) into o->tile_pts. */
+static gdt_status load_tile_points(tr_out *o, const gdt_tile_desc *d, gdt_error *err)
+{
+    tl_rfile rf;
+    char *path = NULL;
+    size_t n = 0;
+    gdt_status st;
+
+    if (gdt_grow(&o->tile_pts, &o->cap_tile_pts, (size_t)d->points + 1, sizeof *o->tile_pts,
+                 TR_CHUNK) != 0)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory (the DEM's tile points)");
+    memset(&rf, 0, sizeof rf);
+    rf.fd = -1;
+    st = tr_tile_path(o->src.tiles_dir, d, "pts", &path, err);
+    if (st == GDT_OK)
+        st = tl_rfile_open(&rf, path, d->points, TR_CHUNK, err);
+    while (st == GDT_OK && n < d->points) {
+        size_t m = 0;
+        st = tl_rfile_read(&rf, o->tile_pts + n, (size_t)d->points - n < TR_CHUNK
+                                                     ? (size_t)d->points - n : TR_CHUNK,
+                           &m, err);
+        if (st == GDT_OK && m == 0)
+            st = gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
+        n += m;
+    }
+    tl_rfile_close(&rf);
+    free(path);
+    return st;
+}
+
 /* The certified faces of tile k's .tri file, read with direct I/O (the
- * file is not needed in the page cache: the merge reads only its seam). */
+ * file is not needed in the page cache: the merge reads only its seam);
+ * with a DEM, rasterised too. */
 static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
 {
     gdt_tile_desc d;
@@ -79,6 +114,8 @@ static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
 
     memset(&r, 0, sizeof r);
     r.fd = -1;
+    if (st == GDT_OK && o->src.dem != NULL)
+        st = load_tile_points(o, &d, err);
     if (st == GDT_OK)
         st = tr_tile_path(o->src.tiles_dir, &d, "tri", &path, err);
     if (st == GDT_OK)
@@ -97,6 +134,9 @@ static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
             st = gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
         if (st == GDT_OK)
             st = put_face_records(o, m, err);
+        if (st == GDT_OK && o->src.dem != NULL)
+            st = tr_dem_tile_faces(o->src.dem, o->tile_pts, (size_t)d.points, o->src.base[k],
+                                   o->tri, m, err);
         done += m;
     }
     tr_dread_close(&r);
@@ -264,6 +304,7 @@ static void out_free(tr_out *o)
     free(o->pts);
     free(o->tri);
     free(o->raw);
+    free(o->tile_pts);
     free(o);
 }
 

@@ -33,6 +33,7 @@
 #include "private/progress.h"
 #include "private/run_stats.h"
 #include "private/tiled_files.h"
+#include "private/tiled_dem.h"
 #include "private/tiled_out.h"
 #include "private/tiler_io.h"
 
@@ -46,6 +47,10 @@ typedef struct tr_summary {
     char device[256];
     int resumed, pass2_reused;
     uint64_t tiles_reused, tiles_redone;
+    int dem_done;
+    gdt_dem_geo dem_geo;
+    gdt_dem_stats dem_stats;
+    double t_dem;
 } tr_summary;
 
 /* A finished tile file waiting for its journal record. */
@@ -110,6 +115,7 @@ struct tr_ctx {
     tr_post post;
     tr_reclaim reclaim;
     tr_out *out;        /* the PLY writer, from the tile stage on */
+    tr_dem *dem;        /* --dem: fed by the PLY writer thread and the merge */
     uint8_t *cert;
     size_t cap_cert;
     uint32_t *count;    /* bucket counts for the face sort */
@@ -764,7 +770,16 @@ static gdt_status merge_rows(tr_ctx *c, gdt_error *err)
                 goto fail;
             k1++;
         }
-        st = gdt_merger_round(m, &c->seam, y_next, k1 == ntiles, &f, &nf, err);
+        if (c->dem != NULL)
+            st = tr_dem_row(c->dem, &c->seam, pl->min_x, pl->min_y, c->tiler, c->tiles_dir,
+                            c->base, k, k1, err);
+        if (st == GDT_OK)
+            st = gdt_merger_round(m, &c->seam, y_next, k1 == ntiles, &f, &nf, err);
+        if (st == GDT_OK && c->dem != NULL) {
+            size_t nk = 0;
+            const gdt_seam_vertex *kept = gdt_merger_band(m, &nk);
+            st = tr_dem_round(c->dem, f, nf, kept, nk, err);
+        }
         if (st != GDT_OK)
             goto fail;
         for (size_t i = 0; i < nf; i++) {
@@ -856,6 +871,23 @@ static gdt_status write_summary(const tr_ctx *c, gdt_error *err)
     gdt_json_string(&j, "mode", "tiled");
     gdt_json_string(&j, "output", c->opts->output);
     gdt_json_string(&j, "device", s->device);
+    if (s->dem_done) {
+        gdt_json_begin_object(&j, "dem");
+        gdt_json_string(&j, "path", c->opts->dem);
+        if (c->opts->preview != NULL)
+            gdt_json_string(&j, "preview", c->opts->preview);
+        gdt_json_double(&j, "res", s->dem_geo.res_x);
+        gdt_json_uint(&j, "cols", (uint64_t)s->dem_geo.ncols);
+        gdt_json_uint(&j, "rows", (uint64_t)s->dem_geo.nrows);
+        gdt_json_double(&j, "west", s->dem_geo.west);
+        gdt_json_double(&j, "north", s->dem_geo.north);
+        gdt_json_uint(&j, "cells_with_value", s->dem_stats.cells_written);
+        gdt_json_uint(&j, "blocks", s->dem_stats.blocks);
+        gdt_json_uint(&j, "cache_blocks", s->dem_stats.cache_blocks);
+        gdt_json_uint(&j, "spills", s->dem_stats.spills);
+        gdt_json_double(&j, "seconds", s->t_dem);
+        gdt_json_end_object(&j);
+    }
     gdt_json_uint(&j, "points_read", s->points_read);
     gdt_filter_report_json(&j, c->cloud);
     gdt_json_uint(&j, "vertices", s->vertices);
@@ -1489,6 +1521,12 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
         os.base = c.base;
         os.ntiles = ntiles;
         os.stop = opts->stop;
+        if (opts->dem != NULL) {
+            st = tr_dem_create(&c.dem, opts, ci, c.plan, c.s.vertices, c.job, err);
+            if (st != GDT_OK)
+                goto fail;
+        }
+        os.dem = c.dem;
         st = tr_out_start(&c.out, &os, err);
         if (st != GDT_OK)
             goto fail;
@@ -1576,6 +1614,13 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
         c.out = NULL;
         free(mf);
     }
+    if (st == GDT_OK && c.dem != NULL) {
+        double t1 = gdt_now();
+        st = tr_dem_finish(c.dem, &c.s.dem_geo, &c.s.dem_stats, err);
+        c.dem = NULL;
+        c.s.dem_done = st == GDT_OK;
+        c.s.t_dem = gdt_now() - t1;
+    }
     if (st == GDT_OK)
         gdt_progress_update(&c.prog, 1);
     if (st == GDT_OK)
@@ -1609,6 +1654,13 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
                 c.s.faces > 0 ? 100.0 * (double)c.s.certified / (double)c.s.faces : 100.0,
                 c.s.merge.seam_vertices, c.s.device, c.s.t_total,
                 c.s.resumed ? ", resumed" : "", c.s.checked ? ", checked exactly" : "");
+    if (opts->verbosity >= 0 && c.s.dem_done)
+        fprintf(stderr,
+                "gdt-tile: %s: DEM of %" PRId64 " x %" PRId64 " cells of %.17g, %" PRIu64
+                " with a value%s%s\n",
+                opts->dem, c.s.dem_geo.ncols, c.s.dem_geo.nrows, c.s.dem_geo.res_x,
+                c.s.dem_stats.cells_written, opts->preview != NULL ? "; preview " : "",
+                opts->preview != NULL ? opts->preview : "");
     gdt_log_note(&c.log,
                  "times: pass 1 %.2f s, pass 2 %.2f s, tiles %.2f s (core %.2f, post %.2f, of which "
                  "certify %.2f), "
@@ -1630,7 +1682,8 @@ fail:
         gdt_error_clear(&e2);
         core_start_join(&cstart, &c.core, &e2);
         post_join(&c, &e2);
-        tr_out_abort(c.out);
+        tr_out_abort(c.out); /* its thread feeds the DEM: first */
+        tr_dem_abort(c.dem);
         reclaim_join(&c);
     }
     if (st == GDT_OK)

@@ -12,7 +12,10 @@
  * tiles go on and stay in the job, so a rerun only redoes the output.
  *
  * Threads: the caller's thread calls every function; the writer thread
- * only reads the tiler (tile descriptions), the files and src. */
+ * only reads the tiler (tile descriptions), the files and src, and writes
+ * into src.dem (tr_dem_tile_faces is thread-safe).  With a DEM the writer
+ * holds each tile's points while it copies the tile's faces (24 bytes a
+ * point of the largest tile). */
 #ifndef GDT_TILED_OUT_H
 #define GDT_TILED_OUT_H
 
@@ -22,6 +25,7 @@
 #include "gdt_error.h"
 #include "gdt_ply.h"
 #include "gdt_tiler.h"
+#include "private/tiled_dem.h"
 
 typedef struct tr_out tr_out;
 
@@ -34,6 +38,9 @@ typedef struct tr_out_src {
     const uint64_t *base;        /* ntiles + 1: output index of each tile's first vertex */
     uint64_t ntiles;
     volatile sig_atomic_t *stop; /* nonzero: stop (may be NULL) */
+    tr_dem *dem;                 /* --dem: each tile's certified faces are rasterised into
+                                    it as they are copied (NULL: no DEM); must outlive the
+                                    writer */
 } tr_out_src;
 
 /* Starts the writer (src is copied; the arrays and strings it points to
