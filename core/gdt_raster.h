@@ -85,8 +85,7 @@ int gdt_raster_unit(const gdt_lattice *lat, int64_t *ux, int64_t *uy);
 /* The default cell size: twice the mean point spacing sqrt(W H / n) of
  * the bounding box W x H (CRS units) of the n points (max(W, H) / (n - 1)
  * when the box is flat), rounded to the nearest multiple (at least one) of
- * the common unit; 0 when there is no common unit.  opt names the option
- * in messages. */
+ * the common unit; 0 when there is no common unit. */
 double gdt_raster_default_res(const gdt_lattice *lat, int64_t min_x, int64_t min_y,
                               int64_t max_x, int64_t max_y, uint64_t npoints);
 

@@ -281,6 +281,8 @@ static gdt_status slot_of(gdt_dem *w, int64_t b, size_t *slot, gdt_error *err)
                 return st;
             w->spilled[old >> 3] |= (uint8_t)(1u << (old & 7));
             map_remove(w, old);
+            if (old == w->last_block)
+                w->last_block = -1;
             w->stats.spills++;
         }
         if (is_spilled(w, b)) {

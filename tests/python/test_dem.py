@@ -203,6 +203,7 @@ def write_pcd(path, pts):
     return path
 
 
+@pytest.mark.sanitize
 def test_centres_on_vertices_edges_and_the_hull(gdt_bin, runner, tmp_path):
     """A square grid of unit spacing and cells of 2: every centre is a vertex or lies on
     edges, the hull's east and north sides included (nodata by the rule: only west and
@@ -397,6 +398,7 @@ def test_same_bytes_twice_any_budget_and_both_modes(gdt_bin, runner, tmp_path):
 
 # ---- the tiled run ------------------------------------------------------------
 
+@pytest.mark.sanitize
 @pytest.mark.parametrize("kind,tile_args", [
     ("lidar", ["--tile", "64", "--halo", "0"]),
     ("lidar", ["--tile", "64", "--halo", "3", "--threads", "1"]),
@@ -445,6 +447,7 @@ def test_tiled_dem_spills_and_resumes(gdt_bin, runner, tmp_path):
 
 # ---- options ----------------------------------------------------------------
 
+@pytest.mark.sanitize
 @pytest.mark.parametrize("args,code,word", [
     (["--dem-res", "0"], "2002", "--dem-res"),
     (["--dem-res", "-1"], "2002", "--dem-res"),
@@ -466,6 +469,7 @@ def test_bad_dem_values_exit_2(gdt_bin, runner, tmp_path, args, code, word):
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(("d.tif", "gdt-dem"))]
 
 
+@pytest.mark.sanitize
 @pytest.mark.parametrize("args,code", [
     (["--reference", "--preview", "{t}/p.png"], "2605"),
     (["--reference", "--dem-res", "1"], "2605"),
