@@ -54,7 +54,7 @@ gdt_status gdt_memcloud_load(gdt_memcloud *mc, const gdt_options *opts, gdt_log 
                              const char *mode, gdt_error *err)
 {
     gdt_cloud_opts co;
-    int64_t max_x, max_y;
+    int64_t max_x = 0, max_y = 0;
     double t0 = gdt_now();
     gdt_status st;
 
@@ -85,6 +85,14 @@ gdt_status gdt_memcloud_load(gdt_memcloud *mc, const gdt_options *opts, gdt_log 
     }
     if (mc->kept > 0) {
         st = gdt_cloud_check_span(mc->cloud, max_x - mc->min_x, max_y - mc->min_y, mode, err);
+        if (st != GDT_OK)
+            return st;
+    }
+    if (opts->dem != NULL) {
+        const gdt_cloud_info *ci = gdt_cloud_get_info(mc->cloud);
+        st = gdt_raster_grid_define(&mc->dem_grid, &ci->lattice, mc->min_x, mc->min_y,
+                                    max_x, max_y,
+                                    mc->kept, opts->dem_res, "--dem-res", err);
         if (st != GDT_OK)
             return st;
     }
@@ -165,30 +173,21 @@ gdt_status gdt_memcloud_dem(gdt_memcloud *mc, const gdt_options *opts, const gdt
                             gdt_pred_stats *pred, gdt_error *err)
 {
     const gdt_cloud_info *ci = gdt_cloud_get_info(mc->cloud);
-    gdt_raster_grid grid;
+    const gdt_raster_grid *grid = &mc->dem_grid;
     gdt_dem_opts dop;
     gdt_dem *w = NULL;
-    int64_t max_x = mc->min_x, max_y = mc->min_y;
     double t0 = gdt_now();
     gdt_status st;
 
-    for (size_t i = 0; i < mc->kept; i++) {
-        if (mc->pts[i].x > max_x) max_x = mc->pts[i].x;
-        if (mc->pts[i].y > max_y) max_y = mc->pts[i].y;
-    }
-    st = gdt_raster_grid_define(&grid, &ci->lattice, mc->min_x, mc->min_y, max_x, max_y,
-                                mc->kept, opts->dem_res, "--dem-res", err);
-    if (st != GDT_OK)
-        return st;
     memset(&dop, 0, sizeof dop);
     dop.nodata = opts->dem_nodata;
     dop.mem_budget = opts->mem_budget;
     dop.epsg = ci->epsg;
     dop.crs_wkt = ci->crs_wkt;
     dop.preview = opts->preview;
-    st = gdt_dem_create(&w, &grid.geo, opts->dem, &dop, err);
+    st = gdt_dem_create(&w, &grid->geo, opts->dem, &dop, err);
     if (st == GDT_OK)
-        st = gdt_raster_faces(&grid, pred, mc->pts, mc->kept, mesh->tri, mesh->ntris,
+        st = gdt_raster_faces(grid, pred, mc->pts, mc->kept, mesh->tri, mesh->ntris,
                               gdt_dem_sink, w, err);
     if (st == GDT_OK)
         st = gdt_cli_check_stop(opts, "the DEM", err);
@@ -200,7 +199,7 @@ gdt_status gdt_memcloud_dem(gdt_memcloud *mc, const gdt_options *opts, const gdt
     if (st != GDT_OK)
         return st;
     mc->dem_done = 1;
-    mc->dem_geo = grid.geo;
+    mc->dem_geo = grid->geo;
     mc->t_dem = gdt_now() - t0;
     return GDT_OK;
 }

@@ -34,6 +34,7 @@
 #include "private/run_stats.h"
 #include "private/tiled_files.h"
 #include "private/tiled_dem.h"
+#include "gdt_raster.h"
 #include "private/tiled_out.h"
 #include "private/tiler_io.h"
 
@@ -1454,6 +1455,20 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
                                    c.plan->max_y - c.plan->min_y, "the tiled run",
                                    err)) != GDT_OK)
         goto fail;
+    /* a --dem-res the lattice refuses (or a raster too large) is refused
+     * now, before pass 2; the grid itself is defined with the distinct
+     * point count after it */
+    if (opts->dem != NULL) {
+        gdt_raster_grid g;
+        const gdt_cloud_info *ci = gdt_cloud_get_info(c.cloud);
+        st = gdt_raster_grid_define(&g, &ci->lattice, c.plan->points > 0 ? c.plan->min_x : 0,
+                                    c.plan->points > 0 ? c.plan->min_y : 0,
+                                    c.plan->points > 0 ? c.plan->max_x : 0,
+                                    c.plan->points > 0 ? c.plan->max_y : 0, c.plan->points,
+                                    opts->dem_res, "--dem-res", err);
+        if (st != GDT_OK)
+            goto fail;
+    }
     t0 = gdt_now();
     st = gdt_job_stage_done(c.jobdb, "pass2", &done, err);
     if (st != GDT_OK)

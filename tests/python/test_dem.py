@@ -465,8 +465,16 @@ def test_bad_dem_values_exit_2(gdt_bin, runner, tmp_path, args, code, word):
                 *args])
     assert r.returncode == 2, r.stderr
     assert f"GDT-{code}" in r.stderr and word in r.stderr
-    assert not tif.exists()
+    assert not tif.exists() and not (tmp_path / "m.ply").exists()
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(("d.tif", "gdt-dem"))]
+
+
+def test_tiled_run_refuses_a_bad_cell_size_before_the_work(gdt_bin, runner, tmp_path):
+    cloud = gen(runner, tmp_path / "c.las", 2000, 1)
+    r = runner([gdt_bin, cloud, "--tile", "64", "-q", "-o", tmp_path / "m.ply", "--dem",
+                tmp_path / "d.tif", "--dem-res", "0.015"])
+    assert r.returncode == 2 and "GDT-2601" in r.stderr, r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.las"]
 
 
 @pytest.mark.sanitize

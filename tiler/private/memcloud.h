@@ -19,6 +19,7 @@
 #include "gdt_mesh.h"
 #include "gdt_dem.h"
 #include "gdt_predicates.h"
+#include "gdt_raster.h"
 #include "private/json_out.h"
 
 typedef struct gdt_memcloud {
@@ -29,7 +30,8 @@ typedef struct gdt_memcloud {
     size_t kept;        /* after the --dup merge */
     int64_t min_x, min_y;
     double t_read;      /* seconds: open, read, merge, sort */
-    /* --dem, once written (gdt_memcloud_finish) */
+    /* --dem: the grid (gdt_memcloud_load), what was written (gdt_memcloud_finish) */
+    gdt_raster_grid dem_grid;
     int dem_done;
     gdt_dem_geo dem_geo;
     gdt_dem_stats dem_stats;
@@ -37,10 +39,13 @@ typedef struct gdt_memcloud {
 } gdt_memcloud;
 
 /* Opens the inputs of opts, reads every point, merges duplicates (--dup),
- * sorts by ordinal and computes the local coordinates.  mode names the
- * mode in messages ("--reference").
+ * sorts by ordinal and computes the local coordinates; with opts->dem it
+ * defines the DEM grid (so that a --dem-res the lattice refuses stops the
+ * run before any triangulation).  mode names the mode in messages
+ * ("--reference").
  * returns: the readers' errors; GDT_EINPUT 3401 (the cloud spans more than
- *   2^31 - 1 lattice steps on an axis); GDT_EINTERNAL 7001.
+ *   2^31 - 1 lattice steps on an axis); gdt_raster_grid_define's; GDT_EINTERNAL
+ *   7001.
  * Ownership: mc is filled (zeroed first); release with gdt_memcloud_free,
  * also after a failure. */
 gdt_status gdt_memcloud_load(gdt_memcloud *mc, const gdt_options *opts, gdt_log *log,
@@ -52,12 +57,10 @@ void gdt_memcloud_free(gdt_memcloud *mc);
 gdt_status gdt_memcloud_write(const gdt_memcloud *mc, const gdt_options *opts,
                               const gdt_mesh *mesh, gdt_error *err);
 
-/* With opts->dem: the DEM of mesh (vertex i = mc->pts[i]) on the grid of
- * opts->dem_res over the cloud's bounding box (gdt_raster_grid_define),
- * every face rasterised into the streaming writer (budget
+/* With opts->dem: the DEM of mesh (vertex i = mc->pts[i]) on mc->dem_grid
+ * (opts->dem_res over the cloud's bounding box), every face rasterised into the streaming writer (budget
  * opts->mem_budget, scratch files beside the DEM), and the preview;
- * mc->dem_* filled.  returns: the grid's, the rasteriser's and the
- * writer's errors. */
+ * mc->dem_* filled.  returns: the rasteriser's and the writer's errors. */
 gdt_status gdt_memcloud_dem(gdt_memcloud *mc, const gdt_options *opts, const gdt_mesh *mesh,
                             gdt_pred_stats *pred, gdt_error *err);
 
