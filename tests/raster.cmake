@@ -4,3 +4,5 @@
 # Python oracle and gdal_grid are tests/python/test_dem.py.
 gdt_add_test_exe(test_raster ${CMAKE_CURRENT_SOURCE_DIR}/c/test_raster.c)
 add_test(NAME raster COMMAND test_raster ${CMAKE_CURRENT_BINARY_DIR}/raster-work)
+# The half-lattice predicates against Python's big integers (test_dem.py).
+gdt_add_test_exe(half_eval ${CMAKE_CURRENT_SOURCE_DIR}/tools/half_eval.c)

@@ -336,6 +336,56 @@ def test_agrees_with_gdal_grid(gdt_bin, runner, tmp_path):
     assert rel[both].max() <= 1e-6, f"largest difference {rel[both].max()}"
 
 
+# ---- the half-lattice predicates at extreme coordinates ----------------------
+
+def test_half_lattice_predicates_equal_big_integers(tool):
+    """gdt_orient2d_half_det, gdt_edge_owns_half and gdt_edge_owned_range against Python's
+    integers, up to |coordinate| = 2^60 (products of 2^122) and on lines."""
+    import random
+    rnd = random.Random(8)
+    lim = 1 << 60
+    lines, want = [], []
+    for t in range(3000):
+        big = t % 3 != 0
+        span = (lim if t % 5 else lim // 8) if big else 50
+
+        def c():
+            return rnd.randint(-span, span)
+        a, b = (c(), c()), (c(), c())
+        if t % 7 == 0:  # a horizontal edge
+            b = (b[0], a[1])
+        if t % 5 == 0:  # p on the line a-b: a + k (b - a)
+            k = rnd.randint(-2, 2)
+            p = (a[0] + k * (b[0] - a[0]), a[1] + k * (b[1] - a[1]))
+        else:
+            p = (c(), c())
+        lines.append(f"0 {a[0]} {a[1]} {b[0]} {b[1]} {p[0]} {p[1]}")
+        want.append(str(cross(a, b, p)))
+        if a != b:
+            lines.append(f"1 {a[0]} {a[1]} {b[0]} {b[1]} {p[0]} {p[1]}")
+            want.append("1" if owns(a, b, p) else "0")
+            dx = rnd.randint(1, (1 << 53) if big else 4)
+            x0 = rnd.randint(-(1 << 59), 1 << 59) if big else rnd.randint(-60, 0)
+            y = p[1] if t % 4 == 0 else c()
+            lo, hi = rnd.randint(0, 10), rnd.randint(10, 50)
+            lines.append(f"2 {a[0]} {a[1]} {b[0]} {b[1]} {x0} {dx} {y} {lo} {hi}")
+            ks = [k for k in range(lo, hi + 1) if owns(a, b, (x0 + k * dx, y))]
+            assert ks == list(range(ks[0], ks[-1] + 1)) if ks else True
+            want.append(f"{ks[0]} {ks[-1]}" if ks else None)
+    r = subprocess.run([str(tool("half_eval"))], input="\n".join(lines) + "\n",
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    got = r.stdout.split("\n")
+    for line, w, g in zip(lines, want, got):
+        if w is None:  # empty: lo > hi
+            lo, hi = map(int, g.split())
+            assert lo > hi, line
+        else:
+            assert g == w, f"{line}: {g}, want {w}"
+    assert len(got) == len(lines) + 1
+    assert sum(1 for ln, w in zip(lines, want) if ln[0] == "0" and w == "0") > 300
+
+
 # ---- the file --------------------------------------------------------------
 
 def test_cog_layout_crs_nodata_and_preview(gdt_bin, runner, tmp_path):
