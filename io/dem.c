@@ -15,6 +15,7 @@
 
 #include <errno.h>
 #include <fcntl.h>
+#include <float.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -190,7 +191,8 @@ gdt_status gdt_dem_create(gdt_dem **out, const gdt_dem_geo *geo, const char *pat
                              "%s: a DEM of %lld x %lld cells of %g x %g at (%g, %g) cannot be "
                              "written", path, (long long)geo->ncols, (long long)geo->nrows,
                              geo->res_x, geo->res_y, geo->west, geo->north);
-    if (!isfinite(opts->nodata) || (double)(float)opts->nodata != opts->nodata)
+    if (!isfinite(opts->nodata) || fabs(opts->nodata) > FLT_MAX ||
+        (double)(float)opts->nodata != opts->nodata)
         return gdt_error_set(err, GDT_EUSAGE, 2611,
                              "%s: the nodata value %.17g is not a finite float32", path,
                              opts->nodata);

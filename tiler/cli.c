@@ -75,8 +75,9 @@ static const opt_spec OPTIONS[] = {
      "also write the TIN as a DEM: a Cloud Optimized GeoTIFF (float32, the input's CRS), "
      "each cell centre linearly interpolated in its triangle"},
     {OPT_DEM_RES, "--dem-res", NULL, "R", "auto",
-     "DEM cell size in CRS units, a multiple of the lattice step; grid aligned to "
-     "multiples of R (auto: twice the mean point spacing, rounded to a lattice multiple)"},
+     "DEM cell size in CRS units, a whole number of lattice steps (other values are "
+     "refused); grid aligned to multiples of R (auto: twice the mean point spacing, "
+     "rounded to a lattice multiple)"},
     {OPT_DEM_NODATA, "--dem-nodata", NULL, "V", "-9999",
      "DEM value of cells outside the TIN (a finite float32)"},
     {OPT_PREVIEW, "--preview", NULL, "OUT.png", NULL,
