@@ -14,7 +14,7 @@
  * Threads: the caller's thread calls every function; the writer thread
  * only reads the tiler (tile descriptions), the files and src, and writes
  * into src.dem (tr_dem_tile_faces is thread-safe).  With a DEM the writer
- * holds each tile's points while it copies the tile's faces (24 bytes a
+ * holds each tile's points while it copies the tile's faces (32 bytes a
  * point of the largest tile). */
 #ifndef GDT_TILED_OUT_H
 #define GDT_TILED_OUT_H
