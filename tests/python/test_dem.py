@@ -475,6 +475,18 @@ def test_tiled_run_writes_the_reference_dem(gdt_bin, runner, tmp_path, kind, til
     assert not (til / "job").exists()
 
 
+def test_tiled_dem_of_a_real_sample(gdt_bin, runner, tmp_path, data_dir):
+    cloud = data_dir / "autzen_trim.las"
+    outs = []
+    for name, mode in [("ref", ("--reference",)), ("tiled", ("--tile", "128", "--halo", "1"))]:
+        d = tmp_path / name
+        d.mkdir()
+        _, tif, _ = run_dem(runner, gdt_bin, cloud, d, mode,
+                            ("--dem-res", "2", "--preview", d / "p.png"))
+        outs.append((tif.read_bytes(), (d / "p.png").read_bytes()))
+    assert outs[0] == outs[1]
+
+
 def test_tiled_dem_spills_and_resumes(gdt_bin, runner, tmp_path):
     """A raster larger than the DEM's share of the budget, and a rerun that reuses every
     tile: the same bytes as --reference."""
