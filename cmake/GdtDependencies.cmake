@@ -23,6 +23,10 @@ gdt_require(SQLITE3_FOUND libsqlite3-dev "SQLite 3")
 pkg_check_modules(GEOGRAPHICLIB QUIET IMPORTED_TARGET geographiclib)
 gdt_require(GEOGRAPHICLIB_FOUND libgeographiclib-dev "GeographicLib")
 
+# GDAL (the DEM GeoTIFF and its preview).
+pkg_check_modules(GDAL QUIET IMPORTED_TARGET gdal)
+gdt_require(GDAL_FOUND libgdal-dev "GDAL")
+
 # PCL (PCD input): only the io component.
 find_package(PCL QUIET COMPONENTS common io)
 gdt_require(PCL_FOUND libpcl-dev "PCL (Point Cloud Library)")

@@ -120,6 +120,50 @@ int gdt_circumdiameter_below(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c
 int gdt_circumdisk_misses_strip(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ipt c, int64_t x0,
                                 int64_t x1, int64_t y);
 
+/* ---- Half-lattice points (rasterisation of the TIN) --------------------
+ *
+ * Cell centres of a DEM grid lie on the half lattice: lattice coordinates
+ * that are integers or halves.  They are given in doubled coordinates
+ * (2x, 2y), lattice vertices too (2 ix, 2 iy), so that everything stays an
+ * integer.  These predicates take global (not tile-local) coordinates:
+ * precondition |x|, |y| <= GDT_HALF_MAX for every gdt_hpt, so that every
+ * difference fits in 62 bits, every cross product in 124 and their
+ * difference in 125: the arithmetic is exact in __int128 (GCC and Clang on
+ * 64-bit hosts; host code only, never in a kernel). */
+#define GDT_HALF_MAX (INT64_C(1) << 60)
+
+typedef struct gdt_hpt {
+    int64_t x, y; /* doubled lattice coordinates, |x|, |y| <= GDT_HALF_MAX */
+} gdt_hpt;
+
+__extension__ typedef __int128 gdt_i128;
+
+/* The exact orientation determinant (b - a) x (p - a) (positive when a, b,
+ * p turn counter-clockwise).  Counts one orient2d call. */
+gdt_i128 gdt_orient2d_half_det(gdt_pred_stats *st, gdt_hpt a, gdt_hpt b, gdt_hpt p);
+
+/* The half-open ownership rule of an edge u -> v of a counter-clockwise
+ * triangle (its interior on the left): returns 1 if p lies strictly left of
+ * the directed line u -> v, or on it and the edge is *owned*:
+ *     v.y < u.y, or v.y == u.y and v.x > u.x
+ * (in a counter-clockwise triangle: its west edges, going south, and its
+ * south edges, going east).  Equivalently, p is moved by (eps, eps^2) for
+ * an infinitesimal eps > 0 (east, then a much smaller step north) and then
+ * tested strictly.  For u != v exactly one of (u -> v) and (v -> u) owns a
+ * point on the line, so a point of the interior of a triangulated region
+ * belongs to exactly one triangle whose three edges own it (the moved point
+ * lies in the interior of exactly one triangle); points of the region's
+ * boundary belong to one triangle or to none.  Counts one orient2d call. */
+int gdt_edge_owns_half(gdt_pred_stats *st, gdt_hpt u, gdt_hpt v, gdt_hpt p);
+
+/* The same rule for the points p_k = (x0 + k dx, y) of a row, dx > 0:
+ * narrows [*lo, *hi] to the k of it whose point the edge u -> v owns, which
+ * is an interval (empty: *lo > *hi on return).  Exact (floor and ceiling
+ * divisions in 128 bits).  Precondition: every p_k with k in the given
+ * [*lo, *hi] obeys the half-lattice range.  Counts one orient2d call. */
+void gdt_edge_owned_range(gdt_pred_stats *st, gdt_hpt u, gdt_hpt v, int64_t x0, int64_t dx,
+                          int64_t y, int64_t *lo, int64_t *hi);
+
 /* Faults found by gdt_predicates_selftest (bit mask). */
 #define GDT_FPENV_CONTRACTION 0x1u /* a*b - c was fused into one rounding (FMA) */
 #define GDT_FPENV_REASSOC 0x2u     /* (a + b) - a was simplified, or extended precision */

@@ -197,6 +197,89 @@ int gdt_circumdisk_misses_strip(gdt_pred_stats *st, gdt_ipt a, gdt_ipt b, gdt_ip
 }
 
 /* ---------------------------------------------------------------------
+ * Half-lattice points (gdt_predicates.h: doubled coordinates, 128 bits).
+ * ------------------------------------------------------------------- */
+
+#define HALF_IN_RANGE(p)                                                                      \
+    ((p).x >= -GDT_HALF_MAX && (p).x <= GDT_HALF_MAX && (p).y >= -GDT_HALF_MAX              \
+     && (p).y <= GDT_HALF_MAX)
+
+static gdt_i128 half_det(gdt_hpt a, gdt_hpt b, gdt_hpt p)
+{
+    return (gdt_i128)(b.x - a.x) * (gdt_i128)(p.y - a.y) -
+           (gdt_i128)(b.y - a.y) * (gdt_i128)(p.x - a.x);
+}
+
+/* Whether the directed edge u -> v owns the points of its line. */
+static int edge_owned(gdt_hpt u, gdt_hpt v)
+{
+    return v.y < u.y || (v.y == u.y && v.x > u.x);
+}
+
+gdt_i128 gdt_orient2d_half_det(gdt_pred_stats *st, gdt_hpt a, gdt_hpt b, gdt_hpt p)
+{
+    assert(HALF_IN_RANGE(a) && HALF_IN_RANGE(b) && HALF_IN_RANGE(p));
+    if (st != NULL)
+        st->orient_calls++;
+    return half_det(a, b, p);
+}
+
+int gdt_edge_owns_half(gdt_pred_stats *st, gdt_hpt u, gdt_hpt v, gdt_hpt p)
+{
+    gdt_i128 d;
+    assert(HALF_IN_RANGE(u) && HALF_IN_RANGE(v) && HALF_IN_RANGE(p));
+    if (st != NULL)
+        st->orient_calls++;
+    d = half_det(u, v, p);
+    return d > 0 || (d == 0 && edge_owned(u, v));
+}
+
+/* ceil(n / d) for d > 0. */
+static gdt_i128 ceil_div128(gdt_i128 n, gdt_i128 d)
+{
+    gdt_i128 q = n / d;
+    return (n % d != 0 && n > 0) ? q + 1 : q;
+}
+
+/* E(k) = (v - u) x (p_k - u) = E0 - ey dx k with E0 = ex (y - u.y) -
+ * ey (x0 - u.x): linear in k, so the owned k form one interval:
+ *   ey == 0: E is constant; all k or none;
+ *   ey < 0 (the edge is owned, E(k) >= 0 wanted): k >= ceil(-E0 / (-ey dx));
+ *   ey > 0 (not owned, E(k) > 0 wanted): k < E0 / (ey dx), i.e.
+ *           k <= ceil(E0 / (ey dx)) - 1. */
+void gdt_edge_owned_range(gdt_pred_stats *st, gdt_hpt u, gdt_hpt v, int64_t x0, int64_t dx,
+                          int64_t y, int64_t *lo, int64_t *hi)
+{
+    gdt_i128 ex = (gdt_i128)v.x - u.x, ey = (gdt_i128)v.y - u.y;
+    gdt_i128 e0, a, bound;
+
+    assert(HALF_IN_RANGE(u) && HALF_IN_RANGE(v) && dx > 0);
+    if (st != NULL)
+        st->orient_calls++;
+    if (*lo > *hi)
+        return;
+    e0 = ex * ((gdt_i128)y - u.y) - ey * ((gdt_i128)x0 - u.x);
+    if (ey == 0) {
+        if (!(e0 > 0 || (e0 == 0 && edge_owned(u, v))))
+            *hi = *lo - 1;
+        return;
+    }
+    if (ey < 0) {
+        a = -ey * dx;
+        bound = ceil_div128(-e0, a);
+        if (bound > *lo)
+            *lo = bound > *hi ? *hi : (int64_t)bound;
+        if (bound > *hi)
+            *hi = *lo - 1;
+    } else {
+        a = ey * dx;
+        bound = ceil_div128(e0, a) - 1;
+        if (bound < *hi)
+            *hi = bound < *lo ? *lo - 1 : (int64_t)bound;
+    }
+}
+
+/* ---------------------------------------------------------------------
  * Floating-point environment self-test.
  *
  * Every probe reads its operands through volatile objects, so the compiler

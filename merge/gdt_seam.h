@@ -294,6 +294,7 @@ const double *gdt_merger_face_z(const gdt_merger *m);
 /* The counters so far (owned by m). */
 const gdt_merge_stats *gdt_merger_stats(const gdt_merger *m);
 
+
 /* The whole merge in one round (all seams at once, memory growing with
  * them): s->v sorted by strictly increasing id.  On success *faces
  * (malloc'ed, caller frees) holds 3 * *nfaces output indices: the triangles

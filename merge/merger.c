@@ -222,6 +222,7 @@ const double *gdt_merger_face_z(const gdt_merger *m)
     return m->fz;
 }
 
+
 const gdt_merge_stats *gdt_merger_stats(const gdt_merger *m)
 {
     return &m->st;

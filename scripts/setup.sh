@@ -30,6 +30,7 @@ APT_PACKAGES=(
   build-essential cmake pkg-config python3 python3-venv
   pocl-opencl-icd ocl-icd-opencl-dev opencl-headers clinfo
   libpcl-dev libopenvdb-dev libgeographiclib-dev libsqlite3-dev libcgal-dev
+  libgdal-dev gdal-bin
 )
 # The fuzz tree needs clang, and libFuzzer with clang's sanitizer runtimes
 # (libclang-rt-14-dev, which clang only recommends).

@@ -8,6 +8,7 @@
 #include "private/tiled_run.h"
 
 #include <errno.h>
+#include <float.h>
 #include <signal.h>
 #include <limits.h>
 #include <math.h>
@@ -25,7 +26,7 @@ typedef enum opt_id {
     OPT_THREADS, OPT_MEM, OPT_QUANTUM, OPT_DUP, OPT_CHECK, OPT_JSON, OPT_QUIET, OPT_VERBOSE,
     OPT_INFO, OPT_REFERENCE, OPT_SINGLE, OPT_KEEP_JOB, OPT_HELP, OPT_VERSION,
     OPT_KEEP_CLASS, OPT_DROP_CLASS, OPT_RETURNS, OPT_KEEP_WITHHELD, OPT_MAX_EDGE,
-    OPT_CONCAVITY
+    OPT_CONCAVITY, OPT_DEM, OPT_DEM_RES, OPT_DEM_NODATA, OPT_PREVIEW
 } opt_id;
 
 /* The option table: every option once, with its argument, default and help. */
@@ -75,6 +76,17 @@ static const opt_spec OPTIONS[] = {
     {OPT_CONCAVITY, "--concavity", NULL, "L", NULL,
      "drop triangles from the convex hull inwards across edges longer than L, until no "
      "boundary edge is longer (water, voids and the hull's bridges)"},
+    {OPT_DEM, "--dem", NULL, "OUT.tif", NULL,
+     "also write the TIN as a DEM: a Cloud Optimized GeoTIFF (float32, the input's CRS), "
+     "each cell centre linearly interpolated in its triangle (trimmed triangles: nodata)"},
+    {OPT_DEM_RES, "--dem-res", NULL, "R", "auto",
+     "DEM cell size in CRS units, a whole number of lattice steps (other values are "
+     "refused); grid aligned to multiples of R (auto: twice the mean point spacing, "
+     "rounded to a lattice multiple)"},
+    {OPT_DEM_NODATA, "--dem-nodata", NULL, "V", "-9999",
+     "DEM value of cells outside the TIN (a finite float32)"},
+    {OPT_PREVIEW, "--preview", NULL, "OUT.png", NULL,
+     "with --dem: a shaded-relief PNG of the DEM, at most 2048 pixels on its long side"},
     {OPT_CHECK, "--check", NULL, NULL, NULL,
      "validate the written mesh exactly (a tiled .obj/.xml output: through a PLY copy of the "
      "same records in the job directory; --reference/--single-tile: the mesh in memory); "
@@ -160,8 +172,8 @@ bad:
     return gdt_error_set(err, GDT_EUSAGE, 2001, "%s: '%s' is not an integer", opt, s);
 }
 
-static gdt_status parse_positive_double(const char *opt, const char *s, double *out,
-                                        gdt_error *err)
+static gdt_status parse_finite_double(const char *opt, const char *s, double *out,
+                                      gdt_error *err)
 {
     char *end = NULL;
     double v;
@@ -171,12 +183,23 @@ static gdt_status parse_positive_double(const char *opt, const char *s, double *
     v = strtod(s, &end);
     if (errno != 0 || end == s || *end != '\0' || !isfinite(v))
         goto bad;
-    if (!(v > 0.0))
-        return gdt_error_set(err, GDT_EUSAGE, 2002, "%s %s: must be positive", opt, s);
     *out = v;
     return GDT_OK;
 bad:
     return gdt_error_set(err, GDT_EUSAGE, 2001, "%s: '%s' is not a finite number", opt, s);
+}
+
+static gdt_status parse_positive_double(const char *opt, const char *s, double *out,
+                                        gdt_error *err)
+{
+    double v = 0;
+    gdt_status st = parse_finite_double(opt, s, &v, err);
+    if (st != GDT_OK)
+        return st;
+    if (!(v > 0.0))
+        return gdt_error_set(err, GDT_EUSAGE, 2002, "%s %s: must be positive", opt, s);
+    *out = v;
+    return GDT_OK;
 }
 
 /* Sizes: a number with an optional binary suffix K, M, G or T (optionally
@@ -289,6 +312,24 @@ static gdt_status apply(gdt_options *opts, const opt_spec *o, const char *val, g
             st = gdt_error_set(err, GDT_EUSAGE, 2001,
                                "--dup: '%s' is not one of first, min-z, max-z", val);
         break;
+    case OPT_DEM: opts->dem = val; break;
+    case OPT_DEM_RES:
+        st = parse_positive_double(o->lng, val, &opts->dem_res, err);
+        opts->dem_res_set = 1;
+        break;
+    case OPT_DEM_NODATA:
+        st = parse_finite_double(o->lng, val, &opts->dem_nodata, err);
+        if (st == GDT_OK && (fabs(opts->dem_nodata) > FLT_MAX ||
+                             (double)(float)opts->dem_nodata != opts->dem_nodata))
+            st = gdt_error_set(err, GDT_EUSAGE, 2604,
+                               "--dem-nodata %s: not exactly a float32 value (the DEM's cells "
+                               "are float32); the nearest is %.9g",
+                               val, fabs(opts->dem_nodata) > FLT_MAX
+                                        ? (opts->dem_nodata > 0 ? FLT_MAX : -FLT_MAX)
+                                        : (double)(float)opts->dem_nodata);
+        opts->dem_nodata_set = 1;
+        break;
+    case OPT_PREVIEW: opts->preview = val; break;
     case OPT_CHECK: opts->check = 1; break;
     case OPT_JSON: opts->json = val; break;
     case OPT_QUIET: opts->verbosity = -1; break;
@@ -323,6 +364,7 @@ gdt_status gdt_cli_parse(gdt_options *opts, int argc, char **argv, gdt_error *er
     opts->halo = -1;
     opts->quantum = 0.001;
     opts->dup = GDT_DUP_FIRST;
+    opts->dem_nodata = -9999.0;
     opts->inputs = calloc((size_t)(argc > 0 ? argc : 1), sizeof *opts->inputs);
     if (opts->inputs == NULL)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
@@ -455,6 +497,15 @@ static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
                              "--check validates a whole triangulation, not a trimmed one: "
                              "check the untrimmed mesh, and the trimming with "
                              "scripts/validate_mesh.py TRIMMED.ply --trimmed-from FULL.ply");
+    if (opts->dem == NULL && (opts->dem_res_set || opts->dem_nodata_set || opts->preview))
+        return gdt_error_set(err, GDT_EUSAGE, 2605, "%s needs --dem OUT.tif",
+                             opts->preview != NULL ? "--preview"
+                             : opts->dem_res_set  ? "--dem-res"
+                                                  : "--dem-nodata");
+    if (opts->dem != NULL && opts->mode != GDT_MODE_RUN && opts->mode != GDT_MODE_REFERENCE)
+        return gdt_error_set(err, GDT_EUSAGE, 2606,
+                             "--dem only applies to a triangulation run (not --info or "
+                             "--resume)");
     return GDT_OK;
 }
 

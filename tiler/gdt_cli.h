@@ -53,6 +53,11 @@ typedef struct gdt_options {
     gdt_trim_rule trim;      /* --max-edge, --concavity (0 = off); sx, sy unused here */
     int check;               /* --check */
     const char *json;        /* --json FILE */
+    const char *dem;         /* --dem OUT.tif, NULL: no DEM */
+    double dem_res;          /* --dem-res R (CRS units); 0 = automatic */
+    double dem_nodata;       /* --dem-nodata V (a float32); default -9999 */
+    int dem_res_set, dem_nodata_set;
+    const char *preview;     /* --preview OUT.png (needs --dem) */
     int verbosity;           /* -q = -1, default 0, -v = 1 (-vv = 2) */
     volatile sig_atomic_t *stop; /* set (nonzero) by a signal handler: stop cleanly;
                                     NULL = never */

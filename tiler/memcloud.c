@@ -2,11 +2,15 @@
 #include "private/memcloud.h"
 
 #include <inttypes.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "gdt_mesh_out.h"
+#include "gdt_ply.h"
+#include "gdt_raster.h"
 #include "private/filter_report.h"
+#include "private/dem_report.h"
 #include "private/mesh_meta.h"
 #include "private/trim_report.h"
 #include "private/cli_modes.h"
@@ -54,7 +58,7 @@ gdt_status gdt_memcloud_load(gdt_memcloud *mc, const gdt_options *opts, gdt_log 
                              const char *mode, gdt_error *err)
 {
     gdt_cloud_opts co;
-    int64_t max_x, max_y;
+    int64_t max_x = 0, max_y = 0;
     double t0 = gdt_now();
     gdt_status st;
 
@@ -86,6 +90,14 @@ gdt_status gdt_memcloud_load(gdt_memcloud *mc, const gdt_options *opts, gdt_log 
     }
     if (mc->kept > 0) {
         st = gdt_cloud_check_span(mc->cloud, max_x - mc->min_x, max_y - mc->min_y, mode, err);
+        if (st != GDT_OK)
+            return st;
+    }
+    if (opts->dem != NULL) {
+        const gdt_cloud_info *ci = gdt_cloud_get_info(mc->cloud);
+        st = gdt_raster_grid_define(&mc->dem_grid, &ci->lattice, mc->min_x, mc->min_y,
+                                    max_x, max_y,
+                                    mc->kept, opts->dem_res, "--dem-res", err);
         if (st != GDT_OK)
             return st;
     }
@@ -147,7 +159,8 @@ static gdt_status trim_faces(const gdt_memcloud *mc, const gdt_options *opts,
 }
 
 gdt_status gdt_memcloud_write(const gdt_memcloud *mc, const gdt_options *opts,
-                              const gdt_mesh *mesh, gdt_trim_counts *tc, gdt_error *err)
+                              const gdt_mesh *mesh, gdt_trim_counts *tc, int32_t **kept,
+                              size_t *nkept, gdt_error *err)
 {
     const gdt_cloud_info *ci = gdt_cloud_get_info(mc->cloud);
     gdt_mesh_writer *w = NULL;
@@ -170,6 +183,12 @@ gdt_status gdt_memcloud_write(const gdt_memcloud *mc, const gdt_options *opts,
     st = trim_faces(mc, opts, canon, mesh->ntris, &keep, tc, err);
     if (st == GDT_OK)
         st = gdt_mesh_create(&w, opts->output, gdt_mesh_format_of(opts->output), &meta, err);
+    if (st == GDT_OK && kept != NULL) {
+        *nkept = 0;
+        *kept = malloc((3 * (mesh->ntris - tc->dropped) + 1) * sizeof **kept);
+        if (*kept == NULL)
+            st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    }
     for (size_t i = 0; st == GDT_OK && i < mesh->nverts; i += MC_CHUNK) {
         size_t m = mesh->nverts - i < MC_CHUNK ? mesh->nverts - i : MC_CHUNK;
         for (size_t k = 0; k < m; k++) {
@@ -189,6 +208,10 @@ gdt_status gdt_memcloud_write(const gdt_memcloud *mc, const gdt_options *opts,
                 tri[3 * n + q] = (int32_t)canon[3 * (i + k) + q];
             n++;
         }
+        if (kept != NULL) {
+            memcpy(*kept + 3 * *nkept, tri, 3 * n * sizeof *tri);
+            *nkept += n;
+        }
         st = gdt_mesh_write_faces(w, tri, n, err);
     }
     if (st == GDT_OK) {
@@ -204,11 +227,53 @@ fail:
     return st;
 }
 
-gdt_status gdt_memcloud_finish(const gdt_memcloud *mc, const gdt_options *opts,
+gdt_status gdt_memcloud_dem(gdt_memcloud *mc, const gdt_options *opts, const int32_t *tri,
+                            size_t nf, gdt_pred_stats *pred, gdt_error *err)
+{
+    const gdt_cloud_info *ci = gdt_cloud_get_info(mc->cloud);
+    const gdt_raster_grid *grid = &mc->dem_grid;
+    gdt_dem_opts dop;
+    gdt_dem *w = NULL;
+    double t0 = gdt_now();
+    gdt_status st;
+
+    memset(&dop, 0, sizeof dop);
+    dop.nodata = opts->dem_nodata;
+    dop.mem_budget = opts->mem_budget;
+    dop.epsg = ci->epsg;
+    dop.crs_wkt = ci->crs_wkt;
+    dop.preview = opts->preview;
+    st = gdt_dem_create(&w, &grid->geo, opts->dem, &dop, err);
+    if (st == GDT_OK)
+        st = gdt_raster_faces(grid, pred, mc->pts, mc->kept, tri, nf, gdt_dem_sink, w, err);
+    if (st == GDT_OK)
+        st = gdt_cli_check_stop(opts, "the DEM", err);
+    if (st != GDT_OK) {
+        gdt_dem_abort(w);
+        return st;
+    }
+    st = gdt_dem_finish(w, &mc->dem_stats, err);
+    if (st != GDT_OK)
+        return st;
+    mc->dem_done = 1;
+    mc->dem_geo = grid->geo;
+    mc->t_dem = gdt_now() - t0;
+    return GDT_OK;
+}
+
+void gdt_memcloud_print_dem(const gdt_memcloud *mc, const gdt_options *opts)
+{
+    if (mc->dem_done)
+        gdt_dem_report_line(opts, &mc->dem_geo, &mc->dem_stats);
+}
+
+gdt_status gdt_memcloud_finish(gdt_memcloud *mc, const gdt_options *opts,
                                const gdt_mesh *mesh, gdt_pred_stats *pred, double *t_check,
                                double *t_write, int *checked, gdt_trim_counts *tc,
                                gdt_error *err)
 {
+    int32_t *kept = NULL;
+    size_t nkept = 0;
     double t0 = gdt_now();
     gdt_status st;
     if (opts->check) {
@@ -221,8 +286,11 @@ gdt_status gdt_memcloud_finish(const gdt_memcloud *mc, const gdt_options *opts,
         *t_check = gdt_now() - t0;
     }
     t0 = gdt_now();
-    st = gdt_memcloud_write(mc, opts, mesh, tc, err);
+    st = gdt_memcloud_write(mc, opts, mesh, tc, opts->dem != NULL ? &kept : NULL, &nkept, err);
     *t_write = gdt_now() - t0;
+    if (st == GDT_OK && opts->dem != NULL)
+        st = gdt_memcloud_dem(mc, opts, kept, nkept, pred, err);
+    free(kept);
     return st;
 }
 
@@ -244,6 +312,8 @@ gdt_status gdt_memcloud_json_head(gdt_json *j, const gdt_memcloud *mc, const gdt
     gdt_json_uint(j, "duplicates_merged", mc->read - mc->kept);
     gdt_json_uint(j, "faces", faces);
     gdt_json_string(j, "crs", ci->crs_desc);
+    if (mc->dem_done)
+        gdt_dem_report_json(j, opts, &mc->dem_geo, &mc->dem_stats, mc->t_dem);
     gdt_filter_report_json(j, mc->cloud);
     gdt_trim_report_json(j, &opts->trim, tc);
     return GDT_OK;

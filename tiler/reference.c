@@ -118,6 +118,7 @@ gdt_status gdt_cli_reference(const gdt_options *opts, gdt_error *err)
                 " duplicates merged), %" PRIu64 " faces%s%s\n",
                 opts->output, s.points_read, ftext, s.vertices, s.duplicates_merged, s.faces,
                 ttext, s.checked ? ", checked exactly" : "");
+    gdt_memcloud_print_dem(&mc, opts);
     gdt_log_note(&log,
                  "predicates: orient2d %" PRIu64 ", incircle %" PRIu64 " (%" PRIu64
                  " exact), tie-breaks %" PRIu64 "; flips %" PRIu64 "; times: read %.3fs, "

@@ -197,6 +197,7 @@ gdt_status gdt_cli_single_tile(const gdt_options *opts, gdt_error *err)
                 " duplicates merged), %" PRIu64 " faces%s on %s (%s path)%s\n",
                 opts->output, s.points_read, ftext, s.vertices, s.duplicates_merged, s.faces, ttext, s.device,
                 s.cs.path, s.checked ? ", checked exactly" : "");
+    gdt_memcloud_print_dem(&mc, opts);
     gdt_log_note(&log,
                  "tile %dx%d texels of %" PRId64 " lattice steps: %s; phases %.3f %.3f %.3f %.3f "
                  "%.3f s; missing %" PRIu64 ", bad cases %" PRIu64 ", flips %" PRIu64

@@ -6,6 +6,8 @@
 #include "private/tiled_files.h"
 #include "private/tiler_io.h"
 
+#include "gdt_grow.h"
+
 #include <dirent.h>
 #include <errno.h>
 #include <pthread.h>
@@ -40,6 +42,9 @@ struct tr_out {
     int32_t *tri;         /* 3 TR_CHUNK */
     unsigned char *raw;   /* 12 TR_CHUNK */
     uint8_t *drop;        /* TR_CHUNK marks: faces trimmed */
+    gdt_point *tile_pts;  /* with a DEM: the points of the tile whose faces are copied */
+    size_t cap_tile_pts;
+    unsigned char *mdem;  /* with a DEM: MD_RECORD TR_CHUNK bytes of merge.dem */
 };
 
 static int stopped(const tr_out *o)
@@ -49,8 +54,10 @@ static int stopped(const tr_out *o)
 
 /* Converts m face records (3 x u32 output indices, little-endian) from
  * o->raw and appends them to the mesh (and its check copy), less those drop
- * marks (drop may be NULL: none). */
-static gdt_status put_face_records(tr_out *o, size_t m, const uint8_t *drop, gdt_error *err)
+ * marks (drop may be NULL: none); the faces kept stay in o->tri, *kept of
+ * them. */
+static gdt_status put_face_records(tr_out *o, size_t m, const uint8_t *drop, size_t *kept,
+                                   gdt_error *err)
 {
     size_t n = 0;
     gdt_status st;
@@ -61,6 +68,7 @@ static gdt_status put_face_records(tr_out *o, size_t m, const uint8_t *drop, gdt
             o->tri[3 * n + q] = (int32_t)tr_get_u32(o->raw + 4 * (3 * f + q));
         n++;
     }
+    *kept = n;
     st = gdt_mesh_write_faces(o->w, o->tri, n, err);
     if (st == GDT_OK && o->cw != NULL)
         st = gdt_ply_write_faces(o->cw, o->tri, n, err);
@@ -126,20 +134,37 @@ done:
     return st;
 }
 
-/* Copies nf face records from the current position of f to the PLY,
- * TR_CHUNK at a time.  path names f in errors. */
-static gdt_status copy_face_records(tr_out *o, FILE *f, const char *path, uint64_t nf,
-                                    gdt_error *err)
+/* Copies nf face records from the current position of f to the mesh,
+ * TR_CHUNK at a time, less the faces the trim graph drops; with a DEM the
+ * kept ones are rasterised with their vertices from df (merge.dem, at its
+ * first record).  path, dpath name f, df in errors. */
+static gdt_status copy_face_records(tr_out *o, FILE *f, FILE *df, const char *path,
+                                    const char *dpath, uint64_t nf, gdt_error *err)
 {
     for (uint64_t done = 0; done < nf;) {
-        size_t m = nf - done < TR_CHUNK ? (size_t)(nf - done) : TR_CHUNK;
+        size_t m = nf - done < TR_CHUNK ? (size_t)(nf - done) : TR_CHUNK, kept = 0;
         gdt_status st;
         if (fread(o->raw, 12, m, f) != m)
             return gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
+        if (df != NULL && fread(o->mdem, MD_RECORD, m, df) != m)
+            return gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", dpath);
         if (o->tg != NULL)
             for (size_t i = 0; i < m; i++)
                 o->drop[i] = (uint8_t)gdt_trim_graph_face_dropped(o->tg, done + i);
-        st = put_face_records(o, m, o->tg != NULL ? o->drop : NULL, err);
+        st = put_face_records(o, m, o->tg != NULL ? o->drop : NULL, &kept, err);
+        for (size_t i = 0; st == GDT_OK && df != NULL && i < m; i++) {
+            gdt_raster_vertex v[3];
+            if (o->tg != NULL && o->drop[i])
+                continue;
+            for (int q = 0; q < 3; q++) {
+                const unsigned char *r = o->mdem + MD_RECORD * i + 24 * (size_t)q;
+                uint64_t zb = tr_get_u64(r + 16);
+                v[q].x = (int64_t)tr_get_u64(r);
+                v[q].y = (int64_t)tr_get_u64(r + 8);
+                memcpy(&v[q].z, &zb, sizeof v[q].z);
+            }
+            st = tr_dem_faces(o->src.dem, v, 1, err);
+        }
         if (st != GDT_OK)
             return st;
         done += m;
@@ -147,8 +172,39 @@ static gdt_status copy_face_records(tr_out *o, FILE *f, const char *path, uint64
     return GDT_OK;
 }
 
+/* With a DEM: tile k's points (d->points of them) into o->tile_pts. */
+static gdt_status load_tile_points(tr_out *o, const gdt_tile_desc *d, gdt_error *err)
+{
+    tl_rfile rf;
+    char *path = NULL;
+    size_t n = 0;
+    gdt_status st;
+
+    if (gdt_grow(&o->tile_pts, &o->cap_tile_pts, (size_t)d->points + 1, sizeof *o->tile_pts,
+                 TR_CHUNK) != 0)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory (the DEM's tile points)");
+    memset(&rf, 0, sizeof rf);
+    rf.fd = -1;
+    st = tr_tile_path(o->src.tiles_dir, d, "pts", &path, err);
+    if (st == GDT_OK)
+        st = tl_rfile_open(&rf, path, d->points, TR_CHUNK, err);
+    while (st == GDT_OK && n < d->points) {
+        size_t m = 0;
+        st = tl_rfile_read(&rf, o->tile_pts + n, (size_t)d->points - n < TR_CHUNK
+                                                     ? (size_t)d->points - n : TR_CHUNK,
+                           &m, err);
+        if (st == GDT_OK && m == 0)
+            st = gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
+        n += m;
+    }
+    tl_rfile_close(&rf);
+    free(path);
+    return st;
+}
+
 /* The certified faces of tile k's .tri file, read with direct I/O (the
- * file is not needed in the page cache: the merge reads only its seam). */
+ * file is not needed in the page cache: the merge reads only its seam);
+ * with a DEM, rasterised too. */
 static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
 {
     gdt_tile_desc d;
@@ -157,11 +213,14 @@ static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
     tr_dread r;
     size_t got = 0;
     uint64_t nf, ic = 0, ia = 0;
+    size_t kept = 0;
     tr_trim_counts tc = {0, 0, 0};
     gdt_status st = gdt_tiler_tile_info(o->src.tiler, k, &d, err);
 
     memset(&r, 0, sizeof r);
     r.fd = -1;
+    if (st == GDT_OK && o->src.dem != NULL)
+        st = load_tile_points(o, &d, err);
     if (st == GDT_OK)
         st = tr_tile_path(o->src.tiles_dir, &d, "tri", &path, err);
     if (st == GDT_OK)
@@ -200,7 +259,11 @@ static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
                 o->tc.dropped += o->drop[i];
         }
         if (st == GDT_OK)
-            st = put_face_records(o, m, o->src.trim ? o->drop : NULL, err);
+            st = put_face_records(o, m, o->src.trim ? o->drop : NULL, &kept, err);
+        /* the DEM takes the faces the mesh keeps (o->tri holds them) */
+        if (st == GDT_OK && o->src.dem != NULL)
+            st = tr_dem_tile_faces(o->src.dem, o->tile_pts, (size_t)d.points, o->src.base[k],
+                                   o->tri, kept, err);
         done += m;
     }
     if (st == GDT_OK)
@@ -211,10 +274,11 @@ static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
 }
 
 /* The faces of the seam merge (merge.faces). */
-static gdt_status copy_merge_faces(tr_out *o, const char *path, uint64_t nf, gdt_error *err)
+static gdt_status copy_merge_faces(tr_out *o, const char *path, const char *dpath, uint64_t nf,
+                                   gdt_error *err)
 {
     unsigned char hdr[MF_HEADER];
-    FILE *f = fopen(path, "rb");
+    FILE *f = fopen(path, "rb"), *df = NULL;
     struct stat sb;
     gdt_status st = GDT_OK;
 
@@ -227,10 +291,31 @@ static gdt_status copy_merge_faces(tr_out *o, const char *path, uint64_t nf, gdt
         st = gdt_error_set(err, GDT_EJOB, 6801, "%s: not the merge file this run wrote", path);
         goto fail;
     }
-    st = copy_face_records(o, f, path, nf, err);
+    if (dpath != NULL) {
+        df = fopen(dpath, "rb");
+        if (df == NULL || fstat(fileno(df), &sb) != 0) {
+            st = gdt_error_set(err, GDT_EIO, 4805, "%s: cannot open: %s", dpath,
+                               strerror(errno));
+            goto fail;
+        }
+        if (fread(hdr, 1, MF_HEADER, df) != MF_HEADER || memcmp(hdr, MD_MAGIC, 8) != 0 ||
+            tr_get_u64(hdr + 8) != nf || nf > ((uint64_t)sb.st_size - MF_HEADER) / MD_RECORD ||
+            (uint64_t)sb.st_size != MF_HEADER + MD_RECORD * nf) {
+            st = gdt_error_set(err, GDT_EJOB, 6801, "%s: not the merge file this run wrote",
+                               dpath);
+            goto fail;
+        }
+        if (o->mdem == NULL && (o->mdem = malloc(MD_RECORD * (size_t)TR_CHUNK)) == NULL) {
+            st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+            goto fail;
+        }
+    }
+    st = copy_face_records(o, f, df, path, dpath, nf, err);
 fail:
     if (f != NULL)
         fclose(f);
+    if (df != NULL)
+        fclose(df);
     return st;
 }
 
@@ -409,6 +494,8 @@ static void out_free(tr_out *o)
     free(o->drop);
     free(o->cut);
     free(o->cand);
+    free(o->tile_pts);
+    free(o->mdem);
     free(o);
 }
 
@@ -478,7 +565,8 @@ static void out_join(tr_out *o, int quit)
     o->running = 0;
 }
 
-gdt_status tr_out_finish(tr_out *o, const char *merge_path, uint64_t merge_faces,
+gdt_status tr_out_finish(tr_out *o, const char *merge_path, const char *merge_dem,
+                         uint64_t merge_faces,
                          gdt_trim_counts *tc, gdt_error *err)
 {
     gdt_status st;
@@ -493,7 +581,7 @@ gdt_status tr_out_finish(tr_out *o, const char *merge_path, uint64_t merge_faces
     }
     if (st == GDT_OK)
         st = stopped(o) ? tr_interrupted(o->src.job, "the output", err)
-                        : copy_merge_faces(o, merge_path, merge_faces, err);
+                        : copy_merge_faces(o, merge_path, merge_dem, merge_faces, err);
     if (st == GDT_OK && o->cw != NULL) {
         st = gdt_ply_finish(o->cw, err);
         o->cw = NULL;

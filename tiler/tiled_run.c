@@ -27,6 +27,7 @@
 #include "gdt_plycheck.h"
 #include "gdt_seam.h"
 #include "gdt_tiler.h"
+#include "private/dem_report.h"
 #include "private/filter_report.h"
 #include "private/cli_modes.h"
 #include "private/job.h"
@@ -36,6 +37,8 @@
 #include "private/progress.h"
 #include "private/run_stats.h"
 #include "private/tiled_files.h"
+#include "private/tiled_dem.h"
+#include "gdt_raster.h"
 #include "private/tiled_out.h"
 #include "private/trim_report.h"
 #include "private/tiler_io.h"
@@ -51,6 +54,10 @@ typedef struct tr_summary {
     int resumed, pass2_reused;
     uint64_t tiles_reused, tiles_redone;
     gdt_trim_counts trim; /* faces before trimming and the drops (with a rule on) */
+    int dem_done;
+    gdt_dem_geo dem_geo;
+    gdt_dem_stats dem_stats;
+    double t_dem;
 } tr_summary;
 
 /* A finished tile file waiting for its journal record. */
@@ -118,6 +125,7 @@ struct tr_ctx {
     tr_reclaim reclaim;
     tr_out *out;        /* the mesh writer, from the tile stage on */
     char *check_ply;    /* --check of a text output: the PLY copy in the job; owned */
+    tr_dem *dem;        /* --dem: fed by the mesh writer */
     uint8_t *cert;
     size_t cap_cert;
     uint32_t *count;    /* bucket counts for the face sort */
@@ -803,20 +811,66 @@ static gdt_status read_seam(tr_ctx *c, uint64_t k, gdt_error *err)
  * indices per face, little-endian), written under merge.faces.tmp, fsync'd
  * and renamed.  Holds one row of seams, the merger's band and a write
  * buffer. */
+/* With --dem: the round's nf faces' vertices (global lattice, z) appended
+ * to merge.dem (dbuf holds *ndbuf bytes of MD_RECORD TR_CHUNK). */
+static gdt_status put_merge_dem(tr_ctx *c, int fd, const char *tmp, const gdt_merger *m,
+                                size_t nf, unsigned char *dbuf, size_t *ndbuf, gdt_error *err)
+{
+    const gdt_ipt *p = gdt_merger_face_points(m);
+    const double *z = gdt_merger_face_z(m);
+    for (size_t i = 0; i < 3 * nf; i++) {
+        uint64_t zb;
+        unsigned char *r;
+        if (i % 3 == 0 && *ndbuf + MD_RECORD > MD_RECORD * (size_t)TR_CHUNK) {
+            gdt_status st = write_all(fd, dbuf, *ndbuf, tmp, err);
+            if (st != GDT_OK)
+                return st;
+            *ndbuf = 0;
+        }
+        r = dbuf + *ndbuf;
+        memcpy(&zb, &z[i], sizeof zb);
+        tr_put_u64(r, (uint64_t)(p[i].x + c->plan->min_x));
+        tr_put_u64(r + 8, (uint64_t)(p[i].y + c->plan->min_y));
+        tr_put_u64(r + 16, zb);
+        *ndbuf += 24;
+    }
+    return GDT_OK;
+}
+
 static gdt_status merge_rows(tr_ctx *c, gdt_error *err)
 {
     const gdt_tile_plan *pl = c->plan;
     uint64_t ntiles = gdt_tiler_tile_count(c->tiler), k = 0, nmf = 0, done_v = 0;
     gdt_merger *m = NULL;
     char *path = tr_path_join(c->job, MF_NAME), *tmp = tr_path_join(c->job, MF_NAME ".tmp");
-    unsigned char *buf = malloc(12 * (size_t)TR_CHUNK);
-    size_t nbuf = 0;
-    int fd = -1;
+    char *dpath = NULL, *dtmp = NULL;
+    unsigned char *buf = malloc(12 * (size_t)TR_CHUNK), *dbuf = NULL;
+    size_t nbuf = 0, ndbuf = 0;
+    int fd = -1, dfd = -1;
     gdt_status st = GDT_OK;
 
     if (path == NULL || tmp == NULL || buf == NULL) {
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         goto fail;
+    }
+    /* with --dem the faces' vertices go beside them to merge.dem */
+    if (c->dem != NULL) {
+        dpath = tr_path_join(c->job, MD_NAME);
+        dtmp = tr_path_join(c->job, MD_NAME ".tmp");
+        dbuf = malloc(MD_RECORD * (size_t)TR_CHUNK);
+        if (dpath == NULL || dtmp == NULL || dbuf == NULL) {
+            st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+            goto fail;
+        }
+        dfd = open(dtmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+        if (dfd < 0) {
+            st = gdt_error_set(err, GDT_EIO, 4802, "%s: cannot create: %s", dtmp,
+                               strerror(errno));
+            goto fail;
+        }
+        memset(dbuf, 0, MF_HEADER);
+        memcpy(dbuf, MD_MAGIC, 8);
+        ndbuf = MF_HEADER;
     }
     /* the merge frame is lattice minus the plan's minimum, so the cloud's x
      * range is [0, max_x - min_x]; read_seam refuses any seam vertex beyond
@@ -867,6 +921,8 @@ static gdt_status merge_rows(tr_ctx *c, gdt_error *err)
         st = gdt_merger_round(m, &c->seam, y_next, k1 == ntiles, &f, &nf, err);
         if (st == GDT_OK && c->tgraph != NULL)
             st = gdt_trim_graph_add_faces(c->tgraph, f, gdt_merger_face_points(m), nf, err);
+        if (st == GDT_OK && dfd >= 0)
+            st = put_merge_dem(c, dfd, dtmp, m, nf, dbuf, &ndbuf, err);
         if (st != GDT_OK)
             goto fail;
         for (size_t i = 0; i < nf; i++) {
@@ -896,6 +952,21 @@ static gdt_status merge_rows(tr_ctx *c, gdt_error *err)
     st = commit_tmp(&fd, tmp, path, 0, err);
     if (st != GDT_OK)
         goto fail;
+    if (dfd >= 0) {
+        /* rebuilt by every run: no sync of its own */
+        st = write_all(dfd, dbuf, ndbuf, dtmp, err);
+        if (st != GDT_OK)
+            goto fail;
+        tr_put_u64(dbuf, nmf);
+        if (pwrite(dfd, dbuf, 8, 8) != 8) {
+            st = gdt_error_set(err, GDT_EIO, 4803, "%s: write failed: %s", dtmp,
+                               strerror(errno));
+            goto fail;
+        }
+        st = commit_tmp(&dfd, dtmp, dpath, 1, err);
+        if (st != GDT_OK)
+            goto fail;
+    }
     st = tl_sync_dir(c->job, err);
     if (st == GDT_OK && c->tgraph != NULL)
         st = gdt_trim_graph_resolve(c->tgraph, err);
@@ -904,12 +975,19 @@ static gdt_status merge_rows(tr_ctx *c, gdt_error *err)
 fail:
     if (fd >= 0)
         close(fd);
+    if (dfd >= 0)
+        close(dfd);
     if (st != GDT_OK && tmp != NULL)
         unlink(tmp);
+    if (st != GDT_OK && dtmp != NULL)
+        unlink(dtmp);
     gdt_merger_destroy(m);
     free(buf);
+    free(dbuf);
     free(tmp);
     free(path);
+    free(dtmp);
+    free(dpath);
     return st;
 }
 
@@ -967,6 +1045,8 @@ static gdt_status write_summary(const tr_ctx *c, gdt_error *err)
     gdt_json_string(&j, "output_format",
                     gdt_mesh_format_name(gdt_mesh_format_of(c->opts->output)));
     gdt_json_string(&j, "device", s->device);
+    if (s->dem_done)
+        gdt_dem_report_json(&j, c->opts, &s->dem_geo, &s->dem_stats, s->t_dem);
     gdt_json_uint(&j, "points_read", s->points_read);
     gdt_filter_report_json(&j, c->cloud);
     gdt_json_uint(&j, "vertices", s->vertices);
@@ -1178,7 +1258,8 @@ static void remove_job_files(const char *job, int final, int own_dir)
 {
     static const char *const names[] = {"job.db", "job.db-wal", "job.db-shm", "job.db-journal",
                                         "index.vdb", "index.vdb.tmp", MF_NAME,
-                                        MF_NAME ".tmp", CHECK_PLY_NAME};
+                                        MF_NAME ".tmp", MD_NAME, MD_NAME ".tmp",
+                                        CHECK_PLY_NAME};
     char *tiles = tr_path_join(job, "tiles");
     /* the journal first: a removal cut short by a crash must not leave a
      * journal that vouches for files already gone */
@@ -1537,6 +1618,20 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
                                    c.plan->max_y - c.plan->min_y, "the tiled run",
                                    err)) != GDT_OK)
         goto fail;
+    /* a --dem-res the lattice refuses (or a raster too large) is refused
+     * now, before pass 2; the grid itself is defined with the distinct
+     * point count after it */
+    if (opts->dem != NULL) {
+        gdt_raster_grid g;
+        const gdt_cloud_info *ci = gdt_cloud_get_info(c.cloud);
+        st = gdt_raster_grid_define(&g, &ci->lattice, c.plan->points > 0 ? c.plan->min_x : 0,
+                                    c.plan->points > 0 ? c.plan->min_y : 0,
+                                    c.plan->points > 0 ? c.plan->max_x : 0,
+                                    c.plan->points > 0 ? c.plan->max_y : 0, c.plan->points,
+                                    opts->dem_res, "--dem-res", err);
+        if (st != GDT_OK)
+            goto fail;
+    }
     t0 = gdt_now();
     st = gdt_job_stage_done(c.jobdb, "pass2", &done, err);
     if (st != GDT_OK)
@@ -1615,6 +1710,12 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
         os.base = c.base;
         os.ntiles = ntiles;
         os.stop = opts->stop;
+        if (opts->dem != NULL) {
+            st = tr_dem_create(&c.dem, opts, ci, c.plan, c.s.vertices, c.job, err);
+            if (st != GDT_OK)
+                goto fail;
+        }
+        os.dem = c.dem;
         st = tr_out_start(&c.out, &os, err);
         if (st != GDT_OK)
             goto fail;
@@ -1698,12 +1799,22 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     gdt_progress_stage(&c.prog, "write", 1, "files");
     {
         char *mf = tr_path_join(c.job, MF_NAME);
-        st = mf == NULL ? gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory")
-                        : tr_out_finish(c.out, mf, c.s.merge_faces, &c.s.trim, err);
-        if (mf == NULL)
+        char *md = c.dem != NULL ? tr_path_join(c.job, MD_NAME) : NULL;
+        st = mf == NULL || (c.dem != NULL && md == NULL)
+                 ? gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory")
+                 : tr_out_finish(c.out, mf, md, c.s.merge_faces, &c.s.trim, err);
+        if (mf == NULL || (c.dem != NULL && md == NULL))
             tr_out_abort(c.out);
         c.out = NULL;
+        free(md);
         free(mf);
+    }
+    if (st == GDT_OK && c.dem != NULL) {
+        double t1 = gdt_now();
+        st = tr_dem_finish(c.dem, &c.s.dem_geo, &c.s.dem_stats, err);
+        c.dem = NULL;
+        c.s.dem_done = st == GDT_OK;
+        c.s.t_dem = gdt_now() - t1;
     }
     if (st == GDT_OK)
         gdt_progress_update(&c.prog, 1);
@@ -1740,6 +1851,8 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
                 c.s.faces > 0 ? 100.0 * (double)c.s.certified / (double)c.s.faces : 100.0,
                 c.s.merge.seam_vertices, c.s.device, c.s.t_total,
                 c.s.resumed ? ", resumed" : "", c.s.checked ? ", checked exactly" : "");
+    if (c.s.dem_done)
+        gdt_dem_report_line(opts, &c.s.dem_geo, &c.s.dem_stats);
     gdt_log_note(&c.log,
                  "times: pass 1 %.2f s, pass 2 %.2f s, tiles %.2f s (core %.2f, post %.2f, of which "
                  "certify %.2f), "
@@ -1761,7 +1874,8 @@ fail:
         gdt_error_clear(&e2);
         core_start_join(&cstart, &c.core, &e2);
         post_join(&c, &e2);
-        tr_out_abort(c.out);
+        tr_out_abort(c.out); /* its thread feeds the DEM: first */
+        tr_dem_abort(c.dem);
         reclaim_join(&c);
     }
     if (st == GDT_OK)

@@ -6,7 +6,7 @@
  *   - inputs: gdt_source_check_path (existing regular files; a FIFO, device
  *     or directory is refused without being opened, since opening a FIFO
  *     blocks);
- *   - file outputs (the mesh, an OBJ's .prj, --json): not empty; not an input, by path or
+ *   - file outputs (the mesh, an OBJ's .prj, --json, --dem, --preview): not empty; not an input, by path or
  *     by identity (same device and inode: covers ./x, symbolic and hard
  *     links); if the path exists, a regular file and not a symbolic link
  *     (outputs are written under a temporary name in the same directory
@@ -46,9 +46,9 @@ gdt_status gdt_outpaths_check(const char *const *inputs, size_t ninputs,
                               const gdt_outpath *outs, size_t nouts, gdt_error *err);
 
 /* The paths of the command opts describes: its inputs (gdt_source_check_path,
- * then) its outputs for its mode: --json; the mesh unless --info, and for an
- * OBJ its .prj (gdt_mesh_prj_path); job, when not NULL, as the job
- * directory. */
+ * then) its outputs for its mode: --json, --dem, --preview; the mesh unless
+ * --info, and for an OBJ its .prj (gdt_mesh_prj_path); job, when not NULL,
+ * as the job directory. */
 gdt_status gdt_cli_check_paths(const gdt_options *opts, const char *job, gdt_error *err);
 
 #endif

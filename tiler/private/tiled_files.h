@@ -24,6 +24,12 @@
 #define CHECK_PLY_NAME "check.ply"
 #define MF_MAGIC "GDTMRG01"
 #define MF_HEADER 16
+/* With --dem, the merge's faces' vertices beside merge.faces, in the same
+ * order: "GDTMDM01", u64 face count, then per face 3 x (i64 x, i64 y in
+ * the global lattice, f64 z). */
+#define MD_NAME "merge.dem"
+#define MD_MAGIC "GDTMDM01"
+#define MD_RECORD 72
 /* The trim section that ends a .tri file in a job with --max-edge or
  * --concavity (gdt_trim.h), after the barrier edges: "GDTTRM01", u64 cut
  * faces, u64 candidates, u64 open edges; then the cut faces (u32, strictly

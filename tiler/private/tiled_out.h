@@ -13,7 +13,10 @@
  * tiles go on and stay in the job, so a rerun only redoes the output.
  *
  * Threads: the caller's thread calls every function; the writer thread
- * only reads the tiler (tile descriptions), the files and src. */
+ * only reads the tiler (tile descriptions), the files and src, and writes
+ * into src.dem (tr_dem_tile_faces is thread-safe).  With a DEM the writer
+ * holds each tile's points while it copies the tile's faces (32 bytes a
+ * point of the largest tile). */
 #ifndef GDT_TILED_OUT_H
 #define GDT_TILED_OUT_H
 
@@ -24,6 +27,7 @@
 #include "gdt_mesh_out.h"
 #include "gdt_tiler.h"
 #include "gdt_trim.h"
+#include "private/tiled_dem.h"
 
 typedef struct tr_out tr_out;
 
@@ -42,6 +46,9 @@ typedef struct tr_out_src {
                                   * drops are not written (tiled_files.h) */
     int concavity;               /* --concavity: no face is written before
                                   * tr_out_set_trim */
+    tr_dem *dem;                 /* --dem: each tile's kept certified faces are rasterised
+                                    into it as they are copied (NULL: no DEM); must outlive
+                                    the writer */
 } tr_out_src;
 
 /* Starts the writer (src is copied; the arrays and strings it points to
@@ -58,14 +65,17 @@ void tr_out_ready(tr_out *o, uint64_t n);
 void tr_out_set_trim(tr_out *o, const gdt_trim_graph *g);
 
 /* Waits until every tile's faces are written, then appends the merge's
- * merge_faces faces from merge_path and completes the mesh (and the
+ * merge_faces faces from merge_path (with a DEM, rasterising the kept ones
+ * with their vertices from merge_dem, the merge.dem file beside it; NULL
+ * without) and completes the mesh (and the
  * check_ply copy); *tc gets the faces before trimming and the drops (zeros
  * without src.trim).  Consumes o (also on failure, when the temporary files
  * are removed).
  * returns: GDT_OK; the mesh writer's errors (GDT_EIO 47xx); GDT_EIO 4805,
  * GDT_EJOB 6801-6802 (a job file missing, foreign or short);
  * GDT_EINTERRUPTED 1302. */
-gdt_status tr_out_finish(tr_out *o, const char *merge_path, uint64_t merge_faces,
+gdt_status tr_out_finish(tr_out *o, const char *merge_path, const char *merge_dem,
+                         uint64_t merge_faces,
                          gdt_trim_counts *tc, gdt_error *err);
 
 /* Stops the writer and removes its temporary file.  o may be NULL. */

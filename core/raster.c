@@ -1,0 +1,281 @@
+/* raster.c — the DEM grid on the lattice and the rasterisation of TIN
+ * triangles (gdt_raster.h).  Every geometric decision goes through the
+ * half-lattice predicates of gdt_predicates.h; this file only does the
+ * index arithmetic of the grid. */
+#include "gdt_raster.h"
+
+#include <math.h>
+#include <string.h>
+
+/* Vertices and centres are doubled lattice integers; the grid's own
+ * arithmetic stays far inside int64 by the checks of grid_define. */
+#define RASTER_VERTEX_LIMIT (INT64_C(1) << 53)
+#define RASTER_SPAN_LIMIT (INT64_C(1) << 56)
+#define RASTER_RUN 256
+#define RASTER_REL_TOL 1e-9
+
+static int64_t floor_div(int64_t n, int64_t d) /* d > 0 */
+{
+    int64_t q = n / d;
+    return (n % d != 0 && n < 0) ? q - 1 : q;
+}
+
+static int64_t ceil_div(int64_t n, int64_t d) /* d > 0 */
+{
+    int64_t q = n / d;
+    return (n % d != 0 && n > 0) ? q + 1 : q;
+}
+
+int gdt_raster_unit(const gdt_lattice *lat, int64_t *ux, int64_t *uy)
+{
+    if (lat->sx == lat->sy) {
+        *ux = *uy = 1;
+        return 1;
+    }
+    for (int64_t a = 1; a <= 10000; a++) {
+        double u = (double)a * lat->sx;
+        double b = nearbyint(u / lat->sy);
+        if (b >= 1.0 && fabs(u - b * lat->sy) <= 1e-12 * u) {
+            *ux = a;
+            *uy = (int64_t)b;
+            return 1;
+        }
+    }
+    return 0;
+}
+
+double gdt_raster_default_res(const gdt_lattice *lat, int64_t min_x, int64_t min_y,
+                              int64_t max_x, int64_t max_y, uint64_t npoints)
+{
+    int64_t ux, uy;
+    double w = (double)(max_x - min_x) * lat->sx, h = (double)(max_y - min_y) * lat->sy;
+    double s = 0.0, unit, k;
+
+    if (!gdt_raster_unit(lat, &ux, &uy))
+        return 0.0;
+    unit = (double)ux * lat->sx;
+    if (npoints >= 1 && w > 0.0 && h > 0.0)
+        s = sqrt(w * h / (double)npoints);
+    else if (npoints > 1)
+        s = (w > h ? w : h) / (double)(npoints - 1);
+    k = nearbyint(2.0 * s / unit);
+    if (!(k >= 1.0))
+        k = 1.0;
+    if (k * (double)(ux > uy ? ux : uy) > (double)GDT_RASTER_MAX_M)
+        k = floor((double)GDT_RASTER_MAX_M / (double)(ux > uy ? ux : uy));
+    return k * unit;
+}
+
+/* Whether the lattice origin o is a multiple of the step s (then the grid
+ * lines are exactly the CRS multiples of the cell size); *anchor is the
+ * lattice coordinate of the line nearest to CRS 0. */
+static int anchor_of(double o, double s, int64_t *anchor)
+{
+    double q = -o / s, r;
+    if (!(fabs(q) < 4503599627370496.0)) { /* 2^52: no lattice line is near CRS 0 */
+        *anchor = 0;
+        return 0;
+    }
+    r = nearbyint(q);
+    *anchor = (int64_t)r;
+    return fabs(q - r) <= RASTER_REL_TOL;
+}
+
+gdt_status gdt_raster_grid_define(gdt_raster_grid *g, const gdt_lattice *lat, int64_t min_x,
+                                  int64_t min_y, int64_t max_x, int64_t max_y,
+                                  uint64_t npoints, double res, const char *opt,
+                                  gdt_error *err)
+{
+    int64_t ux, uy, ax, ay, kc0, kc1, ks, kn;
+    double mxd, myd;
+    int al_x, al_y;
+
+    memset(g, 0, sizeof *g);
+    g->lattice = *lat;
+    if (!gdt_raster_unit(lat, &ux, &uy))
+        return gdt_error_set(err, GDT_EUSAGE, 2602,
+                             "%s: the lattice steps %.17g (x) and %.17g (y) have no common "
+                             "multiple of at most 10^4 steps, so square DEM cells cannot lie "
+                             "on the lattice",
+                             opt, lat->sx, lat->sy);
+    if (res == 0.0) {
+        res = gdt_raster_default_res(lat, min_x, min_y, max_x, max_y, npoints);
+    } else {
+        double unit = (double)ux * lat->sx;
+        mxd = nearbyint(res / lat->sx);
+        myd = nearbyint(res / lat->sy);
+        if (!(mxd >= 1.0 && myd >= 1.0 && fabs(mxd * lat->sx - res) <= RASTER_REL_TOL * res &&
+              fabs(myd * lat->sy - res) <= RASTER_REL_TOL * res)) {
+            double lo = floor(res / unit) * unit, hi = ceil(res / unit) * unit;
+            if (lo < unit)
+                lo = unit;
+            return gdt_error_set(err, GDT_EUSAGE, 2601,
+                                 "%s %.17g: not a multiple of the lattice step (%.17g x %.17g "
+                                 "CRS units): cells must be whole lattice steps; the nearest "
+                                 "are %.17g and %.17g",
+                                 opt, res, lat->sx, lat->sy, lo, hi > lo ? hi : lo + unit);
+        }
+    }
+    mxd = nearbyint(res / lat->sx);
+    myd = nearbyint(res / lat->sy);
+    if (!(mxd <= (double)GDT_RASTER_MAX_M && myd <= (double)GDT_RASTER_MAX_M))
+        return gdt_error_set(err, GDT_EUSAGE, 2603,
+                             "%s %.17g: a cell of more than 2^31 lattice steps", opt, res);
+    g->mx = (int64_t)mxd;
+    g->my = (int64_t)myd;
+    al_x = anchor_of(lat->ox, lat->sx, &ax);
+    al_y = anchor_of(lat->oy, lat->sy, &ay);
+    kc0 = floor_div(min_x - ax, g->mx);
+    kc1 = floor_div(max_x - ax, g->mx);
+    ks = floor_div(min_y - ay, g->my);
+    kn = floor_div(max_y - ay, g->my) + 1;
+    g->geo.ncols = kc1 - kc0 + 1;
+    g->geo.nrows = kn - ks;
+    if (g->geo.ncols > GDT_DEM_MAX_SIDE || g->geo.nrows > GDT_DEM_MAX_SIDE ||
+        (double)g->geo.ncols * (double)g->geo.nrows > (double)GDT_DEM_MAX_CELLS ||
+        (double)g->geo.ncols * (double)g->mx > (double)RASTER_SPAN_LIMIT ||
+        (double)g->geo.nrows * (double)g->my > (double)RASTER_SPAN_LIMIT)
+        return gdt_error_set(err, GDT_EUSAGE, 2603,
+                             "%s %.17g: the DEM would have %lld x %lld cells, more than it "
+                             "may (at most 2^31 - 1 per side and 2^40 in all): give a "
+                             "larger %s",
+                             opt, res, (long long)g->geo.ncols, (long long)g->geo.nrows, opt);
+    g->x0 = ax + kc0 * g->mx;
+    g->y0 = ay + kn * g->my;
+    g->geo.res_x = g->geo.res_y = res;
+    g->geo.west = al_x ? (double)kc0 * res : lat->ox + lat->sx * (double)g->x0;
+    g->geo.north = al_y ? (double)kn * res : lat->oy + lat->sy * (double)g->y0;
+    return GDT_OK;
+}
+
+gdt_hpt gdt_raster_centre(const gdt_raster_grid *g, int64_t row, int64_t col)
+{
+    gdt_hpt p;
+    p.x = 2 * g->x0 + g->mx * (2 * col + 1);
+    p.y = 2 * g->y0 - g->my * (2 * row + 1);
+    return p;
+}
+
+/* The documented conversion of an exact weight: round to nearest double. */
+static double weight(gdt_i128 w)
+{
+    if (w >= INT64_MIN && w <= INT64_MAX)
+        return (double)(int64_t)w;
+    return (double)w;
+}
+
+gdt_status gdt_raster_triangle(const gdt_raster_grid *g, gdt_pred_stats *st,
+                               const gdt_raster_vertex v[3], gdt_raster_sink sink, void *ctx,
+                               gdt_error *err)
+{
+    gdt_hpt p[3], a, b, c;
+    double z[3], za, zb, zc, dd;
+    int first = 0;
+    gdt_i128 det;
+    int64_t minx, maxx, miny, maxy, c_lo, c_hi, r_lo, r_hi, xc0, dx;
+    float run[RASTER_RUN];
+
+    for (int i = 0; i < 3; i++) {
+        if (!(v[i].x > -RASTER_VERTEX_LIMIT && v[i].x < RASTER_VERTEX_LIMIT &&
+              v[i].y > -RASTER_VERTEX_LIMIT && v[i].y < RASTER_VERTEX_LIMIT))
+            return gdt_error_set(err, GDT_EINTERNAL, 7660,
+                                 "rasterising a triangle: vertex (%lld, %lld) beyond 2^53 "
+                                 "lattice steps",
+                                 (long long)v[i].x, (long long)v[i].y);
+        p[i].x = 2 * v[i].x;
+        p[i].y = 2 * v[i].y;
+        z[i] = v[i].z;
+    }
+    det = gdt_orient2d_half_det(st, p[0], p[1], p[2]);
+    if (det == 0)
+        return GDT_OK;
+    if (det < 0) {
+        gdt_hpt tp = p[1];
+        double tz = z[1];
+        p[1] = p[2];
+        p[2] = tp;
+        z[1] = z[2];
+        z[2] = tz;
+        det = -det;
+    }
+    for (int i = 1; i < 3; i++)
+        if (p[i].x < p[first].x || (p[i].x == p[first].x && p[i].y < p[first].y))
+            first = i;
+    a = p[first];
+    b = p[(first + 1) % 3];
+    c = p[(first + 2) % 3];
+    za = z[first];
+    zb = z[(first + 1) % 3];
+    zc = z[(first + 2) % 3];
+    dd = weight(det);
+
+    minx = maxx = a.x;
+    miny = maxy = a.y;
+    for (int i = 0; i < 3; i++) {
+        if (p[i].x < minx) minx = p[i].x;
+        if (p[i].x > maxx) maxx = p[i].x;
+        if (p[i].y < miny) miny = p[i].y;
+        if (p[i].y > maxy) maxy = p[i].y;
+    }
+    xc0 = 2 * g->x0 + g->mx; /* doubled x of the centre of column 0 */
+    dx = 2 * g->mx;
+    c_lo = ceil_div(minx - xc0, dx);
+    c_hi = floor_div(maxx - xc0, dx);
+    r_lo = ceil_div(2 * g->y0 - g->my - maxy, 2 * g->my);
+    r_hi = floor_div(2 * g->y0 - g->my - miny, 2 * g->my);
+    if (c_lo < 0) c_lo = 0;
+    if (c_hi > g->geo.ncols - 1) c_hi = g->geo.ncols - 1;
+    if (r_lo < 0) r_lo = 0;
+    if (r_hi > g->geo.nrows - 1) r_hi = g->geo.nrows - 1;
+    if (c_lo > c_hi)
+        return GDT_OK;
+
+    for (int64_t r = r_lo; r <= r_hi; r++) {
+        int64_t lo = c_lo, hi = c_hi, y = 2 * g->y0 - g->my * (2 * r + 1);
+        gdt_edge_owned_range(st, a, b, xc0, dx, y, &lo, &hi);
+        gdt_edge_owned_range(st, b, c, xc0, dx, y, &lo, &hi);
+        gdt_edge_owned_range(st, c, a, xc0, dx, y, &lo, &hi);
+        for (int64_t col = lo; col <= hi; col += RASTER_RUN) {
+            int64_t n = hi - col + 1 < RASTER_RUN ? hi - col + 1 : RASTER_RUN;
+            gdt_status s;
+            for (int64_t k = 0; k < n; k++) {
+                gdt_hpt q;
+                double wa, wb, wc;
+                q.x = xc0 + dx * (col + k);
+                q.y = y;
+                wa = weight(gdt_orient2d_half_det(st, b, c, q));
+                wb = weight(gdt_orient2d_half_det(st, c, a, q));
+                wc = weight(gdt_orient2d_half_det(st, a, b, q));
+                run[k] = (float)(((wa * za + wb * zb) + wc * zc) / dd);
+            }
+            s = sink(ctx, r, col, n, run, err);
+            if (s != GDT_OK)
+                return s;
+        }
+    }
+    return GDT_OK;
+}
+
+gdt_status gdt_raster_faces(const gdt_raster_grid *g, gdt_pred_stats *st, const gdt_point *pts,
+                            size_t npts, const int32_t *tri, size_t nfaces, gdt_raster_sink sink,
+                            void *ctx, gdt_error *err)
+{
+    for (size_t f = 0; f < nfaces; f++) {
+        gdt_raster_vertex v[3];
+        for (int i = 0; i < 3; i++) {
+            int32_t k = tri[3 * f + (size_t)i];
+            if (k < 0 || (size_t)k >= npts)
+                return gdt_error_set(err, GDT_EINTERNAL, 7663,
+                                     "rasterising face %zu: vertex index %d out of range "
+                                     "(%zu vertices)",
+                                     f, (int)k, npts);
+            v[i].x = pts[k].x;
+            v[i].y = pts[k].y;
+            v[i].z = pts[k].z;
+        }
+        gdt_status s = gdt_raster_triangle(g, st, v, sink, ctx, err);
+        if (s != GDT_OK)
+            return s;
+    }
+    return GDT_OK;
+}

@@ -1,0 +1,512 @@
+/* dem.c — the streaming DEM writer (gdt_dem.h): the block cache, its
+ * scratch file, and the ordered hand-over of every block to the GDAL side
+ * (private/dem_gdal.h).
+ *
+ * Invariants:
+ *   - a block is in at most one cache slot; slot_block[s] is its index or
+ *     -1, and the hash map block -> slot holds exactly the occupied slots;
+ *   - spilled[b] is set once block b has been written to the scratch file;
+ *     the file then holds its latest contents whenever it is not cached
+ *     (a cached block is written back whole when evicted);
+ *   - a cell is 0 (never written) or the float32 bits of its value plus one
+ *     (the one NaN pattern 0xffffffff becomes the quiet NaN 0x7fc00000). */
+#define _DEFAULT_SOURCE 1 /* mkstemp */
+#include "gdt_dem.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <float.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "gdt_outfile.h"
+#include "private/dem_gdal.h"
+
+#define BLOCK_CELLS ((size_t)GDT_DEM_BLOCK * GDT_DEM_BLOCK)
+#define BLOCK_BYTES (BLOCK_CELLS * sizeof(uint32_t))
+#define DEFAULT_BUDGET ((uint64_t)256 << 20)
+
+struct gdt_dem {
+    gdt_dem_geo geo;
+    char *path, *tmp_path, *scratch_dir, *preview, *preview_tmp, *wkt, *tiles_path;
+    double nodata;
+    int epsg;
+    uint64_t mem_budget;
+    int64_t bcols, brows, nblocks;
+    size_t nslots, used;
+    uint32_t *cells;       /* nslots * BLOCK_CELLS */
+    int64_t *slot_block;   /* block in each slot, -1 free */
+    uint64_t *slot_tick;   /* last use (LRU) */
+    int64_t *hkey;         /* hash map block -> slot, open addressing; -1 empty */
+    size_t *hval;
+    size_t hmask;
+    uint8_t *spilled;      /* bitmap of blocks in the scratch file */
+    int fd;                /* scratch file, -1 until the first spill */
+    uint64_t tick;
+    int64_t last_block;    /* the slot of the last block used, a fast path */
+    size_t last_slot;
+    uint32_t *xfer;        /* one block read back during gdt_dem_finish */
+    gdt_dem_stats stats;
+};
+
+static char *dup_str(const char *s)
+{
+    return s != NULL ? strdup(s) : NULL;
+}
+
+static char *dir_of(const char *path)
+{
+    const char *slash = strrchr(path, '/');
+    char *d;
+    if (slash == NULL)
+        return strdup(".");
+    if (slash == path)
+        return strdup("/");
+    d = malloc((size_t)(slash - path) + 1);
+    if (d != NULL) {
+        memcpy(d, path, (size_t)(slash - path));
+        d[slash - path] = '\0';
+    }
+    return d;
+}
+
+/* path followed by suffix, where a "%ld" in suffix becomes v. */
+static char *with_suffix(const char *path, const char *suffix, long v)
+{
+    size_t len = strlen(path) + strlen(suffix) + 24;
+    char *p = malloc(len);
+    const char *pct = strstr(suffix, "%ld");
+    if (p != NULL) {
+        if (pct == NULL)
+            snprintf(p, len, "%s%s", path, suffix);
+        else
+            snprintf(p, len, "%s%.*s%ld%s", path, (int)(pct - suffix), suffix, v, pct + 3);
+    }
+    return p;
+}
+
+static size_t hash_of(const gdt_dem *w, int64_t b)
+{
+    return (size_t)(((uint64_t)b * UINT64_C(0x9E3779B97F4A7C15)) >> 17) & w->hmask;
+}
+
+static int map_find(const gdt_dem *w, int64_t b, size_t *slot)
+{
+    for (size_t i = hash_of(w, b);; i = (i + 1) & w->hmask) {
+        if (w->hkey[i] == -1)
+            return 0;
+        if (w->hkey[i] == b) {
+            *slot = w->hval[i];
+            return 1;
+        }
+    }
+}
+
+static void map_insert(gdt_dem *w, int64_t b, size_t slot)
+{
+    size_t i = hash_of(w, b);
+    while (w->hkey[i] != -1)
+        i = (i + 1) & w->hmask;
+    w->hkey[i] = b;
+    w->hval[i] = slot;
+}
+
+/* Linear probing with backward-shift deletion (no tombstones). */
+static void map_remove(gdt_dem *w, int64_t b)
+{
+    size_t i = hash_of(w, b);
+    while (w->hkey[i] != b)
+        i = (i + 1) & w->hmask;
+    for (size_t j = i;;) {
+        size_t home;
+        j = (j + 1) & w->hmask;
+        if (w->hkey[j] == -1)
+            break;
+        home = hash_of(w, w->hkey[j]);
+        /* move j back to i unless its home lies cyclically in (i, j] */
+        if ((j > i && (home <= i || home > j)) || (j < i && home <= i && home > j)) {
+            w->hkey[i] = w->hkey[j];
+            w->hval[i] = w->hval[j];
+            i = j;
+        }
+    }
+    w->hkey[i] = -1;
+}
+
+static gdt_status open_scratch(gdt_dem *w, gdt_error *err)
+{
+    char *tmpl = with_suffix(w->scratch_dir, "/gdt-dem-blocks-%ld-XXXXXX", (long)getpid());
+    if (tmpl == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    w->fd = mkstemp(tmpl);
+    if (w->fd < 0) {
+        gdt_status st = gdt_error_set(err, GDT_EIO, 4650,
+                                      "%s: cannot create a scratch file in %s: %s", w->path,
+                                      w->scratch_dir, strerror(errno));
+        free(tmpl);
+        return st;
+    }
+    unlink(tmpl); /* anonymous from now on: gone with the descriptor */
+    free(tmpl);
+    return GDT_OK;
+}
+
+static gdt_status scratch_io(gdt_dem *w, int writing, int64_t b, uint32_t *buf, gdt_error *err)
+{
+    off_t off = (off_t)b * (off_t)BLOCK_BYTES;
+    size_t done = 0;
+    while (done < BLOCK_BYTES) {
+        ssize_t n = writing ? pwrite(w->fd, (const char *)buf + done, BLOCK_BYTES - done,
+                                     off + (off_t)done)
+                            : pread(w->fd, (char *)buf + done, BLOCK_BYTES - done,
+                                    off + (off_t)done);
+        if (n < 0 && errno == EINTR)
+            continue;
+        if (n <= 0)
+            return gdt_error_set(err, GDT_EIO, 4651, "%s: %s of the DEM scratch file in %s "
+                                 "failed: %s", w->path, writing ? "write" : "read",
+                                 w->scratch_dir, n < 0 ? strerror(errno) : "unexpected end");
+        done += (size_t)n;
+    }
+    return GDT_OK;
+}
+
+gdt_status gdt_dem_create(gdt_dem **out, const gdt_dem_geo *geo, const char *path,
+                          const gdt_dem_opts *opts, gdt_error *err)
+{
+    gdt_dem *w;
+    uint64_t budget = opts->mem_budget != 0 ? opts->mem_budget : DEFAULT_BUDGET;
+    size_t hcap = 4;
+
+    *out = NULL;
+    if (!(geo->ncols >= 1 && geo->nrows >= 1 && geo->ncols <= GDT_DEM_MAX_SIDE &&
+          geo->nrows <= GDT_DEM_MAX_SIDE &&
+          (double)geo->ncols * (double)geo->nrows <= (double)GDT_DEM_MAX_CELLS &&
+          geo->res_x > 0.0 && geo->res_y > 0.0 && isfinite(geo->west) &&
+          isfinite(geo->north) && isfinite(geo->res_x) && isfinite(geo->res_y)))
+        return gdt_error_set(err, GDT_EUSAGE, 2611,
+                             "%s: a DEM of %lld x %lld cells of %g x %g at (%g, %g) cannot be "
+                             "written", path, (long long)geo->ncols, (long long)geo->nrows,
+                             geo->res_x, geo->res_y, geo->west, geo->north);
+    if (!isfinite(opts->nodata) || fabs(opts->nodata) > FLT_MAX ||
+        (double)(float)opts->nodata != opts->nodata)
+        return gdt_error_set(err, GDT_EUSAGE, 2611,
+                             "%s: the nodata value %.17g is not a finite float32", path,
+                             opts->nodata);
+    w = calloc(1, sizeof *w);
+    if (w == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    w->fd = -1;
+    w->last_block = -1;
+    w->geo = *geo;
+    w->nodata = opts->nodata;
+    w->epsg = opts->epsg;
+    w->mem_budget = budget;
+    w->bcols = (geo->ncols + GDT_DEM_BLOCK - 1) / GDT_DEM_BLOCK;
+    w->brows = (geo->nrows + GDT_DEM_BLOCK - 1) / GDT_DEM_BLOCK;
+    w->nblocks = w->bcols * w->brows;
+    w->nslots = (size_t)(budget / BLOCK_BYTES);
+    if (w->nslots < 2)
+        w->nslots = 2;
+    if ((int64_t)w->nslots > w->nblocks)
+        w->nslots = (size_t)w->nblocks;
+    while (hcap < 2 * w->nslots)
+        hcap *= 2;
+    w->hmask = hcap - 1;
+    w->path = dup_str(path);
+    w->tmp_path = with_suffix(path, ".tmp-%ld", (long)getpid());
+    w->scratch_dir = opts->scratch_dir != NULL ? dup_str(opts->scratch_dir) : dir_of(path);
+    w->wkt = dup_str(opts->crs_wkt);
+    if (opts->preview != NULL) {
+        w->preview = dup_str(opts->preview);
+        w->preview_tmp = with_suffix(opts->preview, ".tmp-%ld", (long)getpid());
+    }
+    w->cells = malloc(w->nslots * BLOCK_BYTES);
+    w->slot_block = malloc(w->nslots * sizeof *w->slot_block);
+    w->slot_tick = calloc(w->nslots, sizeof *w->slot_tick);
+    w->hkey = malloc(hcap * sizeof *w->hkey);
+    w->hval = malloc(hcap * sizeof *w->hval);
+    w->spilled = calloc((size_t)(w->nblocks + 7) / 8, 1);
+    if (w->path == NULL || w->tmp_path == NULL || w->scratch_dir == NULL ||
+        (opts->crs_wkt != NULL && w->wkt == NULL) ||
+        (opts->preview != NULL && (w->preview == NULL || w->preview_tmp == NULL)) ||
+        w->cells == NULL || w->slot_block == NULL || w->slot_tick == NULL || w->hkey == NULL ||
+        w->hval == NULL || w->spilled == NULL) {
+        gdt_dem_abort(w);
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory (DEM block cache of "
+                             "%zu blocks)", w->nslots);
+    }
+    for (size_t s = 0; s < w->nslots; s++)
+        w->slot_block[s] = -1;
+    for (size_t i = 0; i < hcap; i++)
+        w->hkey[i] = -1;
+    w->stats.blocks = (uint64_t)w->nblocks;
+    w->stats.cache_blocks = w->nslots;
+    *out = w;
+    return GDT_OK;
+}
+
+static int is_spilled(const gdt_dem *w, int64_t b)
+{
+    return (w->spilled[b >> 3] >> (b & 7)) & 1;
+}
+
+/* The slot of block b, loading it (and evicting the least recently used
+ * block) when it is not cached. */
+static gdt_status slot_of(gdt_dem *w, int64_t b, size_t *slot, gdt_error *err)
+{
+    size_t s;
+    gdt_status st;
+
+    if (b == w->last_block) {
+        *slot = w->last_slot;
+        w->slot_tick[*slot] = ++w->tick;
+        return GDT_OK;
+    }
+    if (!map_find(w, b, &s)) {
+        if (w->used < w->nslots) {
+            s = w->used++;
+        } else {
+            int64_t old;
+            s = 0;
+            for (size_t k = 1; k < w->nslots; k++)
+                if (w->slot_tick[k] < w->slot_tick[s])
+                    s = k;
+            old = w->slot_block[s];
+            if (w->fd < 0 && (st = open_scratch(w, err)) != GDT_OK)
+                return st;
+            st = scratch_io(w, 1, old, w->cells + s * BLOCK_CELLS, err);
+            if (st != GDT_OK)
+                return st;
+            w->spilled[old >> 3] |= (uint8_t)(1u << (old & 7));
+            map_remove(w, old);
+            if (old == w->last_block)
+                w->last_block = -1;
+            w->stats.spills++;
+        }
+        if (is_spilled(w, b)) {
+            st = scratch_io(w, 0, b, w->cells + s * BLOCK_CELLS, err);
+            if (st != GDT_OK)
+                return st;
+            w->stats.reloads++;
+        } else {
+            memset(w->cells + s * BLOCK_CELLS, 0, BLOCK_BYTES);
+        }
+        w->slot_block[s] = b;
+        map_insert(w, b, s);
+    }
+    w->slot_tick[s] = ++w->tick;
+    w->last_block = b;
+    w->last_slot = s;
+    *slot = s;
+    return GDT_OK;
+}
+
+gdt_status gdt_dem_put(gdt_dem *w, int64_t row, int64_t col, int64_t n, const float *z,
+                       gdt_error *err)
+{
+    if (n <= 0)
+        return GDT_OK;
+    if (row < 0 || row >= w->geo.nrows || col < 0 || n > w->geo.ncols - col)
+        return gdt_error_set(err, GDT_EINTERNAL, 7661,
+                             "%s: cells (%lld, %lld..%lld) outside the DEM of %lld x %lld",
+                             w->path, (long long)row, (long long)col, (long long)(col + n - 1),
+                             (long long)w->geo.nrows, (long long)w->geo.ncols);
+    while (n > 0) {
+        int64_t b = (row / GDT_DEM_BLOCK) * w->bcols + col / GDT_DEM_BLOCK;
+        int64_t in = col % GDT_DEM_BLOCK, m = GDT_DEM_BLOCK - in < n ? GDT_DEM_BLOCK - in : n;
+        size_t s;
+        uint32_t *cell;
+        gdt_status st = slot_of(w, b, &s, err);
+        if (st != GDT_OK)
+            return st;
+        cell = w->cells + s * BLOCK_CELLS + (size_t)(row % GDT_DEM_BLOCK) * GDT_DEM_BLOCK +
+               (size_t)in;
+        for (int64_t k = 0; k < m; k++) {
+            uint32_t bits;
+            memcpy(&bits, &z[k], sizeof bits);
+            if (bits == UINT32_MAX)
+                bits = UINT32_C(0x7fc00000);
+            if (cell[k] != 0)
+                return gdt_error_set(err, GDT_EINTERNAL, 7662,
+                                     "%s: DEM cell (%lld, %lld) given a value twice", w->path,
+                                     (long long)row, (long long)(col + k));
+            cell[k] = bits + 1;
+        }
+        w->stats.cells_written += (uint64_t)m;
+        z += m;
+        col += m;
+        n -= m;
+    }
+    return GDT_OK;
+}
+
+gdt_status gdt_dem_sink(void *ctx, int64_t row, int64_t col, int64_t n, const float *z,
+                        gdt_error *err)
+{
+    return gdt_dem_put((gdt_dem *)ctx, row, col, n, z, err);
+}
+
+gdt_dem_stats gdt_dem_get_stats(const gdt_dem *w)
+{
+    return w->stats;
+}
+
+/* gdt_dem_block_fn: block (bx, by) from the cache or the scratch file. */
+static gdt_status next_block(void *ctx, int64_t bx, int64_t by, float *buf, int *empty,
+                             gdt_error *err)
+{
+    gdt_dem *w = ctx;
+    int64_t b = by * w->bcols + bx;
+    const uint32_t *src;
+    size_t s;
+    int any = 0;
+    float nd = (float)w->nodata;
+
+    if (map_find(w, b, &s)) {
+        src = w->cells + s * BLOCK_CELLS;
+    } else if (is_spilled(w, b)) {
+        gdt_status st = scratch_io(w, 0, b, w->xfer, err);
+        if (st != GDT_OK)
+            return st;
+        src = w->xfer;
+    } else {
+        *empty = 1;
+        return GDT_OK;
+    }
+    for (size_t i = 0; i < BLOCK_CELLS; i++) {
+        if (src[i] == 0) {
+            buf[i] = nd;
+        } else {
+            uint32_t bits = src[i] - 1;
+            memcpy(&buf[i], &bits, sizeof bits);
+            any = 1;
+        }
+    }
+    *empty = !any;
+    if (any)
+        w->stats.blocks_written++;
+    return GDT_OK;
+}
+
+static void free_cache(gdt_dem *w)
+{
+    free(w->cells);
+    free(w->slot_block);
+    free(w->slot_tick);
+    free(w->hkey);
+    free(w->hval);
+    free(w->spilled);
+    free(w->xfer);
+    w->cells = NULL;
+    w->slot_block = NULL;
+    w->slot_tick = NULL;
+    w->hkey = NULL;
+    w->hval = NULL;
+    w->spilled = NULL;
+    w->xfer = NULL;
+    if (w->fd >= 0)
+        close(w->fd);
+    w->fd = -1;
+}
+
+static void remove_tiles(gdt_dem *w)
+{
+    if (w->tiles_path != NULL)
+        unlink(w->tiles_path);
+    free(w->tiles_path);
+    w->tiles_path = NULL;
+}
+
+static void sync_dir_of(const char *path)
+{
+    char *d = dir_of(path);
+    int fd = d != NULL ? open(d, O_RDONLY | O_DIRECTORY | O_CLOEXEC) : -1;
+    if (fd >= 0) {
+        (void)fsync(fd); /* some file systems cannot sync a directory: not an error */
+        close(fd);
+    }
+    free(d);
+}
+
+/* Renames tmp over path after checking path is still absent or a regular
+ * file. */
+static gdt_status publish(const char *tmp, const char *path, gdt_error *err)
+{
+    gdt_status st = gdt_outfile_check(path, err);
+    if (st != GDT_OK)
+        return st;
+    if (rename(tmp, path) != 0)
+        return gdt_error_set(err, GDT_EIO, 4653, "%s: cannot rename %s to it: %s", path, tmp,
+                             strerror(errno));
+    sync_dir_of(path);
+    return GDT_OK;
+}
+
+gdt_status gdt_dem_finish(gdt_dem *w, gdt_dem_stats *stats, gdt_error *err)
+{
+    gdt_status st;
+    uint64_t gdal_cache = w->mem_budget / 2;
+    int fd;
+
+    w->xfer = malloc(BLOCK_BYTES);
+    w->tiles_path = with_suffix(w->scratch_dir, "/gdt-dem-tiles-%ld-XXXXXX", (long)getpid());
+    if (w->xfer == NULL || w->tiles_path == NULL) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        goto done;
+    }
+    fd = mkstemp(w->tiles_path);
+    if (fd < 0) {
+        st = gdt_error_set(err, GDT_EIO, 4650, "%s: cannot create a scratch file in %s: %s",
+                           w->path, w->scratch_dir, strerror(errno));
+        free(w->tiles_path);
+        w->tiles_path = NULL;
+        goto done;
+    }
+    close(fd);
+    st = gdt_dem_gdal_tiles(&w->geo, w->nodata, w->epsg, w->wkt, w->tiles_path, gdal_cache,
+                            next_block, w, err);
+    free_cache(w);
+    if (st == GDT_OK)
+        st = gdt_dem_gdal_cog(w->tiles_path, w->tmp_path, w->path, gdal_cache, err);
+    remove_tiles(w);
+    if (st == GDT_OK)
+        st = publish(w->tmp_path, w->path, err);
+    if (st == GDT_OK && w->preview != NULL) {
+        st = gdt_dem_gdal_preview(w->path, w->preview_tmp, w->preview, gdal_cache, err);
+        if (st == GDT_OK)
+            st = publish(w->preview_tmp, w->preview, err);
+    }
+done:
+    if (stats != NULL)
+        *stats = w->stats;
+    gdt_dem_abort(w);
+    return st;
+}
+
+void gdt_dem_abort(gdt_dem *w)
+{
+    if (w == NULL)
+        return;
+    free_cache(w);
+    remove_tiles(w);
+    if (w->tmp_path != NULL) {
+        char *ovr = with_suffix(w->tmp_path, ".ovr.tmp", 0); /* GDAL's overview scratch */
+        unlink(w->tmp_path);
+        if (ovr != NULL)
+            unlink(ovr);
+        free(ovr);
+    }
+    if (w->preview_tmp != NULL)
+        unlink(w->preview_tmp);
+    free(w->path);
+    free(w->tmp_path);
+    free(w->scratch_dir);
+    free(w->preview);
+    free(w->preview_tmp);
+    free(w->wkt);
+    free(w);
+}

@@ -1,0 +1,46 @@
+/* dem_gdal.h — the GDAL side of the DEM writer (gdt_dem.h): the only code
+ * of gdt-tile that calls GDAL.  Every entry point keeps GDAL's messages
+ * off stderr (a quiet error handler for the duration of the call) and
+ * turns a GDAL failure into a gdt_error carrying GDAL's last message.
+ * Thread-safe across threads as GDAL is; GDAL's block cache size is
+ * process-wide. */
+#ifndef GDT_DEM_GDAL_H
+#define GDT_DEM_GDAL_H
+
+#include <stdint.h>
+
+#include "gdt_dem.h"
+#include "gdt_error.h"
+
+/* Fills buf (GDT_DEM_BLOCK x GDT_DEM_BLOCK float32, row-major, stride
+ * GDT_DEM_BLOCK) with block (bx, by); *empty = 1 when every cell is
+ * nodata (buf is then not used). */
+typedef gdt_status (*gdt_dem_block_fn)(void *ctx, int64_t bx, int64_t by, float *buf,
+                                       int *empty, gdt_error *err);
+
+/* Writes the intermediate tiled GeoTIFF tiles_path (512 x 512 tiles,
+ * DEFLATE level 1 with the floating-point predictor, BIGTIFF, sparse:
+ * empty blocks are not written): georeferencing, CRS (epsg, else wkt,
+ * else none), nodata; then each block once, asked from fn in row-major
+ * block order.  gdal_cache bounds GDAL's block cache (bytes).
+ * returns: GDT_OK; fn's errors; GDT_EINPUT 3650 (the CRS is unknown to
+ * GDAL); GDT_EIO 4652. */
+gdt_status gdt_dem_gdal_tiles(const gdt_dem_geo *geo, double nodata, int epsg, const char *wkt,
+                              const char *tiles_path, uint64_t gdal_cache, gdt_dem_block_fn fn,
+                              void *ctx, gdt_error *err);
+
+/* Copies tiles_path to the COG tmp_path (DEFLATE, floating-point
+ * predictor, BIGTIFF=IF_SAFER, 512 x 512 tiles, overviews by averaging)
+ * and fsyncs it; the caller renames it.  path names the output in
+ * messages.  returns: GDT_OK; GDT_EIO 4652, 4653. */
+gdt_status gdt_dem_gdal_cog(const char *tiles_path, const char *tmp_path, const char *path,
+                            uint64_t gdal_cache, gdt_error *err);
+
+/* Writes the hillshade of the GeoTIFF dem_path, averaged down to at most
+ * GDT_DEM_PREVIEW_MAX pixels on its long side, as the PNG tmp_path, and
+ * fsyncs it; the caller renames it.  path names the preview in messages.
+ * returns: GDT_OK; GDT_EIO 4652, 4653. */
+gdt_status gdt_dem_gdal_preview(const char *dem_path, const char *tmp_path, const char *path,
+                                uint64_t gdal_cache, gdt_error *err);
+
+#endif

@@ -1,0 +1,63 @@
+/* tiled_dem.h — --dem in the tiled run.
+ *
+ * The DEM is the rasterisation (core/gdt_raster.h) of every face the mesh
+ * keeps (trimming, gdt_trim.h, drops the same faces from both), fed to one
+ * streaming writer (io/gdt_dem.h) by the mesh writer (tiled_out.c):
+ *   - each tile's kept certified faces as it copies them from the tile's
+ *     .tri file; a certified triangle has its three vertices among the
+ *     tile's own points, whose coordinates and z it reads from the tile's
+ *     .pts file (tr_dem_tile_faces);
+ *   - then the merge's kept faces, as it copies them from merge.faces, with
+ *     their vertices from merge.dem, which the merge writes beside it from
+ *     the band (the seam vertices carry their z: gdt_seam.h) (tr_dem_faces).
+ * Every cell centre is owned by exactly one face and the writer's output
+ * does not depend on the order of the writes, so the bytes are those of
+ * --reference on the same cloud.
+ *
+ * Grid: gdt_raster_grid_define over the plan's lattice bounding box with
+ * the run's distinct point count (the bounding box and the count of the
+ * in-memory modes).  Budget: the DEM's block cache gets an eighth of
+ * --mem-budget (at least 16 MiB), 256 MiB without one; its scratch files go
+ * to the job directory. */
+#ifndef GDT_TILED_DEM_H
+#define GDT_TILED_DEM_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "gdt_cli.h"
+#include "gdt_cloud.h"
+#include "gdt_dem.h"
+#include "gdt_raster.h"
+#include "gdt_error.h"
+#include "gdt_seam.h"
+#include "gdt_tiler.h"
+
+typedef struct tr_dem tr_dem;
+
+/* Defines the grid and starts the writer at opts->dem (preview: opts->preview).
+ * returns: gdt_raster_grid_define's and gdt_dem_create's errors; 7001.
+ * Ownership: release with tr_dem_finish or tr_dem_abort. */
+gdt_status tr_dem_create(tr_dem **out, const gdt_options *opts, const gdt_cloud_info *ci,
+                         const gdt_tile_plan *pl, uint64_t vertices, const char *scratch_dir,
+                         gdt_error *err);
+
+/* Rasterises m faces tri[3m] (output vertex indices) of a tile whose points
+ * pts[0..n) have the output indices base..base+n-1.  Thread-safe.
+ * returns: GDT_OK; GDT_EINTERNAL 7663 (an index outside the tile); the
+ * writer's errors. */
+gdt_status tr_dem_tile_faces(tr_dem *d, const gdt_point *pts, size_t n, uint64_t base,
+                             const int32_t *tri, size_t m, gdt_error *err);
+
+/* Rasterises m faces given by their vertices v[3 m] (global lattice, z).
+ * Thread-safe.  returns: GDT_OK; the writer's errors. */
+gdt_status tr_dem_faces(tr_dem *d, const gdt_raster_vertex *v, size_t m, gdt_error *err);
+
+/* Writes the DEM (gdt_dem_finish) and releases d.  geo and stats (may be
+ * NULL) receive what was written. */
+gdt_status tr_dem_finish(tr_dem *d, gdt_dem_geo *geo, gdt_dem_stats *stats, gdt_error *err);
+
+/* Releases d without writing; NULL is accepted. */
+void tr_dem_abort(tr_dem *d);
+
+#endif
