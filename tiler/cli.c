@@ -502,10 +502,12 @@ static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
                              opts->preview != NULL ? "--preview"
                              : opts->dem_res_set  ? "--dem-res"
                                                   : "--dem-nodata");
+    if (opts->dem != NULL && opts->mode == GDT_MODE_RESUME)
+        return gdt_error_set(err, GDT_EUSAGE, 2606,
+                             "--resume DIR writes the DEM its job recorded (no --dem)");
     if (opts->dem != NULL && opts->mode != GDT_MODE_RUN && opts->mode != GDT_MODE_REFERENCE)
         return gdt_error_set(err, GDT_EUSAGE, 2606,
-                             "--dem only applies to a triangulation run (not --info or "
-                             "--resume)");
+                             "--dem only applies to a triangulation run (not --info)");
     return GDT_OK;
 }
 

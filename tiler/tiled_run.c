@@ -1317,7 +1317,7 @@ static gdt_status open_journal(tr_ctx *c, gdt_error *err)
     char *params = NULL, *fp = NULL, *old_params = NULL, *old_fp = NULL;
     char diff[512];
     int is_new = 0, has_work = 0;
-    tr_text out = {NULL, 0, 0, 0};
+    tr_text out = {NULL, 0, 0, 0}, products = {NULL, 0, 0, 0};
     gdt_status st = build_params(c->opts, &params, err);
 
     if (st == GDT_OK)
@@ -1326,7 +1326,16 @@ static gdt_status open_journal(tr_ctx *c, gdt_error *err)
         text_abs(&out, "output", c->opts->output);
         if (!out.failed)
             out.s[--out.len] = '\0'; /* the line break */
-        if (out.failed)
+        /* the products beside the mesh, for --resume (not in params: they
+         * do not change the job's files) */
+        if (c->opts->dem != NULL) {
+            text_abs(&products, "dem", c->opts->dem);
+            text_add(&products, "dem_res=%.17g\ndem_nodata=%.17g\n", c->opts->dem_res,
+                     c->opts->dem_nodata);
+            if (c->opts->preview != NULL)
+                text_abs(&products, "preview", c->opts->preview);
+        }
+        if (out.failed || products.failed)
             st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     }
     if (st == GDT_OK)
@@ -1386,9 +1395,12 @@ static gdt_status open_journal(tr_ctx *c, gdt_error *err)
     if (st == GDT_OK)
         st = gdt_job_set_meta(c->jobdb, "output", out.s + strlen("output="), err);
     if (st == GDT_OK)
+        st = gdt_job_set_meta(c->jobdb, "products", products.s != NULL ? products.s : "", err);
+    if (st == GDT_OK)
         st = gdt_job_commit(c->jobdb, err);
 done:
     free(out.s);
+    free(products.s);
     free(params);
     free(fp);
     free(old_params);
@@ -1956,7 +1968,8 @@ gdt_status gdt_cli_resume(const gdt_options *opts, gdt_error *err)
 {
     gdt_options o = *opts;
     gdt_job *j = NULL;
-    char *params = NULL, *v = NULL, *output = NULL;
+    char *params = NULL, *v = NULL, *output = NULL, *products = NULL, *dem = NULL;
+    char *preview = NULL;
     char **inputs = NULL;
     size_t n = 0;
     gdt_status st = gdt_job_open(&j, opts->resume, 0, NULL, err);
@@ -1965,7 +1978,29 @@ gdt_status gdt_cli_resume(const gdt_options *opts, gdt_error *err)
         st = gdt_job_get_meta(j, "params", &params, err);
     if (st == GDT_OK)
         st = gdt_job_get_meta(j, "output", &output, err);
+    if (st == GDT_OK)
+        st = gdt_job_get_meta(j, "products", &products, err);
     gdt_job_close(j);
+    /* the DEM the job's command asked for (jobs of earlier versions: none) */
+    if (st == GDT_OK && products != NULL && (dem = param_get(products, "dem", NULL)) != NULL) {
+        char *r = param_get(products, "dem_res", NULL), *nd = param_get(products, "dem_nodata", NULL);
+        char *e1 = NULL, *e2 = NULL;
+        o.dem = dem;
+        o.preview = preview = param_get(products, "preview", NULL);
+        if (r != NULL)
+            o.dem_res = strtod(r, &e1);
+        if (nd != NULL)
+            o.dem_nodata = strtod(nd, &e2);
+        o.dem_res_set = o.dem_res > 0;
+        o.dem_nodata_set = 1;
+        if (r == NULL || nd == NULL || *e1 != '\0' || *e2 != '\0' || !(o.dem_res >= 0) ||
+            !isfinite(o.dem_res) || !isfinite(o.dem_nodata))
+            st = gdt_error_set(err, GDT_EJOB, 6905, "%s: job record has a bad DEM entry",
+                               opts->resume);
+        free(r);
+        free(nd);
+    }
+    free(products);
     if (st == GDT_OK && params == NULL)
         st = gdt_error_set(err, GDT_EJOB, 6905,
                            "%s: the job there never recorded its options; start it again "
@@ -1973,6 +2008,9 @@ gdt_status gdt_cli_resume(const gdt_options *opts, gdt_error *err)
                            opts->resume);
     if (st != GDT_OK) {
         free(output);
+        free(params);
+        free(dem);
+        free(preview);
         return st;
     }
 #define NEED(key)                                                                            \
@@ -2061,5 +2099,7 @@ done:
     free(v);
     free(output);
     free(params);
+    free(dem);
+    free(preview);
     return st;
 }
