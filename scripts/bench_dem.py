@@ -20,7 +20,8 @@ without are the targets, each PASS or MISS:
 
 For scale, a --subset (default 1M) of the cloud, the records nearest its
 centre (a window of the cloud's aspect, in file order), is written as LAS and
-as a CSV of x, y, z relative to the cloud's south-west corner; gdt-tile --dem
+as a CSV of x, y, z relative to the cloud's south-west corner (one point per
+(x, y), the first z, as gdt-tile keeps them); gdt-tile --dem
 --dem-res 1 runs on the LAS, then gdal_grid -a linear:radius=0 (qhull and
 linear interpolation) on the CSV, on the same grid as gdt-tile's GeoTIFF (its
 extent and size, R = 1).  Both best of --repeat, wall time and peak RSS; the
@@ -68,11 +69,12 @@ def cloud_geometry(las):
                                      float(h.maxs[1])), float(h.scales[0]), float(h.scales[1]))
 
 
-def time_runs(cmds, a, run_dir, outputs):
-    """Runs every (name, cmd) of cmds in turn, --repeat rounds; returns name -> figures."""
-    res = {name: {"walls": [], "rss": [], "cpu": []} for name, _ in cmds}
+def time_runs(cmds, a, run_dir):
+    """Runs every (name, cmd, its outputs) of cmds in turn, --repeat rounds, each
+    after deleting its outputs and the job folder; returns name -> figures."""
+    res = {name: {"walls": [], "rss": [], "cpu": []} for name, _, _ in cmds}
     for k in range(a.repeat):
-        for name, cmd in cmds:
+        for name, cmd, outputs in cmds:
             for p in outputs:
                 p.unlink(missing_ok=True)
             shutil.rmtree(run_dir / "job", ignore_errors=True)
@@ -126,13 +128,19 @@ def write_subset(las, m, corner, work):
     out.points = src.points[keep]
     part = sub.with_name(sub.name + ".part")
     out.write(str(part))
-    z = np.asarray(src.z)[keep]
+    # gdal_grid gets the TIN's vertex set: one point per (x, y), the first z in file
+    # order (gdt-tile's default --dup first)
+    X, Y = np.asarray(src.X, dtype=np.int64)[keep], np.asarray(src.Y, dtype=np.int64)[keep]
+    _, first = np.unique(np.column_stack([X, Y]), axis=0, return_index=True)
+    first = keep[np.sort(first)]
     with open(csv, "w") as f:
         f.write("x,y,z\n")
-        np.savetxt(f, np.column_stack([x[keep] - corner[0], y[keep] - corner[1], z]),
+        np.savetxt(f, np.column_stack([x[first] - corner[0], y[first] - corner[1],
+                                       np.asarray(src.z)[first]]),
                    fmt="%.17g", delimiter=",")
     vrt.write_text('<OGRVRTDataSource><OGRVRTLayer name="p"><SrcDataSource>'
-                   f'{csv}</SrcDataSource><GeometryType>wkbPoint</GeometryType>'
+                   f'{csv}</SrcDataSource><SrcLayer>{csv.stem}</SrcLayer>'
+                   '<GeometryType>wkbPoint</GeometryType>'
                    '<GeometryField encoding="PointFromColumns" x="x" y="y" z="z"/>'
                    '</OGRVRTLayer></OGRVRTDataSource>')
     os.replace(part, sub)
@@ -175,8 +183,8 @@ def bench_subset(gdt, las, m, corner, work, run_dir, a):
     gcmd = ["gdal_grid", "-q", "-a", f"linear:radius=0:nodata={NODATA:g}", "-ot", "Float32",
             "-txe", repr(west), repr(east), "-tye", repr(north), repr(south),
             "-outsize", str(nc), str(nr), "-zfield", "z", "-l", "p", str(vrt), str(grid)]
-    t = time_runs([("subset gdt-tile", cmd), ("subset gdal_grid", gcmd)], a, run_dir,
-                  [ply, tif, grid])
+    t = time_runs([("subset gdt-tile", cmd, [ply, tif]), ("subset gdal_grid", gcmd, [grid])],
+                  a, run_dir)
     ours, theirs = cells(tif, "<f4", run_dir), cells(grid, "<f4", run_dir)
     both = (ours != NODATA) & (theirs != NODATA)
     o, g = ours.astype(np.float64), theirs.astype(np.float64)
@@ -237,15 +245,15 @@ def main(argv=None):
         run_dir = tmp / "run"
         run_dir.mkdir()
         ply, tif = run_dir / "out.ply", run_dir / "out.tif"
-        cmds = [("no DEM", gdt_cmd(gdt, las, ply, a)),
-                ("DEM 1 m", gdt_cmd(gdt, las, ply, a, tif, 1.0)),
-                (f"DEM {res_sp:g} m", gdt_cmd(gdt, las, ply, a, tif, res_sp))]
+        cmds = [("no DEM", gdt_cmd(gdt, las, ply, a), [ply, tif]),
+                ("DEM 1 m", gdt_cmd(gdt, las, ply, a, tif, 1.0), [ply, tif]),
+                (f"DEM {res_sp:g} m", gdt_cmd(gdt, las, ply, a, tif, res_sp), [ply, tif])]
         print(f"bench_dem: {be.size_label(n)} points, --tile {a.tile}, {a.threads} threads, "
               f"best of {a.repeat}", file=sys.stderr, flush=True)
-        t = time_runs(cmds, a, run_dir, [ply, tif])
+        t = time_runs(cmds, a, run_dir)
         base = t["no DEM"]
         runs, targets = [], []
-        for (name, cmd), res in zip(cmds, (None, 1.0, res_sp)):
+        for (name, cmd, _), res in zip(cmds, (None, 1.0, res_sp)):
             r = dict(t[name], name=name, dem_res=res, command=cmd)
             if res is not None:
                 r["time_ratio"] = r["wall_s"] / base["wall_s"]
