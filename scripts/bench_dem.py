@@ -18,10 +18,11 @@ without are the targets, each PASS or MISS:
   time ratio  <= --target-time (1.15)
   RSS ratio   <= --target-rss (1.10)
 
-For scale, a --subset (default 1M) of the cloud, the records nearest its
-centre (a window of the cloud's aspect, in file order), is written as LAS and
-as a CSV of x, y, z relative to the cloud's south-west corner (one point per
-(x, y), the first z, as gdt-tile keeps them); gdt-tile --dem
+For scale, a --subset of the cloud (default 1M points, the whole cloud when
+smaller), the records nearest its centre (a window of the cloud's aspect, in
+file order), is written as LAS and as a CSV of x, y, z relative to the
+cloud's south-west corner (one point per (x, y), the first z, as gdt-tile
+keeps them); gdt-tile --dem
 --dem-res 1 runs on the LAS, then gdal_grid -a linear:radius=0 (qhull and
 linear interpolation) on the CSV, on the same grid as gdt-tile's GeoTIFF (its
 extent and size, R = 1).  Both best of --repeat, wall time and peak RSS; the
@@ -203,8 +204,8 @@ def main(argv=None):
                     help="build folder (default $GDT_BUILD_DIR, else build/)")
     ap.add_argument("--points", type=be.parse_size, default=10_000_000,
                     help="cloud size in records (default 10M)")
-    ap.add_argument("--subset", type=be.parse_size, default=1_000_000,
-                    help="points of the gdal_grid comparison (default 1M)")
+    ap.add_argument("--subset", type=be.parse_size, default=None,
+                    help="points of the gdal_grid comparison (default 1M, at most --points)")
     ap.add_argument("--tile", type=be.positive_int, default=4096, help="gdt-tile --tile (4096)")
     ap.add_argument("--threads", type=be.positive_int, default=os.cpu_count() or 2,
                     help="gdt-tile --threads (default all cores)")
@@ -218,6 +219,8 @@ def main(argv=None):
     ap.add_argument("--target-rss", type=float, default=1.10)
     ap.add_argument("--json", default=None, help="write every figure to this JSON file")
     a = ap.parse_args(argv)
+    if a.subset is None:
+        a.subset = min(1_000_000, a.points)
     if a.subset > a.points:
         ap.error("--subset is larger than --points")
 
