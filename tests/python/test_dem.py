@@ -16,6 +16,7 @@ import json
 import math
 import pathlib
 import shutil
+import signal
 import struct
 import subprocess
 import sys
@@ -593,3 +594,72 @@ def test_help_lists_the_dem_options(gdt_bin, runner):
     assert r.returncode == 0
     for opt in ["--dem OUT.tif", "--dem-res R", "--dem-nodata V", "--preview OUT.png"]:
         assert opt in r.stdout
+
+
+# ---- invariance: tiling, threads, input order, a killed run ------------------
+
+def _dem_bytes(runner, gdt_bin, inputs, out_dir, args):
+    """The DEM bytes and --json summary of one run of gdt-tile on inputs (one or more)."""
+    out_dir.mkdir()
+    inputs = [inputs] if isinstance(inputs, pathlib.Path) else list(inputs)
+    tif, js = out_dir / "d.tif", out_dir / "d.json"
+    r = runner([gdt_bin, *inputs, "-q", "-o", out_dir / "d.ply", "--dem", tif, "--json", js,
+                *args])
+    assert r.returncode == 0, r.stderr
+    return tif.read_bytes(), json.loads(js.read_text())
+
+
+@pytest.mark.parametrize("trim", [(), ("--concavity", "0.8")])
+def test_same_dem_bytes_any_tiling_threads_and_input_order(gdt_bin, runner, tmp_path, trim):
+    """--tile 64 to 4096 (one tile), --threads 1 and 2, the records shuffled, the cloud
+    split into two files given in either order: the same GeoTIFF bytes as --reference
+    (the PLY's vertex order follows the input order; the raster does not).  The lidar
+    cloud has duplicate (x, y) with other z: --dup min-z makes the kept z independent of
+    the input order (the default, first, is not)."""
+    from tiled_util import permute_las
+    cloud = gen(runner, tmp_path / "c.las", 15000, 31, "lidar")
+    shuffled = permute_las(cloud, tmp_path / "s.las", 7)
+    halves = permute_las(cloud, tmp_path / "h.las", 8, parts=2)
+    trim = ("--dup", "min-z", *trim)
+    want, ws = _dem_bytes(runner, gdt_bin, cloud, tmp_path / "ref", ("--reference", *trim))
+    assert ws["duplicates_merged"] > 0
+    if len(trim) > 2:
+        assert ws["trim"]["dropped"] > 0
+    cases = [(cloud, ("--tile", t)) for t in ("64", "256", "1024", "4096")]
+    cases += [(cloud, ("--tile", "64", "--threads", k)) for k in ("1", "2")]
+    cases += [(shuffled, ("--tile", "64")), (shuffled, ("--tile", "256", "--threads", "1")),
+              (halves, ("--tile", "64")), (halves[::-1], ("--tile", "64", "--threads", "2"))]
+    tiles = {}
+    for i, (inputs, args) in enumerate(cases):
+        got, s = _dem_bytes(runner, gdt_bin, inputs, tmp_path / f"run{i}", (*args, *trim))
+        tiles[args[1]] = s["tiles"]
+        assert got == want, f"DEM differs: {inputs} {args}"
+        if "trim" in ws:
+            assert s["trim"] == ws["trim"], args
+    assert tiles["4096"] == 1 and tiles["64"] >= 4
+
+
+@pytest.mark.parametrize("stage,offset,trim", [("tiles", 0.05, ()),
+                                               ("merge", 0.0, ()),
+                                               ("merge", 0.0, ("--concavity", "0.8"))])
+def test_killed_run_resumes_to_the_same_dem_bytes(gdt_bin, runner, tmp_path, stage, offset,
+                                                  trim):
+    """SIGKILL during the tile stage or the merge, then the same command again: the
+    GeoTIFF (and the PLY) of an uninterrupted run, and no DEM left after the kill."""
+    import resume_util as ru
+    cloud = gen(runner, tmp_path / "c.las", 20000, 37, "lidar")
+    want, _ = _dem_bytes(runner, gdt_bin, cloud, tmp_path / "want",
+                         ("--tile", "64", "--dem-res", "0.25", *trim))
+    out, tif = tmp_path / "o.ply", tmp_path / "o.tif"
+    cmd = [gdt_bin, cloud, "-o", out, "--dem", tif, "--dem-res", "0.25", "--tile", 64,
+           "--threads", 1, "--job", tmp_path / "job", *trim]
+    p = ru.Run(cmd)
+    p.stop_in(stage, offset)
+    rc = p.finish()
+    assert rc in (0, -signal.SIGKILL), p.stderr
+    if rc != 0:
+        assert not tif.exists() and not out.exists()
+    r = runner([*cmd, "-q"])
+    assert r.returncode == 0, r.stderr
+    assert tif.read_bytes() == want
+    assert out.read_bytes() == (tmp_path / "want" / "d.ply").read_bytes()

@@ -370,3 +370,28 @@ def test_tiled_run_removes_temporaries_of_killed_writers(gdt_bin, runner, cloud,
     assert not any(p.exists() for p in stale)
     assert kept.exists()
     assert out.exists() and (tmp_path / "m.prj").exists()
+
+
+@pytest.mark.parametrize("mode", [["--tile", "64"], ["--tile", "256", "--threads", "1"],
+                                  ["--reference"]])
+def test_trimmed_text_outputs_hold_the_plys_faces(gdt_bin, runner, cloud, tmp_path, mode):
+    """--concavity and --max-edge: the OBJ and the LandXML hold exactly the trimmed PLY's
+    vertices and faces (the same triangles, in the same order), fewer than untrimmed."""
+    rules = ["--concavity", "0.9", "--max-edge", "1.2"]
+    full = tmp_path / "full.ply"
+    r = runner([gdt_bin, cloud, *mode, "-q", "-o", full])
+    assert r.returncode == 0, r.stderr
+    outs = {}
+    for ext in ("ply", "obj", "xml"):
+        outs[ext] = tmp_path / f"m.{ext}"
+        r = runner([gdt_bin, cloud, *mode, *rules, "-q", "-o", outs[ext]])
+        assert r.returncode == 0, r.stderr
+    _, fv, ff = read_ply(full)
+    _, pv, pf = read_ply(outs["ply"])
+    assert 1000 < len(pf) < len(ff)
+    assert triangles(pv, pf) < triangles(fv, ff)  # trimming only removes triangles
+    ov, of = read_obj(outs["obj"])
+    assert np.array_equal(ov, pv) and np.array_equal(of, pf)
+    _, neh, xf = read_landxml(outs["xml"])
+    assert np.array_equal(neh, pv[:, [1, 0, 2]]) and np.array_equal(xf - 1, pf)
+    assert triangles(ov, of) == triangles(neh[:, [1, 0, 2]], xf - 1) == triangles(pv, pf)
