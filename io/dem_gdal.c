@@ -131,9 +131,9 @@ gdt_status gdt_dem_gdal_tiles(const gdt_dem_geo *geo, double nodata, int epsg, c
     co = CSLSetNameValue(co, "TILED", "YES");
     co = CSLSetNameValue(co, "BLOCKXSIZE", "512");
     co = CSLSetNameValue(co, "BLOCKYSIZE", "512");
-    co = CSLSetNameValue(co, "COMPRESS", "DEFLATE");
-    co = CSLSetNameValue(co, "ZLEVEL", "1");
-    co = CSLSetNameValue(co, "PREDICTOR", "3");
+    /* uncompressed: it is read once, by the COG step, and compressing it
+     * too cost as much as the final compression (empty blocks stay sparse) */
+    co = CSLSetNameValue(co, "COMPRESS", "NONE");
     co = CSLSetNameValue(co, "BIGTIFF", "YES");
     co = CSLSetNameValue(co, "SPARSE_OK", "TRUE");
     ds = GDALCreate(drv, tiles_path, (int)geo->ncols, (int)geo->nrows, 1, GDT_Float32, co);
@@ -215,7 +215,9 @@ gdt_status gdt_dem_gdal_cog(const char *tiles_path, const char *tmp_path, const 
     co = CSLSetNameValue(co, "BLOCKSIZE", "512");
     co = CSLSetNameValue(co, "RESAMPLING", "AVERAGE");
     co = CSLSetNameValue(co, "OVERVIEWS", "IGNORE_EXISTING");
-    co = CSLSetNameValue(co, "NUM_THREADS", "1");
+    /* the blocks are compressed on worker threads but written in block
+     * order: the bytes do not depend on the thread count (tested) */
+    co = CSLSetNameValue(co, "NUM_THREADS", "ALL_CPUS");
     dst = GDALCreateCopy(drv, tmp_path, src, FALSE, co, NULL, NULL);
     if (dst == NULL) {
         st = gdal_fail(err, path, "write the Cloud Optimized GeoTIFF");

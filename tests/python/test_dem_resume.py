@@ -29,3 +29,20 @@ def test_resume_writes_the_recorded_dem(gdt_bin, tmp_path):
     r = run([gdt_bin, "--resume", job, "-q"])
     assert r.returncode == 0, r.stderr
     assert not tif.exists()
+
+
+def test_dem_bytes_do_not_depend_on_the_cpus(gdt_bin, tmp_path):
+    """The COG step compresses blocks on all CPUs: one CPU gives the same bytes."""
+    import os
+    import subprocess
+    las = gen_cloud(tmp_path / "c.las", 30_000, 6)
+    outs = []
+    for name, cpus in (("all", None), ("one", {0})):
+        tif = tmp_path / f"{name}.tif"
+        cmd = [str(c) for c in (gdt_bin, las, "-q", "-o", tmp_path / f"{name}.ply",
+                                "--reference", "--dem", tif, "--dem-res", "0.05")]
+        r = subprocess.run(cmd, capture_output=True, text=True, timeout=300,
+                           preexec_fn=(lambda: os.sched_setaffinity(0, cpus)) if cpus else None)
+        assert r.returncode == 0, r.stderr
+        outs.append(tif.read_bytes())
+    assert outs[0] == outs[1]
