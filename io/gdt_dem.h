@@ -28,7 +28,8 @@
  *     GDT_DEM_PREVIEW_MAX pixels on its long side) is written the same way.
  *
  * Same calls -> same bytes: nothing time-dependent is written (no TIFF
- * date tag, no GDAL statistics), compression runs on one thread, and the
+ * date tag, no GDAL statistics), compressed blocks are written in block
+ * order whatever the threads compressing them, and the
  * output does not depend on the order of the writes or on mem_budget.
  * GDAL's messages never reach stderr: a GDAL failure is an error here,
  * with GDAL's last message in it.  Not thread-safe per writer (one thread
