@@ -45,8 +45,8 @@ def void_cloud(path, n, seed):
 def clouds(tmp_path_factory):
     d = tmp_path_factory.mktemp("trim")
     return {
-        "lidar": gen_cloud(d / "lidar.las", 60_000, 5),
-        "voids": void_cloud(d / "voids.las", 40_000, 2),
+        "lidar": gen_cloud(d / "lidar.las", 30_000, 5),
+        "voids": void_cloud(d / "voids.las", 25_000, 2),
     }
 
 
