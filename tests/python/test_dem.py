@@ -449,9 +449,8 @@ def test_same_bytes_twice_any_budget_and_both_modes(gdt_bin, runner, tmp_path):
 
 # ---- the tiled run ------------------------------------------------------------
 
-@pytest.mark.sanitize
 @pytest.mark.parametrize("kind,tile_args", [
-    ("lidar", ["--tile", "64", "--halo", "0"]),
+    pytest.param("lidar", ["--tile", "64", "--halo", "0"], marks=pytest.mark.sanitize),
     ("lidar", ["--tile", "64", "--halo", "3", "--threads", "1"]),
     ("grid", ["--tile", "64"]),
     ("uniform", ["--tile", "128", "--mem-budget", "16M"]),
