@@ -164,23 +164,68 @@ def tail(path, limit=2000):
         return ""
 
 
+# The measured program is started by this small launcher, not by the
+# benchmark's own process: Linux carries a process's peak RSS across fork and
+# exec into the child's ru_maxrss, so a child forked from a benchmark holding
+# a large subset in memory would report the benchmark's peak, not its own.
+# The launcher (a bare interpreter, a few MiB) forks and execs the program,
+# waits for exactly it and writes "rc maxrss_kib cpu_s" to the descriptor
+# named by its first argument, which the program does not inherit.
+_LAUNCHER = r"""
+import os, sys
+fd = int(sys.argv[1])
+pid = os.fork()
+if pid == 0:
+    os.close(fd)
+    try:
+        os.execvp(sys.argv[2], sys.argv[2:])
+    except OSError as e:
+        os.write(2, ("cannot start %s: %s\n" % (sys.argv[2], e)).encode())
+        os._exit(127)
+_, status, ru = os.wait4(pid, 0)
+os.write(fd, ("%d %d %r" % (os.waitstatus_to_exitcode(status), ru.ru_maxrss,
+                            ru.ru_utime + ru.ru_stime)).encode())
+"""
+
+
 def run_measured(cmd, log_prefix):
     """Runs cmd with stdout/stderr in log files.
 
     returns: (exit status, wall seconds, peak RSS bytes and CPU seconds (user +
-    system, all its threads) of exactly that child)."""
+    system, all its threads) of exactly that program)."""
     cmd = [str(c) for c in cmd]
-    with open(f"{log_prefix}.out", "wb") as out, open(f"{log_prefix}.err", "wb") as err:
-        t0 = time.perf_counter()
-        try:
-            p = subprocess.Popen(cmd, stdout=out, stderr=err, stdin=subprocess.DEVNULL)
-        except OSError as e:
-            raise BenchError(2, f"cannot start {cmd[0]}: {e}")
-        _, status, ru = os.wait4(p.pid, 0)
-        wall = time.perf_counter() - t0
-        p.returncode = os.waitstatus_to_exitcode(status)
+    rfd, wfd = os.pipe()
+    try:
+        with open(f"{log_prefix}.out", "wb") as out, open(f"{log_prefix}.err", "wb") as err:
+            t0 = time.perf_counter()
+            try:
+                p = subprocess.Popen([sys.executable, "-S", "-c", _LAUNCHER, str(wfd), *cmd],
+                                     stdout=out, stderr=err, stdin=subprocess.DEVNULL,
+                                     pass_fds=(wfd,))
+            except OSError as e:
+                raise BenchError(2, f"cannot start {cmd[0]}: {e}")
+            os.close(wfd)
+            wfd = -1
+            report = b""
+            while True:
+                chunk = os.read(rfd, 256)
+                if not chunk:
+                    break
+                report += chunk
+            p.wait()
+            wall = time.perf_counter() - t0
+    finally:
+        os.close(rfd)
+        if wfd >= 0:
+            os.close(wfd)
+    fields = report.decode(errors="replace").split()
+    if p.returncode != 0 or len(fields) != 3:
+        raise BenchError(2, f"cannot start {cmd[0]} (see {log_prefix}.err)")
+    rc = int(fields[0])
+    if rc == 127 and b"cannot start" in pathlib.Path(f"{log_prefix}.err").read_bytes()[-300:]:
+        raise BenchError(2, f"cannot start {cmd[0]}")
     # Linux reports ru_maxrss in KiB.
-    return p.returncode, wall, ru.ru_maxrss * 1024, ru.ru_utime + ru.ru_stime
+    return rc, wall, int(fields[1]) * 1024, float(fields[2])
 
 
 def check_run(rc, cmd, log_prefix, what):

@@ -23,6 +23,7 @@ import sys
 
 import numpy as np
 import pytest
+from ply_util import read_ply_triangles as read_ply
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 GEN = ROOT / "scripts" / "gen_cloud.py"
@@ -40,18 +41,6 @@ def gen(runner, path, points, seed, kind="uniform", extra=()):
                 "--kind", kind, "-q", *extra])
     assert r.returncode == 0, r.stderr
     return path
-
-
-def read_ply(path):
-    data = pathlib.Path(path).read_bytes()
-    end = data.index(b"end_header\n") + len(b"end_header\n")
-    header = data[:end].decode()
-    nv = int(header.split("element vertex")[1].split()[0])
-    nf = int(header.split("element face")[1].split()[0])
-    verts = np.frombuffer(data, dtype="<f8", count=3 * nv, offset=end).reshape(nv, 3)
-    faces = np.frombuffer(data, dtype=np.dtype([("n", "u1"), ("v", "<i4", 3)]), count=nf,
-                          offset=end + 24 * nv)["v"]
-    return header, verts, faces
 
 
 def ply_lattice(header):

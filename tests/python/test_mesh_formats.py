@@ -14,23 +14,11 @@ import pyproj
 import pytest
 import trimesh
 from lxml import etree
+from ply_util import read_ply_triangles as read_ply
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 GEN = ROOT / "scripts" / "gen_cloud.py"
 NS = "http://www.landxml.org/schema/LandXML-1.2"
-
-
-def read_ply(path):
-    data = pathlib.Path(path).read_bytes()
-    end = data.index(b"end_header\n") + len(b"end_header\n")
-    header = data[:end].decode()
-    nv = int(header.split("element vertex")[1].split()[0])
-    nf = int(header.split("element face")[1].split()[0])
-    verts = np.frombuffer(data, dtype="<f8", count=3 * nv, offset=end).reshape(nv, 3)
-    faces = np.frombuffer(data, dtype=np.dtype([("n", "u1"), ("v", "<i4", 3)]), count=nf,
-                          offset=end + 24 * nv)
-    assert (faces["n"] == 3).all()
-    return header, verts, faces["v"].astype(np.int64)
 
 
 def read_obj(path):

@@ -8,6 +8,7 @@ import sys
 
 import numpy as np
 import pytest
+from ply_util import read_ply
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 VALIDATE = ROOT / "scripts" / "validate_mesh.py"
@@ -26,18 +27,6 @@ def validate(mesh, cloud=None):
     if cloud is not None:
         cmd += ["--input", str(cloud)]
     return subprocess.run(cmd, capture_output=True, text=True, timeout=600)
-
-
-def read_ply(path):
-    data = pathlib.Path(path).read_bytes()
-    end = data.index(b"end_header\n") + len(b"end_header\n")
-    header = data[:end].decode()
-    nv = int(header.split("element vertex")[1].split()[0])
-    nf = int(header.split("element face")[1].split()[0])
-    verts = np.frombuffer(data, dtype="<f8", count=3 * nv, offset=end).reshape(nv, 3)
-    faces = np.frombuffer(data, dtype=np.dtype([("n", "u1"), ("v", "<i4", 3)]), count=nf,
-                          offset=end + 24 * nv)
-    return header, verts, faces
 
 
 @pytest.mark.parametrize("name", REAL)
