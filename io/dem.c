@@ -57,22 +57,6 @@ static char *dup_str(const char *s)
     return s != NULL ? strdup(s) : NULL;
 }
 
-static char *dir_of(const char *path)
-{
-    const char *slash = strrchr(path, '/');
-    char *d;
-    if (slash == NULL)
-        return strdup(".");
-    if (slash == path)
-        return strdup("/");
-    d = malloc((size_t)(slash - path) + 1);
-    if (d != NULL) {
-        memcpy(d, path, (size_t)(slash - path));
-        d[slash - path] = '\0';
-    }
-    return d;
-}
-
 /* path followed by suffix, where a "%ld" in suffix becomes v. */
 static char *with_suffix(const char *path, const char *suffix, long v)
 {
@@ -217,12 +201,12 @@ gdt_status gdt_dem_create(gdt_dem **out, const gdt_dem_geo *geo, const char *pat
         hcap *= 2;
     w->hmask = hcap - 1;
     w->path = dup_str(path);
-    w->tmp_path = with_suffix(path, ".tmp-%ld", (long)getpid());
-    w->scratch_dir = opts->scratch_dir != NULL ? dup_str(opts->scratch_dir) : dir_of(path);
+    w->tmp_path = gdt_outfile_temp(path);
+    w->scratch_dir = opts->scratch_dir != NULL ? dup_str(opts->scratch_dir) : gdt_outfile_dir(path);
     w->wkt = dup_str(opts->crs_wkt);
     if (opts->preview != NULL) {
         w->preview = dup_str(opts->preview);
-        w->preview_tmp = with_suffix(opts->preview, ".tmp-%ld", (long)getpid());
+        w->preview_tmp = gdt_outfile_temp(opts->preview);
     }
     w->cells = malloc(w->nslots * BLOCK_BYTES);
     w->slot_block = malloc(w->nslots * sizeof *w->slot_block);
@@ -421,14 +405,13 @@ static void remove_tiles(gdt_dem *w)
     w->tiles_path = NULL;
 }
 
+/* The directory of path synced; a failure there is not an error (the file
+ * is complete at its path; only the name's durability is at stake). */
 static void sync_dir_of(const char *path)
 {
-    char *d = dir_of(path);
-    int fd = d != NULL ? open(d, O_RDONLY | O_DIRECTORY | O_CLOEXEC) : -1;
-    if (fd >= 0) {
-        (void)fsync(fd); /* some file systems cannot sync a directory: not an error */
-        close(fd);
-    }
+    char *d = gdt_outfile_dir(path);
+    if (d != NULL)
+        (void)gdt_outfile_sync_dir(d);
     free(d);
 }
 

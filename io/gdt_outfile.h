@@ -22,6 +22,19 @@ extern "C" {
  * fails for another reason than its absence. */
 gdt_status gdt_outfile_check(const char *path, gdt_error *err);
 
+/* The directory part of path: "." when it has no slash, "/" for "/name".
+ * malloc'd (the caller frees it); NULL when out of memory. */
+char *gdt_outfile_dir(const char *path);
+
+/* "<path>.tmp-<pid>", the temporary name a writer uses beside path.
+ * malloc'd; NULL when out of memory. */
+char *gdt_outfile_temp(const char *path);
+
+/* fsync of the directory dir, so that a rename in it survives a power
+ * loss; a file system that cannot sync a directory (EINVAL) is accepted.
+ * returns 0 or the errno. */
+int gdt_outfile_sync_dir(const char *dir);
+
 #ifdef __cplusplus
 }
 #endif

@@ -103,45 +103,6 @@ char *gdt_mesh_prj_path(const char *path, gdt_mesh_format f)
     return p;
 }
 
-/* Directory part of path: "." when it has no slash, "/" for "/name". */
-static char *dir_of(const char *path)
-{
-    const char *slash = strrchr(path, '/');
-    char *d;
-    size_t n;
-    if (slash == NULL)
-        return strdup(".");
-    n = slash == path ? 1 : (size_t)(slash - path);
-    d = malloc(n + 1);
-    if (d == NULL)
-        return NULL;
-    memcpy(d, path, n);
-    d[n] = '\0';
-    return d;
-}
-
-static char *temp_name(const char *path)
-{
-    size_t l = strlen(path) + 32;
-    char *t = malloc(l);
-    if (t != NULL)
-        snprintf(t, l, "%s.tmp-%ld", path, (long)getpid());
-    return t;
-}
-
-/* fsync of a directory; EINVAL (cannot be synced) is accepted. */
-static int sync_dir(const char *dir)
-{
-    int e = 0;
-    int fd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-    if (fd < 0)
-        return errno;
-    if (fsync(fd) != 0 && errno != EINVAL)
-        e = errno;
-    close(fd);
-    return e;
-}
-
 /* ---- numbers ------------------------------------------------------------ */
 
 /* Shortest round-trip text of the finite d; the C numeric locale must be
@@ -552,7 +513,7 @@ static gdt_status plan_prj(gdt_mesh_writer *w, const gdt_mesh_meta *meta, char *
                          w->prj_path);
         return GDT_OK;
     }
-    w->prj_tmp = temp_name(w->prj_path);
+    w->prj_tmp = gdt_outfile_temp(w->prj_path);
     if (w->prj_tmp == NULL)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     return GDT_OK;
@@ -602,8 +563,8 @@ gdt_status gdt_mesh_create(gdt_mesh_writer **out, const char *path, gdt_mesh_for
     if (st != GDT_OK)
         goto fail;
     w->path = strdup(path);
-    w->dir_path = dir_of(path);
-    w->tmp_path = temp_name(path);
+    w->dir_path = gdt_outfile_dir(path);
+    w->tmp_path = gdt_outfile_temp(path);
     w->buf = malloc(GDT_MESH_BUFFER_BYTES);
     w->cloc = newlocale(LC_NUMERIC_MASK, "C", (locale_t)0);
     wkt = crs_wkt_of(meta, &oom);
@@ -896,7 +857,7 @@ static gdt_status finish_text(gdt_mesh_writer *w, gdt_error *err)
                      strerror(re));
     }
     w->tmp_exists = 0;
-    e = sync_dir(w->dir_path);
+    e = gdt_outfile_sync_dir(w->dir_path);
     if (e != 0)
         return gdt_error_set(err, GDT_EIO, 4716,
                              "%s: written, but syncing its directory %s failed: %s", w->path,

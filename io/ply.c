@@ -298,24 +298,6 @@ static gdt_status put_header(gdt_ply_writer *w, const gdt_ply_meta *meta, gdt_er
     return GDT_OK;
 }
 
-/* Directory part of path: "." when it has no slash, "/" for "/name". */
-static char *dir_of(const char *path)
-{
-    const char *slash = strrchr(path, '/');
-    char *d;
-    size_t n;
-
-    if (slash == NULL)
-        return strdup(".");
-    n = slash == path ? 1 : (size_t)(slash - path);
-    d = malloc(n + 1);
-    if (d == NULL)
-        return NULL;
-    memcpy(d, path, n);
-    d[n] = '\0';
-    return d;
-}
-
 gdt_status gdt_ply_create(gdt_ply_writer **out, const char *path, const gdt_ply_meta *meta,
                           gdt_error *err)
 {
@@ -346,8 +328,8 @@ gdt_status gdt_ply_create(gdt_ply_writer **out, const char *path, const gdt_ply_
     w->fd = -1;
     gdt_error_clear(&w->fail);
     w->path = strdup(path);
-    w->dir_path = dir_of(path);
-    w->tmp_path = malloc(len + 32);
+    w->dir_path = gdt_outfile_dir(path);
+    w->tmp_path = gdt_outfile_temp(path);
     {
         void *buf = NULL;
         w->buf = posix_memalign(&buf, GDT_DIO_BLOCK, GDT_PLY_BUFFER_BYTES) == 0 ? buf : NULL;
@@ -356,8 +338,6 @@ gdt_status gdt_ply_create(gdt_ply_writer **out, const char *path, const gdt_ply_
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         goto fail;
     }
-    snprintf(w->tmp_path, len + 32, "%s.tmp-%ld", path, (long)getpid());
-
     w->fd = gdt_dio_create(w->tmp_path, 0666, &w->direct);
     if (w->fd < 0) {
         st = gdt_error_set(err, GDT_EIO, 4701, "%s: cannot create temporary file %s: %s", path,
@@ -491,20 +471,6 @@ static gdt_status patch_count(gdt_ply_writer *w, uint64_t off, uint64_t count, g
     return GDT_OK;
 }
 
-/* fsync of the directory entry; file systems that cannot sync a directory
- * (EINVAL) are accepted as they are. */
-static int sync_dir(const char *dir)
-{
-    int e = 0;
-    int fd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-    if (fd < 0)
-        return errno;
-    if (fsync(fd) != 0 && errno != EINVAL)
-        e = errno;
-    close(fd);
-    return e;
-}
-
 gdt_status gdt_ply_finish(gdt_ply_writer *w, gdt_error *err)
 {
     gdt_status st;
@@ -554,7 +520,7 @@ gdt_status gdt_ply_finish(gdt_ply_writer *w, gdt_error *err)
         goto fail;
     }
     w->tmp_exists = 0;
-    e = sync_dir(w->dir_path);
+    e = gdt_outfile_sync_dir(w->dir_path);
     if (e != 0) {
         st = gdt_error_set(err, GDT_EIO, 4706,
                            "%s: written, but syncing its directory %s failed: %s", w->path,
