@@ -186,6 +186,28 @@ gdt_status gdt_raster_triangle(const gdt_raster_grid *g, gdt_pred_stats *st,
         p[i].y = 2 * v[i].y;
         z[i] = v[i].z;
     }
+    /* the cells the bounding box can hold first: most faces of a coarse grid
+     * own no centre and need no exact orientation at all */
+    minx = maxx = p[0].x;
+    miny = maxy = p[0].y;
+    for (int i = 0; i < 3; i++) {
+        if (p[i].x < minx) minx = p[i].x;
+        if (p[i].x > maxx) maxx = p[i].x;
+        if (p[i].y < miny) miny = p[i].y;
+        if (p[i].y > maxy) maxy = p[i].y;
+    }
+    xc0 = 2 * g->x0 + g->mx; /* doubled x of the centre of column 0 */
+    dx = 2 * g->mx;
+    c_lo = ceil_div(minx - xc0, dx);
+    c_hi = floor_div(maxx - xc0, dx);
+    r_lo = ceil_div(2 * g->y0 - g->my - maxy, 2 * g->my);
+    r_hi = floor_div(2 * g->y0 - g->my - miny, 2 * g->my);
+    if (c_lo < 0) c_lo = 0;
+    if (c_hi > g->geo.ncols - 1) c_hi = g->geo.ncols - 1;
+    if (r_lo < 0) r_lo = 0;
+    if (r_hi > g->geo.nrows - 1) r_hi = g->geo.nrows - 1;
+    if (c_lo > c_hi || r_lo > r_hi)
+        return GDT_OK;
     det = gdt_orient2d_half_det(st, p[0], p[1], p[2]);
     if (det == 0)
         return GDT_OK;
@@ -209,26 +231,6 @@ gdt_status gdt_raster_triangle(const gdt_raster_grid *g, gdt_pred_stats *st,
     zc = z[(first + 2) % 3];
     dd = weight(det);
 
-    minx = maxx = a.x;
-    miny = maxy = a.y;
-    for (int i = 0; i < 3; i++) {
-        if (p[i].x < minx) minx = p[i].x;
-        if (p[i].x > maxx) maxx = p[i].x;
-        if (p[i].y < miny) miny = p[i].y;
-        if (p[i].y > maxy) maxy = p[i].y;
-    }
-    xc0 = 2 * g->x0 + g->mx; /* doubled x of the centre of column 0 */
-    dx = 2 * g->mx;
-    c_lo = ceil_div(minx - xc0, dx);
-    c_hi = floor_div(maxx - xc0, dx);
-    r_lo = ceil_div(2 * g->y0 - g->my - maxy, 2 * g->my);
-    r_hi = floor_div(2 * g->y0 - g->my - miny, 2 * g->my);
-    if (c_lo < 0) c_lo = 0;
-    if (c_hi > g->geo.ncols - 1) c_hi = g->geo.ncols - 1;
-    if (r_lo < 0) r_lo = 0;
-    if (r_hi > g->geo.nrows - 1) r_hi = g->geo.nrows - 1;
-    if (c_lo > c_hi)
-        return GDT_OK;
 
     for (int64_t r = r_lo; r <= r_hi; r++) {
         int64_t lo = c_lo, hi = c_hi, y = 2 * g->y0 - g->my * (2 * r + 1);
