@@ -2,7 +2,10 @@
 # The whole test suite: set-up (packages, .venv, the three builds), then
 # CTest and pytest on the release build, the sanitizer-marked tests again on
 # the ASan+UBSan build, and on the clang fuzz build the saved fuzz inputs and
-# a smoke run of every fuzz target (15 s each).
+# a smoke run of every fuzz target (15 s each).  pytest runs its tests on one
+# worker process per CPU (pytest-xdist): every test has its own temporary
+# directory, and the few that time a run compare CPU seconds of their own
+# children, so they do not depend on what runs beside them.
 #
 #   scripts/test.sh
 set -euo pipefail
@@ -21,9 +24,9 @@ ctest --test-dir build --output-on-failure -j"$JOBS"
 echo "== ctest (ASan+UBSan build)"
 ctest --test-dir build-asan --output-on-failure -j"$JOBS" -LE 'nosanitize|unsafe_fp'
 echo "== pytest (release build)"
-GDT_BUILD_DIR="$ROOT/build" .venv/bin/python -m pytest -q tests/python
+GDT_BUILD_DIR="$ROOT/build" .venv/bin/python -m pytest -q -n "$JOBS" tests/python
 echo "== pytest, sanitize-marked tests (ASan+UBSan build)"
-GDT_BUILD_DIR="$ROOT/build-asan" .venv/bin/python -m pytest -q -m sanitize tests/python
+GDT_BUILD_DIR="$ROOT/build-asan" .venv/bin/python -m pytest -q -n "$JOBS" -m sanitize tests/python
 echo "== ctest, saved fuzz inputs (clang fuzz build)"
 ctest --test-dir build-fuzz --output-on-failure -L fuzz
 echo "== fuzz smoke run (clang fuzz build)"
