@@ -25,6 +25,7 @@
 #ifndef GDT_PREDICATES_H
 #define GDT_PREDICATES_H
 
+#include <assert.h>
 #include <stdint.h>
 
 #include "gdt_error.h"
@@ -139,8 +140,19 @@ typedef struct gdt_hpt {
 __extension__ typedef __int128 gdt_i128;
 
 /* The exact orientation determinant (b - a) x (p - a) (positive when a, b,
- * p turn counter-clockwise).  Counts one orient2d call. */
-gdt_i128 gdt_orient2d_half_det(gdt_pred_stats *st, gdt_hpt a, gdt_hpt b, gdt_hpt p);
+ * p turn counter-clockwise).  Counts one orient2d call.  Inline: the
+ * rasteriser evaluates it for every cell centre. */
+static inline gdt_i128 gdt_orient2d_half_det(gdt_pred_stats *st, gdt_hpt a, gdt_hpt b, gdt_hpt p)
+{
+    assert(a.x >= -GDT_HALF_MAX && a.x <= GDT_HALF_MAX && a.y >= -GDT_HALF_MAX &&
+           a.y <= GDT_HALF_MAX && b.x >= -GDT_HALF_MAX && b.x <= GDT_HALF_MAX &&
+           b.y >= -GDT_HALF_MAX && b.y <= GDT_HALF_MAX && p.x >= -GDT_HALF_MAX &&
+           p.x <= GDT_HALF_MAX && p.y >= -GDT_HALF_MAX && p.y <= GDT_HALF_MAX);
+    if (st != NULL)
+        st->orient_calls++;
+    return (gdt_i128)(b.x - a.x) * (gdt_i128)(p.y - a.y) -
+           (gdt_i128)(b.y - a.y) * (gdt_i128)(p.x - a.x);
+}
 
 /* The half-open ownership rule of an edge u -> v of a counter-clockwise
  * triangle (its interior on the left): returns 1 if p lies strictly left of

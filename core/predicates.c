@@ -216,14 +216,6 @@ static int edge_owned(gdt_hpt u, gdt_hpt v)
     return v.y < u.y || (v.y == u.y && v.x > u.x);
 }
 
-gdt_i128 gdt_orient2d_half_det(gdt_pred_stats *st, gdt_hpt a, gdt_hpt b, gdt_hpt p)
-{
-    assert(HALF_IN_RANGE(a) && HALF_IN_RANGE(b) && HALF_IN_RANGE(p));
-    if (st != NULL)
-        st->orient_calls++;
-    return half_det(a, b, p);
-}
-
 int gdt_edge_owns_half(gdt_pred_stats *st, gdt_hpt u, gdt_hpt v, gdt_hpt p)
 {
     gdt_i128 d;
@@ -234,9 +226,15 @@ int gdt_edge_owns_half(gdt_pred_stats *st, gdt_hpt u, gdt_hpt v, gdt_hpt p)
     return d > 0 || (d == 0 && edge_owned(u, v));
 }
 
-/* ceil(n / d) for d > 0. */
+/* ceil(n / d) for d > 0.  Both usually fit 64 bits (an edge of a tile
+ * and a row near it), and a 64-bit division is several times cheaper than
+ * the 128-bit library call; the result is the same exact integer. */
 static gdt_i128 ceil_div128(gdt_i128 n, gdt_i128 d)
 {
+    if (n > -(gdt_i128)INT64_MAX && n < (gdt_i128)INT64_MAX && d < (gdt_i128)INT64_MAX) {
+        int64_t n64 = (int64_t)n, d64 = (int64_t)d, q64 = n64 / d64;
+        return (n64 % d64 != 0 && n64 > 0) ? q64 + 1 : q64;
+    }
     gdt_i128 q = n / d;
     return (n % d != 0 && n > 0) ? q + 1 : q;
 }

@@ -12,6 +12,7 @@
 #define RASTER_VERTEX_LIMIT (INT64_C(1) << 53)
 #define RASTER_SPAN_LIMIT (INT64_C(1) << 56)
 #define RASTER_RUN 256
+#define RASTER_SMALL 16 /* bounding boxes of at most this many centres: tested cell by cell */
 #define RASTER_REL_TOL 1e-9
 
 static int64_t floor_div(int64_t n, int64_t d) /* d > 0 */
@@ -20,10 +21,24 @@ static int64_t floor_div(int64_t n, int64_t d) /* d > 0 */
     return (n % d != 0 && n < 0) ? q - 1 : q;
 }
 
-static int64_t ceil_div(int64_t n, int64_t d) /* d > 0 */
+/* floor(n / d) for d > 0, given inv ~ 1 / d: the quotient is estimated in
+ * double and then corrected with exact products, so the result is the exact
+ * floor (for |n| < 2^62, where the estimate is off by a few units at most
+ * and q d cannot overflow).  A 64-bit integer division costs several times
+ * more, and the rasteriser needs four per face. */
+static int64_t floor_div_inv(int64_t n, int64_t d, double inv)
 {
-    int64_t q = n / d;
-    return (n % d != 0 && n > 0) ? q + 1 : q;
+    int64_t q = (int64_t)((double)n * inv);
+    while (q * d > n)
+        q--;
+    while ((q + 1) * d <= n)
+        q++;
+    return q;
+}
+
+static int64_t ceil_div_inv(int64_t n, int64_t d, double inv)
+{
+    return -floor_div_inv(-n, d, inv);
 }
 
 int gdt_raster_unit(const gdt_lattice *lat, int64_t *ux, int64_t *uy)
@@ -164,6 +179,59 @@ static double weight(gdt_i128 w)
     return (double)w;
 }
 
+/* Whether the directed edge u -> v (of a counter-clockwise triangle) owns
+ * a point whose determinant orient2d(u, v, p) is e: the rule of
+ * gdt_edge_owns_half, given the determinant. */
+static int owns(gdt_hpt u, gdt_hpt v, gdt_i128 e)
+{
+    return e > 0 || (e == 0 && (v.y < u.y || (v.y == u.y && v.x > u.x)));
+}
+
+/* The cells of a bounding box of at most RASTER_SMALL centres (what most
+ * faces have when the grid is about as fine as the points): each centre is
+ * tested against the three edges directly, which costs three determinants
+ * instead of the three exact divisions per row of the edge ranges, and
+ * owns exactly the same centres (gdt_edge_owned_range is the same rule
+ * solved for a row).  a, b, c are counter-clockwise. */
+static gdt_status small_triangle(const gdt_raster_grid *g, gdt_pred_stats *st, gdt_hpt a,
+                                 gdt_hpt b, gdt_hpt c, double za, double zb, double zc, double dd,
+                                 int64_t r_lo, int64_t r_hi, int64_t c_lo, int64_t c_hi,
+                                 gdt_raster_sink sink, void *ctx, gdt_error *err)
+{
+    const int64_t xc0 = 2 * g->x0 + g->mx, dx = 2 * g->mx;
+    float run[RASTER_SMALL];
+
+    for (int64_t r = r_lo; r <= r_hi; r++) {
+        int64_t y = 2 * g->y0 - g->my * (2 * r + 1), start = -1, n = 0;
+        for (int64_t col = c_lo; col <= c_hi + 1; col++) {
+            int in = 0;
+            if (col <= c_hi) {
+                gdt_hpt q;
+                gdt_i128 ia, ib, ic;
+                q.x = xc0 + dx * col;
+                q.y = y;
+                ia = gdt_orient2d_half_det(st, b, c, q);
+                ib = gdt_orient2d_half_det(st, c, a, q);
+                ic = gdt_orient2d_half_det(st, a, b, q);
+                in = owns(b, c, ia) && owns(c, a, ib) && owns(a, b, ic);
+                if (in) {
+                    double wa = weight(ia), wb = weight(ib), wc = weight(ic);
+                    if (n == 0)
+                        start = col;
+                    run[n++] = (float)(((wa * za + wb * zb) + wc * zc) / dd);
+                }
+            }
+            if (!in && n > 0) {
+                gdt_status s = sink(ctx, r, start, n, run, err);
+                if (s != GDT_OK)
+                    return s;
+                n = 0;
+            }
+        }
+    }
+    return GDT_OK;
+}
+
 gdt_status gdt_raster_triangle(const gdt_raster_grid *g, gdt_pred_stats *st,
                                const gdt_raster_vertex v[3], gdt_raster_sink sink, void *ctx,
                                gdt_error *err)
@@ -198,10 +266,13 @@ gdt_status gdt_raster_triangle(const gdt_raster_grid *g, gdt_pred_stats *st,
     }
     xc0 = 2 * g->x0 + g->mx; /* doubled x of the centre of column 0 */
     dx = 2 * g->mx;
-    c_lo = ceil_div(minx - xc0, dx);
-    c_hi = floor_div(maxx - xc0, dx);
-    r_lo = ceil_div(2 * g->y0 - g->my - maxy, 2 * g->my);
-    r_hi = floor_div(2 * g->y0 - g->my - miny, 2 * g->my);
+    {
+        const double inv_x = 1.0 / (double)dx, inv_y = 1.0 / (double)(2 * g->my);
+        c_lo = ceil_div_inv(minx - xc0, dx, inv_x);
+        c_hi = floor_div_inv(maxx - xc0, dx, inv_x);
+        r_lo = ceil_div_inv(2 * g->y0 - g->my - maxy, 2 * g->my, inv_y);
+        r_hi = floor_div_inv(2 * g->y0 - g->my - miny, 2 * g->my, inv_y);
+    }
     if (c_lo < 0) c_lo = 0;
     if (c_hi > g->geo.ncols - 1) c_hi = g->geo.ncols - 1;
     if (r_lo < 0) r_lo = 0;
@@ -232,6 +303,9 @@ gdt_status gdt_raster_triangle(const gdt_raster_grid *g, gdt_pred_stats *st,
     dd = weight(det);
 
 
+    if ((r_hi - r_lo + 1) * (c_hi - c_lo + 1) <= RASTER_SMALL)
+        return small_triangle(g, st, a, b, c, za, zb, zc, dd, r_lo, r_hi, c_lo, c_hi, sink, ctx,
+                              err);
     for (int64_t r = r_lo; r <= r_hi; r++) {
         int64_t lo = c_lo, hi = c_hi, y = 2 * g->y0 - g->my * (2 * r + 1);
         gdt_edge_owned_range(st, a, b, xc0, dx, y, &lo, &hi);
@@ -240,14 +314,23 @@ gdt_status gdt_raster_triangle(const gdt_raster_grid *g, gdt_pred_stats *st,
         for (int64_t col = lo; col <= hi; col += RASTER_RUN) {
             int64_t n = hi - col + 1 < RASTER_RUN ? hi - col + 1 : RASTER_RUN;
             gdt_status s;
-            for (int64_t k = 0; k < n; k++) {
-                gdt_hpt q;
-                double wa, wb, wc;
-                q.x = xc0 + dx * (col + k);
-                q.y = y;
-                wa = weight(gdt_orient2d_half_det(st, b, c, q));
-                wb = weight(gdt_orient2d_half_det(st, c, a, q));
-                wc = weight(gdt_orient2d_half_det(st, a, b, q));
+            /* The three weights are orient2d determinants of the centres
+             * q_k = (xc0 + dx (col + k), y): exact at k = 0, then each
+             * changes by the exact constant -(edge dy) dx per cell, so the
+             * run holds the same integers as one determinant per cell. */
+            gdt_hpt q;
+            gdt_i128 ia, ib, ic;
+            const gdt_i128 sa = -(gdt_i128)(c.y - b.y) * dx, sb = -(gdt_i128)(a.y - c.y) * dx,
+                           sc = -(gdt_i128)(b.y - a.y) * dx;
+            q.x = xc0 + dx * col;
+            q.y = y;
+            ia = gdt_orient2d_half_det(st, b, c, q);
+            ib = gdt_orient2d_half_det(st, c, a, q);
+            ic = gdt_orient2d_half_det(st, a, b, q);
+            if (st != NULL)
+                st->orient_calls += 3 * (uint64_t)(n - 1);
+            for (int64_t k = 0; k < n; k++, ia += sa, ib += sb, ic += sc) {
+                double wa = weight(ia), wb = weight(ib), wc = weight(ic);
                 run[k] = (float)(((wa * za + wb * zb) + wc * zc) / dd);
             }
             s = sink(ctx, r, col, n, run, err);

@@ -211,6 +211,9 @@ gdt_status gdt_dem_gdal_cog(const char *tiles_path, const char *tmp_path, const 
     }
     co = CSLSetNameValue(co, "COMPRESS", "DEFLATE");
     co = CSLSetNameValue(co, "PREDICTOR", "FLOATING_POINT");
+    /* libdeflate level 1: measured 27% less time than the default 6 for a
+     * file 1% larger on a 10M-cell DEM */
+    co = CSLSetNameValue(co, "LEVEL", "1");
     co = CSLSetNameValue(co, "BIGTIFF", "IF_SAFER");
     co = CSLSetNameValue(co, "BLOCKSIZE", "512");
     co = CSLSetNameValue(co, "RESAMPLING", "AVERAGE");
