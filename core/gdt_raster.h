@@ -61,6 +61,7 @@ typedef struct gdt_raster_grid {
     int64_t x0;          /* lattice x of the west edge of column 0 */
     int64_t y0;          /* lattice y of the north edge of row 0 */
     gdt_dem_geo geo;     /* ncols, nrows; CRS corner; res_x = res_y = R */
+    double inv_dx, inv_dy; /* 1 / (2 mx), 1 / (2 my): estimates for cell indices */
 } gdt_raster_grid;
 
 /* A TIN vertex: global lattice integers (|x|, |y| < 2^53, as gdt_point)

@@ -138,6 +138,8 @@ gdt_status gdt_raster_grid_define(gdt_raster_grid *g, const gdt_lattice *lat, in
                              "%s %.17g: a cell of more than 2^31 lattice steps", opt, res);
     g->mx = (int64_t)mxd;
     g->my = (int64_t)myd;
+    g->inv_dx = 1.0 / (double)(2 * g->mx);
+    g->inv_dy = 1.0 / (double)(2 * g->my);
     al_x = anchor_of(lat->ox, lat->sx, &ax);
     al_y = anchor_of(lat->oy, lat->sy, &ay);
     kc0 = floor_div(min_x - ax, g->mx);
@@ -237,7 +239,7 @@ gdt_status gdt_raster_triangle(const gdt_raster_grid *g, gdt_pred_stats *st,
                                gdt_error *err)
 {
     gdt_hpt p[3], a, b, c;
-    double z[3], za, zb, zc, dd;
+    double z[3], za, zb, zc, dd, inv_x, inv_y;
     int first = 0;
     gdt_i128 det;
     int64_t minx, maxx, miny, maxy, c_lo, c_hi, r_lo, r_hi, xc0, dx;
@@ -266,18 +268,20 @@ gdt_status gdt_raster_triangle(const gdt_raster_grid *g, gdt_pred_stats *st,
     }
     xc0 = 2 * g->x0 + g->mx; /* doubled x of the centre of column 0 */
     dx = 2 * g->mx;
-    {
-        const double inv_x = 1.0 / (double)dx, inv_y = 1.0 / (double)(2 * g->my);
-        c_lo = ceil_div_inv(minx - xc0, dx, inv_x);
-        c_hi = floor_div_inv(maxx - xc0, dx, inv_x);
-        r_lo = ceil_div_inv(2 * g->y0 - g->my - maxy, 2 * g->my, inv_y);
-        r_hi = floor_div_inv(2 * g->y0 - g->my - miny, 2 * g->my, inv_y);
-    }
+    /* columns first: most faces that own no centre are rejected there */
+    inv_x = g->inv_dx > 0 ? g->inv_dx : 1.0 / (double)dx; /* a grid not from _define */
+    inv_y = g->inv_dy > 0 ? g->inv_dy : 1.0 / (double)(2 * g->my);
+    c_lo = ceil_div_inv(minx - xc0, dx, inv_x);
+    c_hi = floor_div_inv(maxx - xc0, dx, inv_x);
     if (c_lo < 0) c_lo = 0;
     if (c_hi > g->geo.ncols - 1) c_hi = g->geo.ncols - 1;
+    if (c_lo > c_hi)
+        return GDT_OK;
+    r_lo = ceil_div_inv(2 * g->y0 - g->my - maxy, 2 * g->my, inv_y);
+    r_hi = floor_div_inv(2 * g->y0 - g->my - miny, 2 * g->my, inv_y);
     if (r_lo < 0) r_lo = 0;
     if (r_hi > g->geo.nrows - 1) r_hi = g->geo.nrows - 1;
-    if (c_lo > c_hi || r_lo > r_hi)
+    if (r_lo > r_hi)
         return GDT_OK;
     det = gdt_orient2d_half_det(st, p[0], p[1], p[2]);
     if (det == 0)

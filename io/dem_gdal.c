@@ -88,6 +88,97 @@ static gdt_status close_and_commit(GDALDatasetH ds, const char *tmp, const char 
     return sync_file(tmp, path, err);
 }
 
+/* ---- overviews -------------------------------------------------------
+ *
+ * The intermediate file carries its own overviews, computed here from each
+ * full-resolution block as it is written, so that the COG step only
+ * compresses them (GDAL's own generation re-reads the raster, writes a
+ * compressed scratch file and reads it back: about half of the COG time).
+ * Level k (1 .. OVR_MAX_LEVELS) has factor 2^k and ceil(n / 2^k) cells per
+ * side; a cell is the mean of the full-resolution cells with a value in
+ * its 2^k x 2^k footprint (nodata when there are none), summed in double
+ * in a fixed order: first 2 x 2 groups of full-resolution cells, then 2 x 2
+ * groups of the level below.  With 2^k dividing the block side every
+ * footprint lies inside one block, so a block gives its part of every
+ * level at once and memory stays one block.  Levels are added while the
+ * previous one is wider than a block; a raster that would need more than
+ * OVR_MAX_LEVELS (a side over 512 x 512 cells) gets its overviews from
+ * GDAL's averaging instead. */
+#define OVR_MAX_LEVELS 9
+
+/* The number of own overview levels of geo, or -1 when GDAL must make them. */
+static int own_levels(const gdt_dem_geo *geo)
+{
+    int64_t side = geo->ncols > geo->nrows ? geo->ncols : geo->nrows;
+    int levels = 0;
+    while (side > GDT_DEM_BLOCK) {
+        side = (side + 1) / 2;
+        levels++;
+    }
+    return levels > OVR_MAX_LEVELS ? -1 : levels;
+}
+
+typedef struct ovr_work {
+    double *sum[2];
+    uint32_t *count[2];
+    float *out;
+} ovr_work;
+
+/* Writes the part of every overview level that block (bx, by) gives: buf
+ * holds its w x h cells (stride GDT_DEM_BLOCK), nodata where nd_bits. */
+static gdt_status block_overviews(GDALRasterBandH band, int levels, const float *buf, int w,
+                                  int h, int64_t bx, int64_t by, uint32_t nd_bits, float nd,
+                                  const gdt_dem_geo *geo, ovr_work *o, const char *path,
+                                  gdt_error *err)
+{
+    int pw = w, ph = h; /* the level below: full resolution first */
+    for (int k = 1; k <= levels; k++) {
+        const int cur = (k - 1) & 1, prev = cur ^ 1, s = GDT_DEM_BLOCK >> k;
+        const int cw = (pw + 1) / 2, ch = (ph + 1) / 2;
+        int64_t ovw = (geo->ncols + ((int64_t)1 << k) - 1) >> k;
+        int64_t ovh = (geo->nrows + ((int64_t)1 << k) - 1) >> k;
+        int any = 0;
+        GDALRasterBandH ob = GDALGetOverview(band, k - 1);
+
+        for (int j = 0; j < ch; j++)
+            for (int i = 0; i < cw; i++) {
+                double sum = 0.0;
+                uint32_t cnt = 0;
+                for (int dj = 0; dj < 2; dj++)
+                    for (int di = 0; di < 2; di++) {
+                        int r = 2 * j + dj, c = 2 * i + di;
+                        if (r >= ph || c >= pw)
+                            continue;
+                        if (k == 1) {
+                            float v = buf[(size_t)r * GDT_DEM_BLOCK + (size_t)c];
+                            uint32_t bits;
+                            memcpy(&bits, &v, sizeof bits);
+                            if (bits != nd_bits) {
+                                sum += (double)v;
+                                cnt++;
+                            }
+                        } else {
+                            sum += o->sum[prev][(size_t)r * GDT_DEM_BLOCK + (size_t)c];
+                            cnt += o->count[prev][(size_t)r * GDT_DEM_BLOCK + (size_t)c];
+                        }
+                    }
+                o->sum[cur][(size_t)j * GDT_DEM_BLOCK + (size_t)i] = sum;
+                o->count[cur][(size_t)j * GDT_DEM_BLOCK + (size_t)i] = cnt;
+                o->out[(size_t)j * (size_t)cw + (size_t)i] = cnt > 0 ? (float)(sum / cnt) : nd;
+                any |= cnt > 0;
+            }
+        if (ob == NULL)
+            return gdal_fail(err, path, "find an overview of the intermediate GeoTIFF");
+        if (any && bx * s < ovw && by * s < ovh &&
+            GDALRasterIO(ob, GF_Write, (int)(bx * s), (int)(by * s), cw, ch, o->out, cw, ch,
+                         GDT_Float32, 0, 0) != CE_None)
+            return gdal_fail(err, path, "write an overview block of the intermediate GeoTIFF");
+        pw = cw;
+        ph = ch;
+    }
+    return GDT_OK;
+}
+
 gdt_status gdt_dem_gdal_tiles(const gdt_dem_geo *geo, double nodata, int epsg, const char *wkt,
                               const char *tiles_path, uint64_t gdal_cache, gdt_dem_block_fn fn,
                               void *ctx, gdt_error *err)
@@ -98,9 +189,12 @@ gdt_status gdt_dem_gdal_tiles(const gdt_dem_geo *geo, double nodata, int epsg, c
     GDALRasterBandH band;
     OGRSpatialReferenceH srs = NULL;
     char **co = NULL;
-    float *buf = NULL;
+    float *buf = NULL, ndf;
     double gt[6];
     gdt_status st = GDT_OK;
+    int levels = 0;
+    uint32_t nd_bits;
+    ovr_work ow = {{NULL, NULL}, {NULL, NULL}, NULL};
     int64_t bcols = (geo->ncols + GDT_DEM_BLOCK - 1) / GDT_DEM_BLOCK;
     int64_t brows = (geo->nrows + GDT_DEM_BLOCK - 1) / GDT_DEM_BLOCK;
 
@@ -159,6 +253,30 @@ gdt_status gdt_dem_gdal_tiles(const gdt_dem_geo *geo, double nodata, int epsg, c
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         goto done;
     }
+    levels = own_levels(geo);
+    if (levels > 0) {
+        int factors[OVR_MAX_LEVELS];
+        size_t half = (size_t)(GDT_DEM_BLOCK / 2) * GDT_DEM_BLOCK;
+        for (int k = 1; k <= levels; k++)
+            factors[k - 1] = 1 << k;
+        for (int q = 0; q < 2; q++) {
+            ow.sum[q] = malloc(half * sizeof *ow.sum[q]);
+            ow.count[q] = malloc(half * sizeof *ow.count[q]);
+        }
+        ow.out = malloc(half * sizeof *ow.out);
+        if (ow.sum[0] == NULL || ow.sum[1] == NULL || ow.count[0] == NULL ||
+            ow.count[1] == NULL || ow.out == NULL) {
+            st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+            goto done;
+        }
+        /* "NONE": the levels are created empty; block_overviews fills them */
+        if (GDALBuildOverviews(ds, "NONE", levels, factors, 0, NULL, NULL, NULL) != CE_None) {
+            st = gdal_fail(err, tiles_path, "create the overviews of the intermediate GeoTIFF");
+            goto done;
+        }
+    }
+    ndf = (float)nodata;
+    memcpy(&nd_bits, &ndf, sizeof nd_bits);
     for (int64_t by = 0; by < brows && st == GDT_OK; by++)
         for (int64_t bx = 0; bx < bcols && st == GDT_OK; bx++) {
             int empty = 0;
@@ -171,6 +289,9 @@ gdt_status gdt_dem_gdal_tiles(const gdt_dem_geo *geo, double nodata, int epsg, c
             if (GDALRasterIO(band, GF_Write, (int)x, (int)y, w, h, buf, w, h, GDT_Float32, 0,
                              (int)(GDT_DEM_BLOCK * sizeof *buf)) != CE_None)
                 st = gdal_fail(err, tiles_path, "write a block of the intermediate GeoTIFF");
+            else if (levels > 0)
+                st = block_overviews(band, levels, buf, w, h, bx, by, nd_bits, ndf, geo, &ow,
+                                     tiles_path, err);
         }
 done:
     if (ds != NULL) {
@@ -182,6 +303,11 @@ done:
             st = gdal_fail(err, tiles_path, "complete the intermediate GeoTIFF");
     }
     free(buf);
+    for (int q = 0; q < 2; q++) {
+        free(ow.sum[q]);
+        free(ow.count[q]);
+    }
+    free(ow.out);
     CSLDestroy(co);
     if (srs != NULL)
         OSRDestroySpatialReference(srs);
@@ -217,7 +343,12 @@ gdt_status gdt_dem_gdal_cog(const char *tiles_path, const char *tmp_path, const 
     co = CSLSetNameValue(co, "BIGTIFF", "IF_SAFER");
     co = CSLSetNameValue(co, "BLOCKSIZE", "512");
     co = CSLSetNameValue(co, "RESAMPLING", "AVERAGE");
-    co = CSLSetNameValue(co, "OVERVIEWS", "IGNORE_EXISTING");
+    /* the intermediate file's own overviews when it has them (see
+     * own_levels), else GDAL's averaging */
+    co = CSLSetNameValue(co, "OVERVIEWS",
+                         GDALGetOverviewCount(GDALGetRasterBand(src, 1)) > 0
+                             ? "FORCE_USE_EXISTING"
+                             : "IGNORE_EXISTING");
     /* the blocks are compressed on worker threads but written in block
      * order: the bytes do not depend on the thread count (tested) */
     co = CSLSetNameValue(co, "NUM_THREADS", "ALL_CPUS");

@@ -4,7 +4,8 @@
  * any order, each cell at most once (runs of cells along a row, as the TIN
  * rasteriser of core/gdt_raster.h produces them), and writes one Cloud
  * Optimized GeoTIFF: tiled 512 x 512, DEFLATE with the floating-point
- * predictor, overviews (average of the valid cells), BIGTIFF when it could
+ * predictor, overviews (the mean of the valid cells of each 2^k x 2^k
+ * footprint, ceil(n / 2^k) cells a side), BIGTIFF when it could
  * exceed 4 GiB, the CRS and the nodata value; cells never written are
  * nodata.  The raster may be far larger than memory:
  *
@@ -18,9 +19,11 @@
  *     all-zero bytes (a hole of the sparse file) decode as "not written";
  *   - gdt_dem_finish writes every block exactly once, in row-major block
  *     order, to an intermediate tiled GeoTIFF in scratch_dir (blocks that
- *     are all nodata are left out: sparse), frees the cache, and lets GDAL's
- *     COG driver (at most mem_budget / 2 of GDAL block cache) copy it, with
- *     its overviews, to PATH.tmp-PID beside PATH; that file is fsync'd and
+ *     are all nodata are left out: sparse) with its overview levels, each
+ *     block's part of every level computed from the block as it is written
+ *     (dem_gdal.c), frees the cache, and lets GDAL's COG driver (at most
+ *     mem_budget / 2 of GDAL block cache) copy it, overviews included, to
+ *     PATH.tmp-PID beside PATH; that file is fsync'd and
  *     renamed over PATH, so a file at PATH is complete; the scratch files
  *     are removed whatever happens;
  *   - with a preview path, a shaded-relief PNG of the DEM (GDAL's

@@ -19,8 +19,8 @@ typedef gdt_status (*gdt_dem_block_fn)(void *ctx, int64_t bx, int64_t by, float 
                                        int *empty, gdt_error *err);
 
 /* Writes the intermediate tiled GeoTIFF tiles_path (512 x 512 tiles,
- * DEFLATE level 1 with the floating-point predictor, BIGTIFF, sparse:
- * empty blocks are not written): georeferencing, CRS (epsg, else wkt,
+ * uncompressed, BIGTIFF, sparse: empty blocks are not written, with its
+ * own overview levels, see dem_gdal.c): georeferencing, CRS (epsg, else wkt,
  * else none), nodata; then each block once, asked from fn in row-major
  * block order.  gdal_cache bounds GDAL's block cache (bytes).
  * returns: GDT_OK; fn's errors; GDT_EINPUT 3650 (the CRS is unknown to
@@ -29,8 +29,9 @@ gdt_status gdt_dem_gdal_tiles(const gdt_dem_geo *geo, double nodata, int epsg, c
                               const char *tiles_path, uint64_t gdal_cache, gdt_dem_block_fn fn,
                               void *ctx, gdt_error *err);
 
-/* Copies tiles_path to the COG tmp_path (DEFLATE, floating-point
- * predictor, BIGTIFF=IF_SAFER, 512 x 512 tiles, overviews by averaging)
+/* Copies tiles_path to the COG tmp_path (DEFLATE level 1, floating-point
+ * predictor, BIGTIFF=IF_SAFER, 512 x 512 tiles, the overviews of tiles_path,
+ * or GDAL's averaged ones when it has none)
  * and fsyncs it; the caller renames it.  path names the output in
  * messages.  returns: GDT_OK; GDT_EIO 4652, 4653. */
 gdt_status gdt_dem_gdal_cog(const char *tiles_path, const char *tmp_path, const char *path,

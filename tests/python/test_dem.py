@@ -415,6 +415,52 @@ def test_cog_layout_crs_nodata_and_preview(gdt_bin, runner, tmp_path):
         ["c.las", "d.ply", "d.tif", "d.json", "p.png"])
 
 
+def overview(path, tmp, level, nodata):
+    """Every cell of overview level (1-based) of band 1, exactly."""
+    raw = tmp / f"ovr{level}.raw"
+    r = subprocess.run(["gdal_translate", "-q", "-ovr", str(level - 1), "-of", "ENVI", str(path),
+                        str(raw)], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    hdr = {k.strip(): v.strip() for k, v in
+           (line.split("=", 1) for line in (tmp / f"ovr{level}.hdr").read_text().splitlines()
+            if "=" in line)}
+    nc, nr = int(hdr["samples"]), int(hdr["lines"])
+    return np.fromfile(raw, dtype="<f4").reshape(nr, nc)
+
+
+@pytest.mark.parametrize("mode", [("--reference",), ("--tile", "64")])
+def test_overviews_are_footprint_means(gdt_bin, runner, tmp_path, mode):
+    """Each overview level k has ceil(n / 2^k) cells a side, each the mean of
+    the cells with a value in its 2^k x 2^k footprint of the full-resolution
+    DEM, nodata where the footprint has none (computed here with numpy from
+    the full-resolution cells)."""
+    cloud = gen(runner, tmp_path / "c.las", 12000, 5, "lidar")
+    nd = -9999.0
+    _, tif, _ = run_dem(runner, gdt_bin, cloud, tmp_path, mode=mode,
+                        extra=("--dem-res", "0.03", "--dem-nodata", str(nd)))
+    full, info = raster(tif, tmp_path)
+    ovrs = info["bands"][0].get("overviews", [])
+    nr, nc = full.shape
+    assert max(nr, nc) > 1024 and len(ovrs) >= 2, (full.shape, ovrs)
+    valid = full != np.float32(nd)
+    for k in range(1, len(ovrs) + 1):
+        f = 2 ** k
+        want_r, want_c = -(-nr // f), -(-nc // f)
+        assert ovrs[k - 1]["size"] == [want_c, want_r]
+        pr, pc = want_r * f - nr, want_c * f - nc
+        v = np.pad(np.where(valid, full.astype(np.float64), 0.0), ((0, pr), (0, pc)))
+        cnt = np.pad(valid.astype(np.int64), ((0, pr), (0, pc)))
+        sums = v.reshape(want_r, f, want_c, f).sum(axis=(1, 3))
+        cnts = cnt.reshape(want_r, f, want_c, f).sum(axis=(1, 3))
+        ours = overview(tif, tmp_path, k, nd)
+        assert ours.shape == (want_r, want_c)
+        has = cnts > 0
+        assert np.array_equal(ours != np.float32(nd), has), f"level {k}: nodata pattern"
+        mean = (sums[has] / cnts[has]).astype(np.float32)
+        assert np.allclose(ours[has], mean, rtol=1e-6, atol=0), \
+            f"level {k}: max diff {np.max(np.abs(ours[has] - mean))}"
+
+
 def test_same_bytes_twice_any_budget_and_both_modes(gdt_bin, runner, tmp_path):
     """Run twice, with a budget that forces the block cache to spill (the raster has
     more blocks than 16 MiB holds) and one that holds it all, and from --single-tile:
