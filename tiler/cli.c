@@ -3,6 +3,7 @@
 #include "gdt_ocl.h"
 #include "gdt_predicates.h"
 #include "private/cli_modes.h"
+#include "private/launch.h"
 #include "private/outpaths.h"
 #include "private/single_tile.h"
 #include "private/tiled_run.h"
@@ -532,6 +533,33 @@ int gdt_cli_threads(int k)
     return n < 1 ? 1 : n > 1024 ? 1024 : (int)n;
 }
 
+/* Set by refuse_parallel_launch on every rank but rank 0. */
+static int quiet_rank;
+
+/* Several processes started by a parallel launcher would each run the
+ * whole job on the same job directory and output: refused (GDT-2950) before
+ * anything is opened, so nothing is touched.  One rank (mpirun -np 1) runs
+ * as a plain process. */
+static gdt_status refuse_parallel_launch(gdt_error *err)
+{
+    gdt_launch l;
+    gdt_launch_detect(&l);
+    if (!gdt_launch_is_parallel(&l))
+        return GDT_OK;
+    quiet_rank = l.rank != 0;
+    if (l.size > 1)
+        return gdt_error_set(err, GDT_EUSAGE, 2950,
+                             "started as rank %ld of %ld by %s: this gdt-tile runs a job in "
+                             "one process and cannot share it between ranks; run it without "
+                             "the launcher or with one rank (mpirun -np 1)",
+                             l.rank, l.size, l.launcher);
+    return gdt_error_set(err, GDT_EUSAGE, 2950,
+                         "started as rank %ld by %s: this gdt-tile runs a job in one process "
+                         "and cannot share it between ranks; run it without the launcher or "
+                         "with one rank",
+                         l.rank, l.launcher);
+}
+
 int gdt_cli_main_stop(int argc, char **argv, volatile sig_atomic_t *stop)
 {
     gdt_options opts;
@@ -553,7 +581,13 @@ int gdt_cli_main_stop(int argc, char **argv, volatile sig_atomic_t *stop)
     default:
         break;
     }
-    st = refuse_unavailable(&opts, &err);
+    st = refuse_parallel_launch(&err);
+    if (st == GDT_EUSAGE && quiet_rank) {
+        gdt_options_free(&opts);
+        return (int)st; /* rank 0 says why, once for the whole job */
+    }
+    if (st == GDT_OK)
+        st = refuse_unavailable(&opts, &err);
     if (st == GDT_OK)
         st = gdt_cli_check_stop(&opts, "start-up", &err);
     /* every path before any work; the tiled run checks its own (its job

@@ -1,0 +1,80 @@
+"""A parallel launcher (mpirun, srun) starting several gdt-tile processes:
+each would run the whole job on the same job directory and output, so every
+rank refuses before it touches anything (exit 2, GDT-2950, said once, by
+rank 0); one rank runs as a plain process."""
+import os
+import shutil
+import sys
+
+import pytest
+
+ROOT_OK = {"OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
+LAUNCH_VARS = ("OMPI_COMM_WORLD_SIZE", "OMPI_COMM_WORLD_RANK", "OMPI_COMM_WORLD_LOCAL_RANK",
+               "PMI_SIZE", "PMI_RANK", "MPI_LOCALRANKID", "PMIX_RANK")
+
+
+def cloud(runner, root, tmp_path):
+    path = tmp_path / "c.las"
+    r = runner([sys.executable, root / "scripts" / "gen_cloud.py", path, "--points", "3000",
+                "--seed", "4", "-q"])
+    assert r.returncode == 0, r.stderr
+    return path
+
+
+def clean_env(**extra):
+    env = {k: v for k, v in os.environ.items() if k not in LAUNCH_VARS}
+    env.update(extra)
+    return env
+
+
+@pytest.mark.parametrize("variables,rank0", [
+    ({"OMPI_COMM_WORLD_SIZE": "4", "OMPI_COMM_WORLD_RANK": "0"}, True),
+    ({"OMPI_COMM_WORLD_SIZE": "4", "OMPI_COMM_WORLD_RANK": "3"}, False),
+    ({"PMI_SIZE": "2", "PMI_RANK": "0"}, True),
+    ({"PMI_SIZE": "2", "PMI_RANK": "1"}, False),
+    ({"PMIX_RANK": "1"}, False),
+])
+@pytest.mark.parametrize("mode", [(), ("--reference",), ("--info",)])
+def test_ranks_refuse_before_touching_anything(gdt_bin, runner, root, tmp_path, variables,
+                                               rank0, mode):
+    c = cloud(runner, root, tmp_path)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    out = tmp_path / "o.ply"
+    r = runner([gdt_bin, c, "-o", out, *mode], env=clean_env(**variables))
+    assert r.returncode == 2, r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == before  # no output, no job
+    if rank0:
+        assert "GDT-2950" in r.stderr and "rank 0 of" in r.stderr and "-np 1" in r.stderr
+    else:
+        assert r.stderr == "", r.stderr
+
+
+@pytest.mark.parametrize("variables", [
+    {"OMPI_COMM_WORLD_SIZE": "1", "OMPI_COMM_WORLD_RANK": "0"},
+    {"PMI_SIZE": "1", "PMI_RANK": "0"},
+    {"PMIX_RANK": "0"},
+    {"OMPI_COMM_WORLD_SIZE": "x2", "OMPI_COMM_WORLD_RANK": "0"},  # not a number: ignored
+])
+def test_one_rank_runs_as_a_plain_process(gdt_bin, runner, root, tmp_path, variables):
+    c = cloud(runner, root, tmp_path)
+    plain, ranked = tmp_path / "plain.ply", tmp_path / "ranked.ply"
+    r = runner([gdt_bin, c, "-o", plain, "--tile", "64", "-q"], env=clean_env())
+    assert r.returncode == 0, r.stderr
+    r = runner([gdt_bin, c, "-o", ranked, "--tile", "64", "-q"], env=clean_env(**variables))
+    assert r.returncode == 0, r.stderr
+    assert plain.read_bytes() == ranked.read_bytes()
+
+
+@pytest.mark.skipif(shutil.which("mpirun") is None, reason="Open MPI's mpirun is not installed")
+def test_under_mpirun(gdt_bin, runner, root, tmp_path):
+    c = cloud(runner, root, tmp_path)
+    out = tmp_path / "o.ply"
+    env = clean_env(**ROOT_OK)
+    r = runner(["mpirun", "--oversubscribe", "-np", "2", gdt_bin, c, "-o", out], env=env,
+               timeout=120)
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert r.stderr.count("GDT-2950") == 1, r.stderr
+    assert not out.exists() and not (tmp_path / "o.ply.gdt-job").exists()
+    r = runner(["mpirun", "-np", "1", gdt_bin, c, "-o", out, "-q"], env=env, timeout=120)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert out.exists()
