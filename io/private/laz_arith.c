@@ -64,10 +64,13 @@ gdt_status gdt_laz_symmodel_alloc(gdt_laz_symmodel *m, uint32_t symbols, gdt_err
     words = 2 * (size_t)symbols;
     if (symbols > 16) {
         /* The table maps the top table_bits bits of a 15-bit position to
-         * the first symbol whose interval may hold it; at least four
-         * symbols per entry on average. */
+         * the first symbol whose interval may hold it; four entries per
+         * symbol on average (up to the largest table the look-up bound
+         * allows), so the search after the look-up mostly has nothing left
+         * to do.  (The table is the decoder's own index: any
+         * size finds the same symbols.) */
         uint32_t table_bits = 3;
-        while (symbols > (1u << (table_bits + 2)))
+        while (symbols > (1u << (table_bits - 2)) && table_bits < GDT_LAZ_DM_TABLE_BITS_MAX)
             table_bits++;
         m->table_size = 1u << table_bits;
         m->table_shift = GDT_LAZ_DM_LENGTH_SHIFT - table_bits;

@@ -36,6 +36,9 @@
 #define GDT_LAZ_DM_LENGTH_SHIFT 15        /* symbol models: distribution bits */
 #define GDT_LAZ_DM_MAX_COUNT (1u << GDT_LAZ_DM_LENGTH_SHIFT)
 #define GDT_LAZ_MAX_SYMBOLS 2048u         /* largest alphabet of a symbol model */
+/* Largest decoder table: 2^9 entries, so the look-up index dv >> (15 - 9)
+ * of a position dv <= 2^15 + 63 is at most the table size. */
+#define GDT_LAZ_DM_TABLE_BITS_MAX 9u
 
 /* Flags of gdt_laz_dec.bad. */
 #define GDT_LAZ_DEC_OVERRUN 1u /* the stream needed bytes past its end */
@@ -133,7 +136,8 @@ static inline uint32_t gdt_laz_decode_symbol(gdt_laz_dec *d, gdt_laz_symmodel *m
     uint32_t sym, x, y = d->length;
 
     if (m->decoder_table) {
-        /* value < length bounds dv by 2^15 + 63, so t <= table_size. */
+        /* value < length bounds dv by 2^15 + 63, so t <= table_size
+         * (GDT_LAZ_DM_TABLE_BITS_MAX). */
         uint32_t dv = d->value / (d->length >>= GDT_LAZ_DM_LENGTH_SHIFT);
         uint32_t t = dv >> m->table_shift;
         uint32_t n;
