@@ -175,29 +175,33 @@ static void *helper_main(void *arg)
 }
 
 /* Starts up to want helpers; fewer (even none) when threads cannot be
- * created: the caller's part then covers more. */
-static void start_helpers(tr_dem *d, int want)
+ * created: the caller's part then covers more.  returns: GDT_EINTERNAL 7001
+ * when not even the caller's batch can be allocated. */
+static gdt_status start_helpers(tr_dem *d, int want, gdt_error *err)
 {
     if (want > TD_HELPERS)
         want = TD_HELPERS;
     if (want < 0)
         want = 0;
     d->parts = calloc((size_t)want + 1, sizeof *d->parts);
-    if (d->parts == NULL) {
-        d->parts = calloc(1, sizeof *d->parts); /* may be NULL: then no batching */
+    if (d->parts == NULL && want > 0) {
         want = 0;
+        d->parts = calloc(1, sizeof *d->parts);
     }
-    for (int i = 0; d->parts != NULL && i <= want; i++) {
+    if (d->parts == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory (the DEM's batches)");
+    for (int i = 0; i <= want; i++) {
         d->parts[i].d = d;
         d->parts[i].index = i;
         d->parts[i].batch.d = d;
     }
-    for (int i = 1; d->parts != NULL && i <= want; i++) {
+    for (int i = 1; i <= want; i++) {
         if (pthread_create(&d->parts[i].thread, NULL, helper_main, &d->parts[i]) != 0)
             break;
         d->parts[i].started = 1;
         d->helpers = i;
     }
+    return GDT_OK;
 }
 
 static void stop_helpers(tr_dem *d)
@@ -258,11 +262,12 @@ gdt_status tr_dem_create(tr_dem **out, const gdt_options *opts, const gdt_cloud_
         dop.preview = opts->preview;
         st = gdt_dem_create(&d->w, &d->grid.geo, opts->dem, &dop, err);
     }
+    if (st == GDT_OK)
+        st = start_helpers(d, gdt_cli_threads(opts->threads) - 1, err);
     if (st != GDT_OK) {
         tr_dem_abort(d);
         return st;
     }
-    start_helpers(d, gdt_cli_threads(opts->threads) - 1);
     *out = d;
     return GDT_OK;
 }
@@ -273,26 +278,6 @@ gdt_status tr_dem_tile_faces(tr_dem *d, const gdt_point *pts, size_t n, uint64_t
     gdt_status st;
     int parts;
 
-    if (d->parts == NULL) { /* no memory for batches: one run at a time */
-        for (size_t f = 0; f < m; f++) {
-            gdt_raster_vertex v[3];
-            for (int i = 0; i < 3; i++) {
-                int64_t k = (int64_t)tri[3 * f + (size_t)i] - (int64_t)base;
-                if (k < 0 || (uint64_t)k >= n)
-                    return gdt_error_set(err, GDT_EINTERNAL, 7663,
-                                         "DEM: a certified face names vertex %d, outside its "
-                                         "tile's %" PRIu64 "..%" PRIu64,
-                                         (int)tri[3 * f + (size_t)i], base, base + n - 1);
-                v[i].x = pts[k].x;
-                v[i].y = pts[k].y;
-                v[i].z = pts[k].z;
-            }
-            st = gdt_raster_triangle(&d->grid, NULL, v, locked_put, d, err);
-            if (st != GDT_OK)
-                return st;
-        }
-        return GDT_OK;
-    }
     pthread_mutex_lock(&d->job_mu);
     if (d->helpers == 0 || m < 2 * (size_t)TD_MIN_PART) {
         st = raster_range(d, &d->parts[0].batch, pts, n, base, tri, 0, m, err);
