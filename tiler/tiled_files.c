@@ -320,3 +320,17 @@ void tr_dread_close(tr_dread *r)
     r->buf = NULL;
     r->path = NULL;
 }
+
+gdt_status tr_commit_tmp(int *fd, const char *tmp, const char *path, int nosync,
+                         gdt_error *err)
+{
+    gdt_status st = GDT_OK;
+    if (!nosync && fsync(*fd) != 0)
+        st = gdt_error_set(err, GDT_EIO, 4804, "%s: fsync failed: %s", tmp, strerror(errno));
+    if (close(*fd) != 0 && st == GDT_OK)
+        st = gdt_error_set(err, GDT_EIO, 4803, "%s: write failed: %s", tmp, strerror(errno));
+    *fd = -1;
+    if (st == GDT_OK && rename(tmp, path) != 0)
+        st = gdt_error_set(err, GDT_EIO, 4804, "%s: rename failed: %s", path, strerror(errno));
+    return st;
+}
