@@ -1,54 +1,21 @@
-/* run_finish.c — the output of a tiled run: the mesh writer and the DEM started before the tile stage, completed after the merge (Euler check), --check, --json, the summary, and the release of the run (private/stages.h). */
-#define _GNU_SOURCE /* syncfs, st_mtim */
-#include <dirent.h>
-#include <errno.h>
-#include <fcntl.h>
+/* run_finish.c — the output of a tiled run: the mesh writer and the DEM,
+ * started before the tile stage and completed after the merge (Euler
+ * check), --check, --json and the summary, and the release of the run
+ * (private/stages.h). */
+#include "private/stages.h"
+
 #include <inttypes.h>
-#include <math.h>
-#include <pthread.h>
-#include <signal.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
 #include <unistd.h>
 
-#include "gdt_certify.h"
-#include "gdt_cloud.h"
-#include "gdt_core.h"
-#include "gdt_grow.h"
-#include "gdt_mesh.h"
-#include "gdt_ocl.h"
-#include "gdt_mesh_out.h"
-#include "gdt_ply.h"
 #include "gdt_plycheck.h"
-#include "gdt_seam.h"
-#include "gdt_tiler.h"
 #include "private/dem_report.h"
-#include "private/filter_report.h"
-#include "private/cli_modes.h"
-#include "private/job.h"
-#include "private/mesh_meta.h"
 #include "private/json_out.h"
-#include "private/outpaths.h"
-#include "private/progress.h"
-#include "private/run_stats.h"
+#include "private/mesh_meta.h"
 #include "private/tiled_files.h"
-#include "private/tiled_dem.h"
-#include "gdt_raster.h"
-#include "private/tiled_out.h"
-#include "private/stages.h"
-#include "private/trim_report.h"
 
-
-/* --check: the exact streaming validator on the written mesh (bounded
- * memory, temporary files in the job directory).  A PLY output is read
- * back itself; an OBJ or LandXML output through the PLY copy of the same
- * records that the writer thread wrote beside it (every number of the text
- * was verified to read back as the same double when written).  A mesh
- * that fails is renamed to OUT.rejected, so no invalid file stays at the
- * output path. */
 static gdt_status check_output(tr_run *c, gdt_error *err)
 {
     gdt_plycheck_opts po;

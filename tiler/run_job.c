@@ -1,6 +1,6 @@
-/* run_job.c — the job directory of a tiled run: paths, lock, journal,
- * the params and fingerprint that tie a job to its command, clean-up, and
- * --resume (private/stages.h, private/job.h). */
+/* run_job.c — the job directory of a tiled run: its paths, lock and
+ * journal, the params and fingerprint that tie a job to its command, the
+ * clean-up, and --resume (private/stages.h, private/job.h). */
 #define _GNU_SOURCE /* st_mtim */
 #include "private/stages.h"
 
@@ -19,7 +19,6 @@
 #include "private/tiled_files.h"
 #include "private/tiled_run.h"
 
-/* *created = 1 when this call made the directory. */
 static gdt_status make_dir(const char *path, int *created, gdt_error *err)
 {
     struct stat sb;
@@ -31,6 +30,7 @@ static gdt_status make_dir(const char *path, int *created, gdt_error *err)
     return gdt_error_set(err, GDT_EIO, 4801, "%s: cannot create the job directory: %s", path,
                          strerror(errno));
 }
+
 static char *default_job(const char *output)
 {
     size_t l = strlen(output);

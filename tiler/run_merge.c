@@ -1,47 +1,16 @@
-/* run_merge.c — the seam merge of a tiled run by rows of tiles: the seams read back from the .tri files, merge.faces and merge.dem in the job directory (private/stages.h). */
-#define _GNU_SOURCE /* syncfs, st_mtim */
-#include <dirent.h>
+/* run_merge.c — the seam merge of a tiled run by rows of tiles: the seams
+ * read back from the .tri files; merge.faces and merge.dem in the job
+ * directory (private/stages.h). */
+#include "private/stages.h"
+
 #include <errno.h>
 #include <fcntl.h>
-#include <inttypes.h>
-#include <math.h>
-#include <pthread.h>
-#include <signal.h>
-#include <stdarg.h>
-#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
 #include <unistd.h>
 
-#include "gdt_certify.h"
-#include "gdt_cloud.h"
-#include "gdt_core.h"
-#include "gdt_grow.h"
-#include "gdt_mesh.h"
-#include "gdt_ocl.h"
-#include "gdt_mesh_out.h"
-#include "gdt_ply.h"
-#include "gdt_plycheck.h"
-#include "gdt_seam.h"
-#include "gdt_tiler.h"
-#include "private/dem_report.h"
-#include "private/filter_report.h"
-#include "private/cli_modes.h"
-#include "private/job.h"
-#include "private/mesh_meta.h"
-#include "private/json_out.h"
-#include "private/outpaths.h"
-#include "private/progress.h"
-#include "private/run_stats.h"
 #include "private/tiled_files.h"
-#include "private/tiled_dem.h"
-#include "gdt_raster.h"
-#include "private/tiled_out.h"
-#include "private/stages.h"
-#include "private/trim_report.h"
 
-/* Writes all of buf to fd (path names it in errors); GDT_EIO 4803. */
 static gdt_status write_all(int fd, const unsigned char *buf, size_t len, const char *path,
                             gdt_error *err)
 {
@@ -57,6 +26,7 @@ static gdt_status write_all(int fd, const unsigned char *buf, size_t len, const 
     }
     return GDT_OK;
 }
+
 /* Appends the seam section of tile k's .tri file (seam vertices and barrier
  * edges) to c->seam, through tr_tri_read_seam: the counts of the header are
  * checked against the file's size before anything is allocated, every id
@@ -92,12 +62,6 @@ static gdt_status read_seam(tr_run *c, uint64_t k, gdt_error *err)
     return st;
 }
 
-/* Stage 3: the seam merge by rows of tiles (gdt_seam.h).  Each row's seam
- * is read from its tiles' .tri files; each round's final faces are appended
- * to <job>/merge.faces ("GDTMRG01", u64 face count, then 3 x u32 output
- * indices per face, little-endian), written under merge.faces.tmp, fsync'd
- * and renamed.  Holds one row of seams, the merger's band and a write
- * buffer. */
 /* With --dem: the round's nf faces' vertices (global lattice, z) appended
  * to merge.dem (dbuf holds *ndbuf bytes of MD_RECORD TR_CHUNK). */
 static gdt_status put_merge_dem(tr_run *c, int fd, const char *tmp, const gdt_merger *m,
@@ -124,6 +88,12 @@ static gdt_status put_merge_dem(tr_run *c, int fd, const char *tmp, const gdt_me
     return GDT_OK;
 }
 
+/* The seam merge by rows of tiles (gdt_seam.h).  Each row's seam
+ * is read from its tiles' .tri files; each round's final faces are appended
+ * to <job>/merge.faces ("GDTMRG01", u64 face count, then 3 x u32 output
+ * indices per face, little-endian), written under merge.faces.tmp, fsync'd
+ * and renamed.  Holds one row of seams, the merger's band and a write
+ * buffer. */
 static gdt_status merge_rows(tr_run *c, gdt_error *err)
 {
     const gdt_tile_plan *pl = c->plan;

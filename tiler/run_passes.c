@@ -1,47 +1,20 @@
-/* run_passes.c — the start of a tiled run: the OpenCL core on its own thread, pass 1 and pass 2 of the tiler, and the journal records of pass 2 (private/stages.h). */
-#define _GNU_SOURCE /* syncfs, st_mtim */
-#include <dirent.h>
-#include <errno.h>
-#include <fcntl.h>
+/* run_passes.c — the start of a tiled run: the OpenCL core created on a
+ * thread of its own, pass 1 and pass 2 of the tiler, and the journal
+ * records of pass 2 (private/stages.h). */
+#define _GNU_SOURCE /* sigaltstack */
+#include "private/stages.h"
+
 #include <inttypes.h>
-#include <math.h>
 #include <pthread.h>
 #include <signal.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
-#include <unistd.h>
 
-#include "gdt_certify.h"
-#include "gdt_cloud.h"
-#include "gdt_core.h"
-#include "gdt_grow.h"
-#include "gdt_mesh.h"
 #include "gdt_ocl.h"
-#include "gdt_mesh_out.h"
-#include "gdt_ply.h"
-#include "gdt_plycheck.h"
-#include "gdt_seam.h"
-#include "gdt_tiler.h"
-#include "private/dem_report.h"
-#include "private/filter_report.h"
 #include "private/cli_modes.h"
-#include "private/job.h"
-#include "private/mesh_meta.h"
-#include "private/json_out.h"
-#include "private/outpaths.h"
-#include "private/progress.h"
-#include "private/run_stats.h"
 #include "private/tiled_files.h"
-#include "private/tiled_dem.h"
-#include "gdt_raster.h"
-#include "private/tiled_out.h"
-#include "private/stages.h"
-#include "private/trim_report.h"
 
-/* The tiler's progress hook: shows progress and carries the stop request. */
 static int tiler_progress(void *ctx, int stage, uint64_t done, uint64_t total)
 {
     tr_run *c = ctx;
@@ -52,6 +25,7 @@ static int tiler_progress(void *ctx, int stage, uint64_t done, uint64_t total)
     gdt_progress_update(&c->prog, done);
     return tr_stopped(c);
 }
+
 /* Records pass 2 as done together with the size and checksum of every
  * .pts and .edge file it wrote (one transaction). */
 static gdt_status record_pass2(tr_run *c, gdt_error *err)
@@ -112,6 +86,7 @@ static gdt_status adopt_pass2(tr_run *c, int *ok, gdt_error *err)
     }
     return st;
 }
+
 static void *core_start_main(void *arg)
 {
     tr_core_start *cs = arg;

@@ -1,48 +1,19 @@
-/* run_tiles.c — the tile stage of a tiled run: per tile the OpenCL core, then on the post thread certification, seam, trim section and the .tri file, synced in batches and recorded in the journal (private/stages.h). */
-#define _GNU_SOURCE /* syncfs, st_mtim */
-#include <dirent.h>
+/* run_tiles.c — the tile stage of a tiled run: per tile the OpenCL core,
+ * then on the post thread certification, seam, trim section and the .tri
+ * file, synced in batches and recorded in the journal (private/stages.h). */
+#define _GNU_SOURCE /* syncfs */
+#include "private/stages.h"
+
 #include <errno.h>
 #include <fcntl.h>
-#include <inttypes.h>
-#include <math.h>
 #include <pthread.h>
-#include <signal.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
 #include <unistd.h>
 
-#include "gdt_certify.h"
-#include "gdt_cloud.h"
-#include "gdt_core.h"
-#include "gdt_grow.h"
-#include "gdt_mesh.h"
-#include "gdt_ocl.h"
-#include "gdt_mesh_out.h"
-#include "gdt_ply.h"
-#include "gdt_plycheck.h"
-#include "gdt_seam.h"
-#include "gdt_tiler.h"
-#include "private/dem_report.h"
-#include "private/filter_report.h"
-#include "private/cli_modes.h"
-#include "private/job.h"
-#include "private/mesh_meta.h"
-#include "private/json_out.h"
-#include "private/outpaths.h"
-#include "private/progress.h"
-#include "private/run_stats.h"
 #include "private/tiled_files.h"
-#include "private/tiled_dem.h"
-#include "gdt_raster.h"
-#include "private/tiled_out.h"
-#include "private/stages.h"
-#include "private/trim_report.h"
 
-/* reserve for a buffer of direct I/O (aligned to GDT_DIO_BLOCK); the content
- * is not kept when it grows. */
 static int reserve_blocks(unsigned char **p, size_t *cap, size_t need)
 {
     void *q;
@@ -57,41 +28,7 @@ static int reserve_blocks(unsigned char **p, size_t *cap, size_t need)
     *cap = need;
     return 0;
 }
-/* Writes buf (aligned to GDT_DIO_BLOCK) to path through path.tmp, with
- * direct I/O where allowed (tr_write_direct), then fsync (unless nosync)
- * and rename.  On failure nothing is left at either name. */
-static gdt_status write_atomic(const char *path, const unsigned char *buf, size_t len,
-                               int nosync, gdt_error *err)
-{
-    int direct;
-    size_t lp = strlen(path);
-    char *tmp = malloc(lp + 5);
-    int fd = -1;
-    gdt_status st = GDT_OK;
 
-    if (tmp == NULL)
-        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-    memcpy(tmp, path, lp);
-    memcpy(tmp + lp, ".tmp", 5);
-    fd = gdt_dio_create(tmp, 0644, &direct);
-    if (fd < 0) {
-        st = gdt_error_set(err, GDT_EIO, 4802, "%s: cannot create: %s", tmp, strerror(errno));
-        goto fail;
-    }
-    st = tr_write_direct(fd, &direct, buf, len, tmp, err);
-    if (st == GDT_OK)
-        st = tr_commit_tmp(&fd, tmp, path, nosync, err);
-    if (st != GDT_OK)
-        goto fail;
-    free(tmp);
-    return GDT_OK;
-fail:
-    if (fd >= 0)
-        close(fd);
-    unlink(tmp);
-    free(tmp);
-    return st;
-}
 #define SORT_AHEAD 16 /* faces between a prefetch and its use */
 
 /* Certified faces of the current tile as output indices, each rotated to
@@ -224,6 +161,7 @@ static void put_trim(const tr_run *c, unsigned char *p)
         tr_put_u32(p + 16, t->open[i].label);
     }
 }
+
 /* The first half of tile k, on the main thread: loads it and runs the core
  * on its own points into sl (the halo goes beside it). */
 static gdt_status core_tile(tr_run *c, uint64_t k, tr_slot *sl, gdt_error *err)
@@ -387,7 +325,7 @@ static gdt_status post_tile_run(tr_run *c, tr_slot *sl, gdt_error *err)
     st = tr_tile_path(c->tiles_dir, d, "tri", &path, err);
     /* durability comes in batches: see sync_tiles */
     if (st == GDT_OK)
-        st = write_atomic(path, c->fbuf, len, 1, err);
+        st = tr_write_atomic(path, c->fbuf, len, 1, err);
     free(path);
     if (st != GDT_OK)
         return st;

@@ -186,6 +186,14 @@ void tr_dread_close(tr_dread *r);
 gdt_status tr_commit_tmp(int *fd, const char *tmp, const char *path, int nosync,
                          gdt_error *err);
 
+/* Writes buf (aligned to GDT_DIO_BLOCK) to path through path.tmp, with
+ * direct I/O where allowed (tr_write_direct), then fsync (unless nosync)
+ * and rename.  On failure nothing is left at either name.
+ * returns: GDT_OK; GDT_EIO 4802 (cannot create), 4803, 4804; GDT_EINTERNAL
+ * 7001. */
+gdt_status tr_write_atomic(const char *path, const unsigned char *buf, size_t len, int nosync,
+                           gdt_error *err);
+
 /* The error of a run stopped by a signal during `where` (GDT_EINTERRUPTED
  * 1302), telling how to continue the job. */
 gdt_status tr_interrupted(const char *job, const char *where, gdt_error *err);
