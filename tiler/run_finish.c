@@ -16,6 +16,13 @@
 #include "private/mesh_meta.h"
 #include "private/tiled_files.h"
 
+/* --check: the exact streaming validator on the written mesh (bounded
+ * memory, temporary files in the job directory).  A PLY output is read
+ * back itself; an OBJ or LandXML output through the PLY copy of the same
+ * records that the writer thread wrote beside it (every number of the text
+ * was verified to read back as the same double when written).  A mesh
+ * that fails is renamed to OUT.rejected, so no invalid file stays at the
+ * output path. */
 static gdt_status check_output(tr_run *c, gdt_error *err)
 {
     gdt_plycheck_opts po;

@@ -19,6 +19,7 @@
 #include "private/tiled_files.h"
 #include "private/tiled_run.h"
 
+/* *created = 1 when this call made the directory. */
 static gdt_status make_dir(const char *path, int *created, gdt_error *err)
 {
     struct stat sb;

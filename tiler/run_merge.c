@@ -11,6 +11,7 @@
 
 #include "private/tiled_files.h"
 
+/* Writes all of buf to fd (path names it in errors); GDT_EIO 4803. */
 static gdt_status write_all(int fd, const unsigned char *buf, size_t len, const char *path,
                             gdt_error *err)
 {

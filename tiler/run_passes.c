@@ -15,6 +15,7 @@
 #include "private/cli_modes.h"
 #include "private/tiled_files.h"
 
+/* The tiler's progress hook: shows progress and carries the stop request. */
 static int tiler_progress(void *ctx, int stage, uint64_t done, uint64_t total)
 {
     tr_run *c = ctx;

@@ -14,6 +14,8 @@
 
 #include "private/tiled_files.h"
 
+/* tr_reserve for a buffer of direct I/O (aligned to GDT_DIO_BLOCK); the
+ * content is not kept when it grows. */
 static int reserve_blocks(unsigned char **p, size_t *cap, size_t need)
 {
     void *q;
