@@ -5,3 +5,5 @@ gdt_add_test_exe(src_read ${CMAKE_CURRENT_SOURCE_DIR}/tools/src_read.c)
 add_library(gdt_fail_threads MODULE ${CMAKE_CURRENT_SOURCE_DIR}/tools/fail_threads.c)
 target_link_libraries(gdt_fail_threads PRIVATE ${CMAKE_DL_LIBS})
 gdt_target_flags(gdt_fail_threads)
+# The tiled run's stages over a subset of the tiles (tests/python/test_stages.py).
+gdt_add_test_exe(stages_subset ${CMAKE_CURRENT_SOURCE_DIR}/tools/stages_subset.c)

@@ -320,3 +320,50 @@ void tr_dread_close(tr_dread *r)
     r->buf = NULL;
     r->path = NULL;
 }
+
+gdt_status tr_commit_tmp(int *fd, const char *tmp, const char *path, int nosync,
+                         gdt_error *err)
+{
+    gdt_status st = GDT_OK;
+    if (!nosync && fsync(*fd) != 0)
+        st = gdt_error_set(err, GDT_EIO, 4804, "%s: fsync failed: %s", tmp, strerror(errno));
+    if (close(*fd) != 0 && st == GDT_OK)
+        st = gdt_error_set(err, GDT_EIO, 4803, "%s: write failed: %s", tmp, strerror(errno));
+    *fd = -1;
+    if (st == GDT_OK && rename(tmp, path) != 0)
+        st = gdt_error_set(err, GDT_EIO, 4804, "%s: rename failed: %s", path, strerror(errno));
+    return st;
+}
+
+gdt_status tr_write_atomic(const char *path, const unsigned char *buf, size_t len, int nosync,
+                           gdt_error *err)
+{
+    int direct;
+    size_t lp = strlen(path);
+    char *tmp = malloc(lp + 5);
+    int fd = -1;
+    gdt_status st = GDT_OK;
+
+    if (tmp == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    memcpy(tmp, path, lp);
+    memcpy(tmp + lp, ".tmp", 5);
+    fd = gdt_dio_create(tmp, 0644, &direct);
+    if (fd < 0) {
+        st = gdt_error_set(err, GDT_EIO, 4802, "%s: cannot create: %s", tmp, strerror(errno));
+        goto fail;
+    }
+    st = tr_write_direct(fd, &direct, buf, len, tmp, err);
+    if (st == GDT_OK)
+        st = tr_commit_tmp(&fd, tmp, path, nosync, err);
+    if (st != GDT_OK)
+        goto fail;
+    free(tmp);
+    return GDT_OK;
+fail:
+    if (fd >= 0)
+        close(fd);
+    unlink(tmp);
+    free(tmp);
+    return st;
+}

@@ -179,6 +179,21 @@ gdt_status tr_dread_bytes(tr_dread *r, void *dst, size_t n, size_t *got, gdt_err
 /* Safe on a zeroed or closed reader. */
 void tr_dread_close(tr_dread *r);
 
+/* Finishes a file written through tmp: fsync (unless nosync), close, then
+ * rename to path.  *fd is closed and set to -1 whatever happens; on failure
+ * the caller removes tmp.
+ * returns: GDT_OK; GDT_EIO 4803 (close), 4804 (fsync, rename). */
+gdt_status tr_commit_tmp(int *fd, const char *tmp, const char *path, int nosync,
+                         gdt_error *err);
+
+/* Writes buf (aligned to GDT_DIO_BLOCK) to path through path.tmp, with
+ * direct I/O where allowed (tr_write_direct), then fsync (unless nosync)
+ * and rename.  On failure nothing is left at either name.
+ * returns: GDT_OK; GDT_EIO 4802 (cannot create), 4803, 4804; GDT_EINTERNAL
+ * 7001. */
+gdt_status tr_write_atomic(const char *path, const unsigned char *buf, size_t len, int nosync,
+                           gdt_error *err);
+
 /* The error of a run stopped by a signal during `where` (GDT_EINTERRUPTED
  * 1302), telling how to continue the job. */
 gdt_status tr_interrupted(const char *job, const char *where, gdt_error *err);

@@ -1,5 +1,9 @@
 /* tiled_run.h — gdt-tile INPUT... --tile N -o OUT.ply: the tiled pipeline.
  *
+ * The stages are functions on one context (private/stages.h: what each
+ * reads and writes, in which order); gdt_cli_tiled runs them in order over
+ * every tile in this process.
+ *
  * Stages, all in the job directory (--job, default OUT.ply.gdt-job):
  *   1. the tiler (gdt_tiler.h): pass 1 (index.vdb), pass 2 (the .pts and
  *      .edge tile files, duplicates merged by --dup);

@@ -1,0 +1,339 @@
+/* stages.h — the stages of a tiled run (tiled_run.h) behind one context.
+ *
+ * A run is a tr_run context driven through the stages below in this order;
+ * the single-process run (tiled_run.c) calls every one of them once.  Each
+ * stage reads what the earlier ones left in the context and the job
+ * directory J (--job, default OUT.ply.gdt-job) and returns gdt_status with
+ * the error in a caller-owned gdt_error.  After any failure the caller
+ * skips the remaining stages and calls tr_run_close, which releases
+ * everything, keeps the job for a rerun (or removes it, see there) and
+ * returns the status of the run.
+ *
+ *   tr_run_init         run_job.c     job paths; every output path checked
+ *   tr_run_start_core   run_passes.c  OpenCL core started on its own thread;
+ *                                     certifier
+ *   tr_run_prepare_job  run_job.c     J made and locked; --restart; J/job.db
+ *                                     opened and checked against options
+ *                                     and inputs (fingerprint)
+ *   tr_run_pass1        run_passes.c  cloud, tiler, pass 1 (J/index.vdb);
+ *                                     core joined; plan checks
+ *   tr_run_pass2        run_passes.c  pass 2 (the .pts, .edge files in J/tiles) or its
+ *                                     recorded files adopted; vertex bases
+ *   tr_run_output_start run_finish.c  trim graph, DEM, mesh writer thread
+ *   tr_run_tiles        run_tiles.c   core + post thread per tile: the
+ *                                     .tri files in J/tiles and their records
+ *   tr_run_merge        run_merge.c   seam merge: J/merge.faces (J/merge.dem)
+ *   tr_run_finish       run_finish.c  Euler check, mesh and DEM completed,
+ *                                     --check, --json, summary, clean-up
+ *   tr_run_close        run_finish.c  release; returns the run's status
+ *
+ * Threads: every stage runs on the caller's thread; the helper threads a
+ * stage starts (core creation, post stage, writer, reclaim) are joined by a
+ * later stage or by tr_run_close. */
+#ifndef GDT_STAGES_H
+#define GDT_STAGES_H
+
+#include <pthread.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "gdt_certify.h"
+#include "gdt_cli.h"
+#include "gdt_cloud.h"
+#include "gdt_core.h"
+#include "gdt_error.h"
+#include "gdt_grow.h"
+#include "gdt_mesh.h"
+#include "gdt_mesh_out.h"
+#include "gdt_raster.h"
+#include "gdt_seam.h"
+#include "gdt_tiler.h"
+#include "gdt_trim.h"
+#include "private/filter_report.h"
+#include "private/job.h"
+#include "private/progress.h"
+#include "private/run_stats.h"
+#include "private/tiled_dem.h"
+#include "private/tiled_out.h"
+#include "private/trim_report.h"
+
+/* What the summary and --json report. */
+typedef struct tr_summary {
+    uint64_t points_read, vertices, tiles, faces, certified, merge_faces;
+    uint64_t max_tile_points, max_halo_points, gcd_tiles, insert_tiles;
+    double t_pass1, t_pass2, t_tiles, t_core, t_certify, t_post, t_merge, t_write, t_check, t_total;
+    gdt_cert_stats cert;
+    gdt_merge_stats merge;
+    int checked;
+    char device[256];
+    int resumed, pass2_reused;
+    uint64_t tiles_reused, tiles_redone;
+    gdt_trim_counts trim; /* faces before trimming and the drops (with a rule on) */
+    int dem_done;
+    gdt_dem_geo dem_geo;
+    gdt_dem_stats dem_stats;
+    double t_dem;
+} tr_summary;
+
+/* A finished tile file waiting for its journal record. */
+typedef struct tr_pending {
+    uint64_t k, size, checksum;
+} tr_pending;
+
+/* One triangulated tile on its way from the core to its .tri file.  The
+ * main thread owns a slot until it hands it to the post stage, the post
+ * stage until it is joined. */
+typedef struct tr_slot {
+    uint64_t k;
+    gdt_tile_desc d;
+    size_t n, nh;       /* own points, halo points */
+    gdt_ipt *lh;        /* nh halo points, tile-local; owned */
+    size_t cap_lh;
+    gdt_mesh mesh;      /* the core's triangulation of the own points */
+    double *z;          /* their z, by vertex; owned */
+    size_t cap_z;
+} tr_slot;
+
+typedef struct tr_run tr_run;
+
+/* The post stage of a tile (certification, seam, sorted faces, .tri file,
+ * pending record) runs on its own thread while the main thread loads the
+ * next tile and runs the core on it.  While it runs it alone touches cert,
+ * count, fbuf, seam, seam_total, pending/npending/nsynced, t_flushed, ttile and
+ * s.cert, s.certified, s.t_certify, s.t_post; the main thread reads them only
+ * after tr_post_join. */
+typedef struct tr_post {
+    pthread_t tid;
+    int running;        /* a thread was started and not yet joined */
+    tr_run *c;
+    tr_slot *slot;
+    gdt_status st;
+    gdt_error err;
+} tr_post;
+
+/* What the tile stage leaves behind (the core with its device memory, the
+ * slots' meshes, the post stage's arrays: about the memory of a tile),
+ * released on a thread of its own while the merge and the output go on;
+ * unmapping it takes a tenth of a second per GB. */
+typedef struct tr_reclaim {
+    pthread_t tid;
+    int running;        /* a thread was started and not yet joined */
+    gdt_core *core;
+    gdt_mesh mesh[2];
+    void *bufs[5];
+} tr_reclaim;
+
+/* The core is created (OpenCL context, kernels from the cache: about 0.2 s
+ * on a CPU device) on a thread of its own while pass 1 reads the input, and
+ * joined after it.  When pass 1 fails first, its error is the one reported:
+ * the device's may be a consequence (the compiler inside the OpenCL
+ * runtime removes its temporary files on SIGXFSZ, which a write beyond
+ * the file size limit raises on the thread that made it). */
+typedef struct tr_core_start {
+    gdt_core_opts opts;
+    gdt_core *core;
+    gdt_error err;
+    gdt_status st;
+    pthread_t thread;
+    int running;
+} tr_core_start;
+
+/* The context of one run.  Zeroed and filled by tr_run_init; released by
+ * tr_run_close.  Owns everything it points to except opts. */
+struct tr_run {
+    const gdt_options *opts;
+    gdt_log log;
+    double t_start;     /* gdt_now() at tr_run_init */
+    char *job;          /* owned */
+    char *tiles_dir;    /* owned */
+    int created;        /* this run made the job directory */
+    int own_dir;        /* a run of this job made it (gdt_job_lock) */
+    tr_core_start cstart; /* the core's creation, until tr_run_pass1 joins it */
+    gdt_cloud *cloud;
+    gdt_tiler *tiler;
+    gdt_core *core;
+    gdt_certifier *certifier;
+    const gdt_tile_plan *plan;
+    uint64_t *base;     /* ntiles + 1 output index of each tile's first vertex */
+    gdt_point_buf halo; /* the current tile's halo */
+    tr_slot slot[2];    /* the i-th tile a tile stage runs uses slot[i & 1] */
+    tr_post post;
+    tr_reclaim reclaim;
+    tr_out *out;        /* the mesh writer, from the tile stage on */
+    char *check_ply;    /* --check of a text output: the PLY copy in the job; owned */
+    tr_dem *dem;        /* --dem: fed by the mesh writer */
+    /* the mesh header's filter and trim lines: live until the writer is done */
+    char filter_comment[GDT_FILTER_COMMENT_MAX];
+    char trim_comment[GDT_TRIM_TEXT_MAX];
+    const char *filter_comments[2];
+    uint8_t *cert;
+    size_t cap_cert;
+    uint32_t *count;    /* bucket counts for the face sort */
+    size_t cap_count;
+    unsigned char *fbuf; /* the .tri file image */
+    size_t cap_fbuf;
+    gdt_seam seam;      /* one tile's seam (tile stage), one row's (merge) */
+    gdt_trim_rule trim; /* --max-edge, --concavity with the lattice steps */
+    gdt_trim_tile ttile; /* one tile's trim section (post stage) */
+    gdt_trim_graph *tgraph; /* the run's long edges (merge), with a rule on */
+    gdt_trim_open *topen; /* one tile's open edges (merge) */
+    size_t ntopen, cap_topen;
+    uint64_t seam_total; /* seam vertices of all tiles (merge progress) */
+    gdt_job *jobdb;
+    uint64_t job_id[2];   /* seeds every checksum the journal records */
+    int lock_fd;          /* the job directory's lock (gdt_job_lock), or -1 */
+    tr_pending *pending;  /* finished tiles not yet recorded */
+    size_t npending, cap_pending;
+    size_t nsynced;       /* pending[0, nsynced) are on disk, to be recorded */
+    double t_flushed;
+    gdt_progress prog;
+    tr_summary s;
+};
+
+/* 1 when a signal asked the run to stop. */
+static inline int tr_stopped(const tr_run *c)
+{
+    return c->opts->stop != NULL && *c->opts->stop != 0;
+}
+
+/* Grows an array to at least need elements (gdt_grow.h: doubling, the
+ * pointer moved without a void ** cast). */
+static inline int tr_reserve(void *pp, size_t *cap, size_t need, size_t elem)
+{
+    return gdt_grow(pp, cap, need, elem, need);
+}
+
+/* ---- run_job.c: the job directory and its journal ---- */
+
+/* Zeroes c and sets it up for opts (which must outlive c): log, progress,
+ * the job path (opts->job, or OUT.gdt-job) and J/tiles, then checks every
+ * path (gdt_cli_check_paths).  Nothing is written.  Call tr_run_close
+ * also when it fails.
+ * returns: GDT_OK; GDT_EINTERNAL 7001; gdt_cli_check_paths' errors. */
+gdt_status tr_run_init(tr_run *c, const gdt_options *opts, gdt_error *err);
+
+/* After tr_run_start_core: makes J (c->created) and takes its lock
+ * (c->lock_fd, c->own_dir) before anything in it is read or removed; with
+ * --restart removes the job's files; then opens or creates J/job.db
+ * (c->jobdb, c->job_id) and checks that it belongs to this command: the
+ * recorded params (options and absolute input paths) and fingerprint (per
+ * input size, mtime and hashes) must match, unless the journal holds no
+ * finished work, when it is taken over.  Records "output" and "products"
+ * (for --resume); c->s.resumed when the journal was this command's.
+ * returns: GDT_OK; GDT_EIO 4801, 49xx; GDT_EJOB 6901, 6903 (options
+ * differ), 6904 (an input changed), 6906; GDT_EINPUT 3802; GDT_EUSAGE
+ * 2106. */
+gdt_status tr_run_prepare_job(tr_run *c, gdt_error *err);
+
+/* Removes the files a job directory holds (job.db and its WAL files,
+ * index.vdb, merge.faces, merge.dem, check.ply, tiles/ with our tile files)
+ * and tiles/ if empty.  With final (the end of the run that holds the
+ * lock), the lock file goes last, then the job directory itself if it is
+ * empty and own_dir; otherwise (--restart) the lock file and the directory
+ * stay.  Never removes anything else: --job may name a directory the user
+ * owns. */
+void tr_remove_job_files(const char *job, int final, int own_dir);
+
+/* ---- run_passes.c: the device, pass 1 and pass 2 ---- */
+
+/* After tr_run_init: starts creating the OpenCL core on a thread of its own
+ * (c->cstart; joined by tr_run_pass1 or tr_run_close) and creates the
+ * certifier.
+ * returns: GDT_OK; the certifier's errors. */
+gdt_status tr_run_start_core(tr_run *c, gdt_error *err);
+
+/* Joins the core's creation (if it runs) and hands the core to *core.
+ * Returns the creation's status; on failure its error replaces *err (err
+ * may be NULL). */
+gdt_status tr_core_start_join(tr_core_start *cs, gdt_core **core, gdt_error *err);
+
+/* After tr_run_prepare_job: opens the cloud (c->cloud; LAZ replayed from
+ * J), creates the tiler (c->tiler) and runs pass 1 (writes J/index.vdb);
+ * joins the core (c->core, c->s.device); c->plan and c->s.t_pass1.  Refuses
+ * a cloud wider than the merge frame and a --dem-res the lattice refuses,
+ * before pass 2.
+ * returns: GDT_OK; the cloud's, tiler's and core's errors; GDT_EINTERRUPTED
+ * 1302. */
+gdt_status tr_run_pass1(tr_run *c, gdt_error *err);
+
+/* After tr_run_pass1: when the journal records pass 2 done and every
+ * recorded .pts/.edge file matches, adopts them (c->s.pass2_reused);
+ * otherwise clears the journal's pass-2 and tile records, runs pass 2
+ * (writes J/tiles/tile_*.pts, .edge) and records its files and the stage.
+ * Then c->base (each tile's first output vertex), c->s.tiles, c->s.vertices,
+ * c->s.points_read, c->s.t_pass2.
+ * returns: GDT_OK; the tiler's and journal's errors; GDT_EINPUT 3801 (more
+ * than 2^31 - 1 vertices); GDT_EINTERRUPTED 1302. */
+gdt_status tr_run_pass2(tr_run *c, gdt_error *err);
+
+/* ---- run_tiles.c: the tile stage ---- */
+
+/* Which tiles a tile stage runs, and who hears of each finished one. */
+typedef struct tr_tile_set {
+    /* n tile indices, strictly increasing; NULL: every tile, in order */
+    const uint64_t *k;
+    uint64_t n;
+    /* NULL, or called on the caller's thread once per tile of the set when
+     * its .tri file is durable and recorded in the journal (a reused tile:
+     * when its file has been verified against its record) */
+    void (*done)(void *ctx, uint64_t k);
+    void *ctx;
+} tr_tile_set;
+
+/* After tr_run_pass2 (and tr_run_output_start when c->out is to be fed):
+ * runs the tiles of set in its order.  A tile the journal records is reused
+ * when its .tri file matches the record (a warning 6803 names a file that
+ * does not, and the tile is redone); any other is loaded, triangulated by
+ * the core, and handed to the post stage (certification, seam, trim
+ * section), which writes J/tiles/tile_<i>_<j>.tri and whose files are
+ * synced in batches and recorded in the journal.  The writer (c->out, if
+ * any) is told of the tiles that have their files, as a prefix of the tile
+ * order: a writer needs the set of every tile.  Leaves c->seam_total and
+ * c->s (certified, tiles_reused, tiles_redone, t_tiles, the core's and
+ * certification's counts); the core and the stage's buffers go to the
+ * reclaim thread at the end, so it runs once per context.  Interrupted, it
+ * records what is finished first.
+ * returns: GDT_OK; the tiler's, core's, certifier's and journal's errors;
+ * GDT_EIO 48xx; GDT_EINTERRUPTED 1302. */
+gdt_status tr_run_tiles(tr_run *c, const tr_tile_set *set, gdt_error *err);
+
+/* Waits for the post stage (if one runs) and returns its status; its error,
+ * if any, is copied to *err. */
+gdt_status tr_post_join(tr_run *c, gdt_error *err);
+
+/* Waits for the reclaim thread (if one runs). */
+void tr_reclaim_join(tr_run *c);
+
+/* ---- run_merge.c: the seam merge ---- */
+
+/* After tr_run_tiles has finished every tile: the seam merge by rows of
+ * tiles, reading each row's seams from their .tri files; writes J/merge.faces
+ * (and with --dem J/merge.dem) anew, synced with the directory; with a
+ * trim rule, the trim graph resolved.  Leaves c->s.merge, merge_faces,
+ * faces, t_merge.
+ * returns: GDT_OK; the merger's errors; GDT_EIO 48xx; GDT_EJOB 6801-6802;
+ * GDT_EINTERRUPTED 1302. */
+gdt_status tr_run_merge(tr_run *c, gdt_error *err);
+
+/* ---- run_finish.c: the output ---- */
+
+/* After tr_run_pass2: the trim rule and graph (c->trim, c->tgraph), the
+ * DEM (c->dem) and the mesh writer thread (c->out), which writes the mesh
+ * beside the tile stage; with --check of a text output, the PLY copy in J.
+ * returns: GDT_OK; GDT_EINTERNAL 7001; the DEM's errors. */
+gdt_status tr_run_output_start(tr_run *c, gdt_error *err);
+
+/* After tr_run_merge: hands the trim graph to the writer, checks Euler's
+ * relation, completes the mesh (merge faces appended) and the DEM, marks
+ * the "ply" stage, runs --check, writes --json and the summary; without
+ * --keep-job removes the job.
+ * returns: GDT_OK; GDT_EINTERNAL 7820 (Euler: a bug), 73xx/7821 (--check);
+ * the writer's and DEM's errors. */
+gdt_status tr_run_finish(tr_run *c, gdt_error *err);
+
+/* Joins every helper thread, releases c and unlocks J; returns st, the
+ * run's status.  A run refused for its input or options (GDT_EINPUT,
+ * GDT_EUSAGE) of a job without finished work removes the job. */
+gdt_status tr_run_close(tr_run *c, gdt_status st);
+
+#endif

@@ -1,0 +1,271 @@
+/* run_passes.c — the start of a tiled run: the OpenCL core created on a
+ * thread of its own, pass 1 and pass 2 of the tiler, and the journal
+ * records of pass 2 (private/stages.h). */
+#define _GNU_SOURCE /* sigaltstack */
+#include "private/stages.h"
+
+#include <inttypes.h>
+#include <pthread.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "gdt_ocl.h"
+#include "private/cli_modes.h"
+#include "private/tiled_files.h"
+
+/* The tiler's progress hook: shows progress and carries the stop request. */
+static int tiler_progress(void *ctx, int stage, uint64_t done, uint64_t total)
+{
+    tr_run *c = ctx;
+    static const char *const names[] = {"", "pass 1", "pass 2", "dup merge"};
+    const char *name = stage >= 1 && stage <= 3 ? names[stage] : "tiler";
+    if (!c->prog.open || strcmp(c->prog.stage, name) != 0)
+        gdt_progress_stage(&c->prog, name, total, stage == 3 ? "tiles" : "points");
+    gdt_progress_update(&c->prog, done);
+    return tr_stopped(c);
+}
+
+/* Records pass 2 as done together with the size and checksum of every
+ * .pts and .edge file it wrote (one transaction). */
+static gdt_status record_pass2(tr_run *c, gdt_error *err)
+{
+    uint64_t ntiles = gdt_tiler_tile_count(c->tiler);
+    gdt_status st = gdt_job_begin(c->jobdb, err);
+    for (uint64_t k = 0; st == GDT_OK && k < ntiles; k++) {
+        gdt_tiler_file_sum fs[2];
+        st = gdt_tiler_file_sums(c->tiler, k, fs, err);
+        if (st == GDT_OK)
+            st = gdt_job_put_file(c->jobdb, k, GDT_JOB_FILE_PTS, fs[0].size, fs[0].sum, err);
+        if (st == GDT_OK)
+            st = gdt_job_put_file(c->jobdb, k, GDT_JOB_FILE_EDGE, fs[1].size, fs[1].sum, err);
+    }
+    if (st == GDT_OK)
+        st = gdt_job_set_stage(c->jobdb, "pass2", 1, err);
+    if (st == GDT_OK)
+        st = gdt_job_commit(c->jobdb, err);
+    return st;
+}
+
+/* Pass 2 recorded as done: its files are adopted if every one matches its
+ * record (*ok = 1); otherwise a warning names the first that does not and
+ * why, and pass 2 is redone (*ok = 0). */
+static gdt_status adopt_pass2(tr_run *c, int *ok, gdt_error *err)
+{
+    uint64_t ntiles = gdt_tiler_tile_count(c->tiler);
+    gdt_tiler_file_sum *fs = malloc((2 * ntiles + 1) * sizeof *fs);
+    gdt_error e2;
+    gdt_status st = GDT_OK, ad = GDT_OK;
+
+    *ok = 0;
+    if (fs == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    gdt_error_clear(&e2);
+    /* fs[2k] .pts and fs[2k + 1] .edge of tile k */
+    for (uint64_t i = 0; st == GDT_OK && ad == GDT_OK && i < 2 * ntiles; i++) {
+        int found = 0;
+        st = gdt_job_get_file(c->jobdb, i / 2, i % 2 ? GDT_JOB_FILE_EDGE : GDT_JOB_FILE_PTS,
+                              &found, &fs[i].size, &fs[i].sum, err);
+        if (st == GDT_OK && !found)
+            ad = gdt_error_set(&e2, GDT_EJOB, 6501,
+                               "the job records no %s file of tile %" PRIu64,
+                               i % 2 ? ".edge" : ".pts", i / 2);
+    }
+    if (st == GDT_OK && ad == GDT_OK)
+        ad = gdt_tiler_adopt_pass2(c->tiler, fs, &e2);
+    free(fs);
+    if (st != GDT_OK)
+        return st;
+    if (ad == GDT_OK) {
+        *ok = 1;
+    } else if (ad == GDT_EJOB) {
+        gdt_log_warn(&c->log, 6502, "redoing pass 2: %s", e2.msg);
+    } else {
+        *err = e2; /* out of memory: not a reason to redo */
+        st = ad;
+    }
+    return st;
+}
+
+static void *core_start_main(void *arg)
+{
+    tr_core_start *cs = arg;
+    stack_t ss;
+    int have = sigaltstack(NULL, &ss) == 0;
+    cs->st = gdt_core_create(&cs->core, &cs->opts, &cs->err);
+    /* The compiler inside the OpenCL runtime gives the thread an alternate
+     * signal stack of its own; put back the one the thread had, which
+     * whoever set it up (a sanitizer's runtime) releases at thread exit. */
+    if (have)
+        sigaltstack(&ss, NULL);
+    return NULL;
+}
+
+static void core_start_begin(tr_core_start *cs)
+{
+    gdt_error_clear(&cs->err);
+    /* setenv here, before pass 1 runs beside the thread (getenv in other
+     * threads while setenv runs can crash) */
+    gdt_ocl_prepare_env(cs->opts.cache_dir, cs->opts.log);
+    cs->running = pthread_create(&cs->thread, NULL, core_start_main, cs) == 0;
+    if (!cs->running)
+        core_start_main(cs);
+}
+
+gdt_status tr_core_start_join(tr_core_start *cs, gdt_core **core, gdt_error *err)
+{
+    if (cs->running) {
+        pthread_join(cs->thread, NULL);
+        cs->running = 0;
+    }
+    if (cs->core != NULL) {
+        *core = cs->core;
+        cs->core = NULL;
+    }
+    if (cs->st != GDT_OK && err != NULL)
+        *err = cs->err;
+    return cs->st;
+}
+
+gdt_status tr_run_start_core(tr_run *c, gdt_error *err)
+{
+    /* the device while pass 1 runs */
+    c->cstart.opts.device = c->opts->device;
+    c->cstart.opts.log = &c->log;
+    core_start_begin(&c->cstart);
+    return gdt_certifier_create(&c->certifier, gdt_cli_threads(c->opts->threads), err);
+}
+
+gdt_status tr_run_pass1(tr_run *c, gdt_error *err)
+{
+    const gdt_options *opts = c->opts;
+    gdt_cloud_opts co;
+    gdt_tiler_opts to;
+    gdt_status st;
+
+    memset(&co, 0, sizeof co);
+    co.log = &c->log;
+    co.quantum = opts->quantum;
+    co.threads = gdt_cli_threads(opts->threads);
+    co.replay_dir = c->job; /* LAZ is decoded once, in pass 1 */
+    co.filter = &opts->filter;
+    st = gdt_cloud_open(&c->cloud, opts->inputs, opts->ninputs, &co, err);
+    if (st != GDT_OK)
+        return st;
+    memset(&to, 0, sizeof to);
+    to.tile = opts->tile;
+    to.cell = opts->cell;
+    to.halo = opts->halo;
+    to.mem_budget = opts->mem_budget;
+    to.dup = opts->dup;
+    to.threads = gdt_cli_threads(opts->threads);
+    to.job_dir = c->job;
+    to.file_id[0] = c->job_id[0];
+    to.file_id[1] = c->job_id[1];
+    to.log = &c->log;
+    to.progress = tiler_progress;
+    to.progress_ctx = c;
+    st = gdt_tiler_create(&c->tiler, &to, c->cloud, err);
+    if (st == GDT_OK)
+        st = gdt_tiler_pass1(c->tiler, err);
+    if (st == GDT_EINTERRUPTED)
+        st = tr_interrupted(c->job, "pass 1", err);
+    if (st != GDT_OK)
+        return st;
+    st = tr_core_start_join(&c->cstart, &c->core, err);
+    if (tr_stopped(c)) {
+        /* a signal during the kernel build, reported now rather than at the
+         * next check; when the build failed, the signal was the cause: the
+         * kernel compiler removes its files on SIGINT/SIGTERM */
+        gdt_error_clear(err);
+        st = tr_interrupted(c->job, "the OpenCL start-up", err);
+    }
+    if (st != GDT_OK)
+        return st;
+    snprintf(c->s.device, sizeof c->s.device, "%s", gdt_core_device_name(c->core));
+    c->plan = gdt_tiler_get_plan(c->tiler);
+    c->s.t_pass1 = gdt_tiler_get_stats(c->tiler)->t_pass1;
+    /* the seam merge's frame is the lattice minus the plan's minimum: a
+     * wider cloud is refused before the tile stage, not at its end */
+    if (c->plan->points > 0 &&
+        (st = gdt_cloud_check_span(c->cloud, c->plan->max_x - c->plan->min_x,
+                                   c->plan->max_y - c->plan->min_y, "the tiled run",
+                                   err)) != GDT_OK)
+        return st;
+    /* a --dem-res the lattice refuses (or a raster too large) is refused
+     * now, before pass 2; the grid itself is defined with the distinct
+     * point count after it */
+    if (opts->dem != NULL) {
+        gdt_raster_grid g;
+        const gdt_cloud_info *ci = gdt_cloud_get_info(c->cloud);
+        st = gdt_raster_grid_define(&g, &ci->lattice, c->plan->points > 0 ? c->plan->min_x : 0,
+                                    c->plan->points > 0 ? c->plan->min_y : 0,
+                                    c->plan->points > 0 ? c->plan->max_x : 0,
+                                    c->plan->points > 0 ? c->plan->max_y : 0, c->plan->points,
+                                    opts->dem_res, "--dem-res", err);
+        if (st != GDT_OK)
+            return st;
+    }
+    return GDT_OK;
+}
+
+gdt_status tr_run_pass2(tr_run *c, gdt_error *err)
+{
+    const gdt_options *opts = c->opts;
+    uint64_t ntiles;
+    int done = 0;
+    double t0;
+    gdt_status st;
+
+    t0 = gdt_now();
+    st = gdt_job_stage_done(c->jobdb, "pass2", &done, err);
+    if (st != GDT_OK)
+        return st;
+    if (done) {
+        st = adopt_pass2(c, &done, err);
+        if (st != GDT_OK)
+            return st;
+        c->s.pass2_reused = done;
+    }
+    if (!done) {
+        st = gdt_job_set_stage(c->jobdb, "pass2", 0, err);
+        if (st == GDT_OK)
+            st = gdt_job_clear_tiles(c->jobdb, err);
+        if (st == GDT_OK)
+            st = gdt_tiler_pass2(c->tiler, err);
+        if (st == GDT_EINTERRUPTED)
+            st = tr_interrupted(c->job, "pass 2", err);
+        if (st == GDT_OK)
+            st = record_pass2(c, err);
+        if (st != GDT_OK)
+            return st;
+    }
+    c->s.t_pass2 = gdt_now() - t0;
+    c->s.points_read = c->plan->points;
+
+    ntiles = gdt_tiler_tile_count(c->tiler);
+    c->s.tiles = ntiles;
+    c->base = malloc((ntiles + 1) * sizeof *c->base);
+    if (c->base == NULL) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        return st;
+    }
+    c->base[0] = 0;
+    for (uint64_t k = 0; k < ntiles; k++) {
+        gdt_tile_desc d;
+        st = gdt_tiler_tile_info(c->tiler, k, &d, err);
+        if (st != GDT_OK)
+            return st;
+        c->base[k + 1] = c->base[k] + d.points;
+    }
+    c->s.vertices = c->base[ntiles];
+    if (c->s.vertices > (uint64_t)INT32_MAX) {
+        st = gdt_error_set(err, GDT_EINPUT, 3801,
+                           "%s: %" PRIu64 " distinct points; a face index of the output "
+                           "holds at most 2^31 - 1",
+                           opts->inputs[0], c->s.vertices);
+        return st;
+    }
+    return GDT_OK;
+}
