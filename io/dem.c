@@ -20,6 +20,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/mman.h>
 #include <unistd.h>
 
 #include "gdt_outfile.h"
@@ -158,6 +159,24 @@ static gdt_status scratch_io(gdt_dem *w, int writing, int64_t b, uint32_t *buf, 
     return GDT_OK;
 }
 
+/* The block cache: every slot is written whole before it is read (zeroed
+ * or reloaded), so it is faulted in once per slot; 2 MiB pages where the
+ * kernel offers them on request (transparent huge pages in "madvise"
+ * mode) make that 512 times fewer faults.  Released with free(). */
+static uint32_t *cells_alloc(size_t bytes)
+{
+    enum { HUGE = 2u << 20 };
+    void *p = NULL;
+    if (bytes < HUGE)
+        return malloc(bytes);
+    if (posix_memalign(&p, HUGE, bytes) != 0)
+        return NULL;
+#ifdef MADV_HUGEPAGE
+    (void)madvise(p, bytes, MADV_HUGEPAGE); /* advice only: no huge pages is fine */
+#endif
+    return p;
+}
+
 gdt_status gdt_dem_create(gdt_dem **out, const gdt_dem_geo *geo, const char *path,
                           const gdt_dem_opts *opts, gdt_error *err)
 {
@@ -208,7 +227,7 @@ gdt_status gdt_dem_create(gdt_dem **out, const gdt_dem_geo *geo, const char *pat
         w->preview = dup_str(opts->preview);
         w->preview_tmp = gdt_outfile_temp(opts->preview);
     }
-    w->cells = malloc(w->nslots * BLOCK_BYTES);
+    w->cells = cells_alloc(w->nslots * BLOCK_BYTES);
     w->slot_block = malloc(w->nslots * sizeof *w->slot_block);
     w->slot_tick = calloc(w->nslots, sizeof *w->slot_tick);
     w->hkey = malloc(hcap * sizeof *w->hkey);

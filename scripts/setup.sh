@@ -31,7 +31,7 @@ APT_PACKAGES=(
   pocl-opencl-icd ocl-icd-opencl-dev opencl-headers clinfo
   libpcl-dev libopenvdb-dev libgeographiclib-dev libsqlite3-dev libcgal-dev
   libgdal-dev gdal-bin
-  openmpi-bin
+  openmpi-bin libopenmpi-dev
 )
 # The fuzz tree needs clang, and libFuzzer with clang's sanitizer runtimes
 # (libclang-rt-14-dev, which clang only recommends).

@@ -41,6 +41,7 @@ struct tr_out {
     gdt_point *pts;       /* TR_CHUNK */
     int32_t *tri;         /* 3 TR_CHUNK */
     unsigned char *raw;   /* 12 TR_CHUNK */
+    unsigned char *rbuf;  /* TL_REC TR_CHUNK: the .pts reads, one buffer for every file */
     uint8_t *drop;        /* TR_CHUNK marks: faces trimmed */
     gdt_point *tile_pts;  /* with a DEM: the points of the tile whose faces are copied */
     size_t cap_tile_pts;
@@ -187,7 +188,7 @@ static gdt_status load_tile_points(tr_out *o, const gdt_tile_desc *d, gdt_error 
     rf.fd = -1;
     st = tr_tile_path(o->src.tiles_dir, d, "pts", &path, err);
     if (st == GDT_OK)
-        st = tl_rfile_open(&rf, path, d->points, TR_CHUNK, err);
+        st = tl_rfile_open_buf(&rf, path, d->points, o->rbuf, TR_CHUNK, err);
     while (st == GDT_OK && n < d->points) {
         size_t m = 0;
         st = tl_rfile_read(&rf, o->tile_pts + n, (size_t)d->points - n < TR_CHUNK
@@ -333,7 +334,7 @@ static gdt_status write_vertices(tr_out *o, uint64_t k, gdt_error *err)
     if (st == GDT_OK)
         st = tr_tile_path(o->src.tiles_dir, &d, "pts", &path, err);
     if (st == GDT_OK)
-        st = tl_rfile_open(&rf, path, d.points, TR_CHUNK, err);
+        st = tl_rfile_open_buf(&rf, path, d.points, o->rbuf, TR_CHUNK, err);
     free(path);
     if (st != GDT_OK)
         return st;
@@ -491,6 +492,7 @@ static void out_free(tr_out *o)
     free(o->pts);
     free(o->tri);
     free(o->raw);
+    free(o->rbuf);
     free(o->drop);
     free(o->cut);
     free(o->cand);
@@ -512,8 +514,9 @@ gdt_status tr_out_start(tr_out **out, const tr_out_src *src, gdt_error *err)
     o->pts = malloc(TR_CHUNK * sizeof *o->pts);
     o->tri = malloc(3 * TR_CHUNK * sizeof *o->tri);
     o->raw = malloc(12 * TR_CHUNK);
+    o->rbuf = malloc((size_t)TL_REC * TR_CHUNK);
     o->drop = malloc(TR_CHUNK);
-    if (o->xyz == NULL || o->pts == NULL || o->tri == NULL || o->raw == NULL ||
+    if (o->xyz == NULL || o->pts == NULL || o->tri == NULL || o->raw == NULL || o->rbuf == NULL ||
         o->drop == NULL) {
         out_free(o);
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");

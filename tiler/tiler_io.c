@@ -181,8 +181,8 @@ gdt_status tl_file_records(const char *path, uint64_t *nrec, gdt_error *err)
     return GDT_OK;
 }
 
-gdt_status tl_rfile_open(tl_rfile *r, const char *path, uint64_t nrec, size_t cap,
-                         gdt_error *err)
+static gdt_status rfile_open(tl_rfile *r, const char *path, uint64_t nrec, unsigned char *buf,
+                             size_t cap, gdt_error *err)
 {
     struct stat sb;
     gdt_status st = GDT_OK;
@@ -192,7 +192,8 @@ gdt_status tl_rfile_open(tl_rfile *r, const char *path, uint64_t nrec, size_t ca
     r->cap = cap > 0 ? cap : 1;
     r->left = nrec;
     r->path = strdup(path);
-    r->buf = malloc(r->cap * TL_REC);
+    r->borrowed = buf != NULL;
+    r->buf = buf != NULL ? buf : malloc(r->cap * TL_REC);
     if (r->path == NULL || r->buf == NULL) {
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         goto fail;
@@ -216,6 +217,18 @@ gdt_status tl_rfile_open(tl_rfile *r, const char *path, uint64_t nrec, size_t ca
 fail:
     tl_rfile_close(r);
     return st;
+}
+
+gdt_status tl_rfile_open(tl_rfile *r, const char *path, uint64_t nrec, size_t cap,
+                         gdt_error *err)
+{
+    return rfile_open(r, path, nrec, NULL, cap, err);
+}
+
+gdt_status tl_rfile_open_buf(tl_rfile *r, const char *path, uint64_t nrec, unsigned char *buf,
+                             size_t cap, gdt_error *err)
+{
+    return rfile_open(r, path, nrec, buf, cap, err);
 }
 
 static gdt_status rfile_fill(tl_rfile *r, gdt_error *err)
@@ -289,7 +302,8 @@ void tl_rfile_close(tl_rfile *r)
     if (r->fd >= 0)
         close(r->fd);
     free(r->path);
-    free(r->buf);
+    if (!r->borrowed)
+        free(r->buf);
     memset(r, 0, sizeof *r);
     r->fd = -1;
 }

@@ -121,7 +121,8 @@ void tl_wfile_abort(tl_wfile *w);
 typedef struct tl_rfile {
     int fd;
     char *path;            /* owned, for messages */
-    unsigned char *buf;    /* owned */
+    unsigned char *buf;    /* owned unless borrowed */
+    int borrowed;          /* buf is the caller's (tl_rfile_open_buf) */
     size_t pos, len, cap;  /* records */
     uint64_t left;         /* records not yet delivered */
 } tl_rfile;
@@ -130,6 +131,11 @@ typedef struct tl_rfile {
  * size).  cap >= 1.  Ownership: release with tl_rfile_close. */
 gdt_status tl_rfile_open(tl_rfile *r, const char *path, uint64_t nrec, size_t cap,
                          gdt_error *err);
+/* The same, reading through the caller's buffer buf of cap * TL_REC bytes,
+ * which must outlive r: a caller that opens many files in turn keeps one
+ * buffer instead of faulting in a fresh one per file. */
+gdt_status tl_rfile_open_buf(tl_rfile *r, const char *path, uint64_t nrec, unsigned char *buf,
+                             size_t cap, gdt_error *err);
 /* Next record into *p; *got = 0 at the end. */
 gdt_status tl_rfile_next(tl_rfile *r, gdt_point *p, int *got, gdt_error *err);
 /* Up to cap records into out[]; *n = 0 at the end. */
