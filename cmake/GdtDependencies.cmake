@@ -39,3 +39,14 @@ gdt_require(OpenVDB_FOUND libopenvdb-dev "OpenVDB")
 
 find_package(Threads REQUIRED)
 find_library(GDT_LIBM m)
+
+# MPI (mpirun: one job over many ranks) is optional: a build without it
+# runs one process and refuses a parallel launch with a message.
+option(GDT_MPI "Build the MPI scheduler when an MPI library is found" ON)
+set(GDT_HAVE_MPI OFF)
+if(GDT_MPI)
+  find_package(MPI QUIET COMPONENTS C)
+  if(MPI_C_FOUND)
+    set(GDT_HAVE_MPI ON)
+  endif()
+endif()

@@ -3,6 +3,7 @@
 #include "gdt_ocl.h"
 #include "gdt_predicates.h"
 #include "private/cli_modes.h"
+#include "private/comm.h"
 #include "private/launch.h"
 #include "private/outpaths.h"
 #include "private/single_tile.h"
@@ -533,31 +534,41 @@ int gdt_cli_threads(int k)
     return n < 1 ? 1 : n > 1024 ? 1024 : (int)n;
 }
 
-/* Set by refuse_parallel_launch on every rank but rank 0. */
-static int quiet_rank;
-
-/* Several processes started by a parallel launcher would each run the
- * whole job on the same job directory and output: refused (GDT-2950) before
- * anything is opened, so nothing is touched.  One rank (mpirun -np 1) runs
- * as a plain process. */
-static gdt_status refuse_parallel_launch(gdt_error *err)
+/* A parallel launch (mpirun -np K, K > 1): the tiled run and --resume are
+ * shared between the ranks (private/mpi_run.h); MPI is initialised only
+ * then, never in a plain run or under one rank, which runs as a plain
+ * process.  Every other mode runs in one process and is refused (2951); a
+ * build without MPI refuses any parallel launch (2950).  Refused before
+ * anything is opened, so nothing is touched.  *comm: the ranks, or NULL. */
+static gdt_status start_parallel(gdt_options *opts, gdt_comm **comm, int *follower,
+                                 gdt_error *err)
 {
     gdt_launch l;
+    gdt_status st;
+    *comm = NULL;
+    *follower = 0;
     gdt_launch_detect(&l);
     if (!gdt_launch_is_parallel(&l))
         return GDT_OK;
-    quiet_rank = l.rank != 0;
-    if (l.size > 1)
+    *follower = l.rank != 0;
+    if (!gdt_comm_available())
         return gdt_error_set(err, GDT_EUSAGE, 2950,
-                             "started as rank %ld of %ld by %s: this gdt-tile runs a job in "
-                             "one process and cannot share it between ranks; run it without "
-                             "the launcher or with one rank (mpirun -np 1)",
+                             "started as rank %ld of %ld by %s, but this gdt-tile was built "
+                             "without MPI (install libopenmpi-dev and build again); run it "
+                             "without the launcher or with one rank (mpirun -np 1)",
                              l.rank, l.size, l.launcher);
-    return gdt_error_set(err, GDT_EUSAGE, 2950,
-                         "started as rank %ld by %s: this gdt-tile runs a job in one process "
-                         "and cannot share it between ranks; run it without the launcher or "
-                         "with one rank",
-                         l.rank, l.launcher);
+    if (!((opts->mode == GDT_MODE_RUN && !opts->single_tile) || opts->mode == GDT_MODE_RESUME))
+        return gdt_error_set(err, GDT_EUSAGE, 2951,
+                             "started as rank %ld of %ld by %s: only the tiled run and "
+                             "--resume are shared between ranks; run --info, --reference and "
+                             "--single-tile without the launcher or with one rank",
+                             l.rank, l.size, l.launcher);
+    st = gdt_comm_init(comm, err);
+    if (st != GDT_OK)
+        return st;
+    *follower = gdt_comm_rank(*comm) != 0;
+    opts->comm = *comm;
+    return GDT_OK;
 }
 
 int gdt_cli_main_stop(int argc, char **argv, volatile sig_atomic_t *stop)
@@ -565,6 +576,8 @@ int gdt_cli_main_stop(int argc, char **argv, volatile sig_atomic_t *stop)
     gdt_options opts;
     gdt_error err;
     gdt_status st;
+    gdt_comm *comm = NULL;
+    int follower = 0;
 
     gdt_error_clear(&err);
     st = gdt_cli_parse(&opts, argc, argv, &err);
@@ -576,13 +589,14 @@ int gdt_cli_main_stop(int argc, char **argv, volatile sig_atomic_t *stop)
         gdt_cli_print_help(stdout);
         goto done;
     case GDT_MODE_VERSION:
-        printf("gdt-tile %s\n", GDT_VERSION);
+        printf("gdt-tile %s\nmpi: %s\n", GDT_VERSION,
+               gdt_comm_available() ? "yes (mpirun -np K shares a tiled run)" : "no");
         goto done;
     default:
         break;
     }
-    st = refuse_parallel_launch(&err);
-    if (st == GDT_EUSAGE && quiet_rank) {
+    st = start_parallel(&opts, &comm, &follower, &err);
+    if (st == GDT_EUSAGE && follower) {
         gdt_options_free(&opts);
         return (int)st; /* rank 0 says why, once for the whole job */
     }
@@ -621,12 +635,15 @@ int gdt_cli_main_stop(int argc, char **argv, volatile sig_atomic_t *stop)
         }
     }
 done:
-    if (st != GDT_OK) {
+    /* another rank of an MPI run has no message of its own: rank 0 prints
+     * the job's error (and a rank's that failed before the run, its own) */
+    if (st != GDT_OK && (comm == NULL || err.status != GDT_OK)) {
         gdt_error_print(&err, stderr);
         if (st == GDT_EUSAGE)
             fprintf(stderr, "usage: gdt-tile INPUT [INPUT ...] [-o OUT.ply] [options]; "
                             "see gdt-tile --help\n");
     }
     gdt_options_free(&opts);
+    gdt_comm_finish(comm);
     return (int)st;
 }

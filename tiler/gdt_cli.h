@@ -61,6 +61,8 @@ typedef struct gdt_options {
     int verbosity;           /* -q = -1, default 0, -v = 1 (-vv = 2) */
     volatile sig_atomic_t *stop; /* set (nonzero) by a signal handler: stop cleanly;
                                     NULL = never */
+    struct gdt_comm *comm;   /* the ranks of an MPI launch (private/comm.h); NULL:
+                                this process alone */
 } gdt_options;
 
 /* Parses argv into opts.  Ownership: opts->inputs is allocated; release with

@@ -246,6 +246,22 @@ typedef struct gdt_tiler_file_sum {
 gdt_status gdt_tiler_file_sums(const gdt_tiler *t, uint64_t k, gdt_tiler_file_sum out[2],
                                gdt_error *err);
 
+/* The tiler's state after pass 2 (plan, tile table, counts) as bytes, for
+ * the other ranks of an MPI job, which share the job directory and so its
+ * tile files: gdt_tiler_import on a tiler of the same options and inputs
+ * then behaves as this one after pass 2 (tile info, loading), without
+ * reading the input.  The bytes are for the same build of gdt-tile only.
+ * returns: GDT_EUSAGE 2505 (pass 2 not done), GDT_EINTERNAL 7001.
+ * Ownership: *buf is malloc'd, the caller frees it. */
+gdt_status gdt_tiler_export(const gdt_tiler *t, unsigned char **buf, size_t *len,
+                            gdt_error *err);
+
+/* Takes the state gdt_tiler_export gave, on a new tiler (before pass 1).
+ * returns: GDT_EUSAGE 2505 (not a new tiler), GDT_EINTERNAL 7503 (bytes of
+ * another build or damaged), 7001. */
+gdt_status gdt_tiler_import(gdt_tiler *t, const unsigned char *buf, size_t len,
+                            gdt_error *err);
+
 /* Resume: after pass 1, takes the .pts and .edge files that a completed
  * pass 2 of the same job left, instead of running pass 2 again.  expect
  * holds 2 records per tile (.pts, .edge, as gdt_tiler_file_sums gave them);

@@ -137,6 +137,38 @@ gdt_status tr_run_start_core(tr_run *c, gdt_error *err)
     return gdt_certifier_create(&c->certifier, gdt_cli_threads(c->opts->threads), err);
 }
 
+/* The cloud's options of this run; replay: LAZ decoded once, in pass 1,
+ * and replayed from the job directory in pass 2. */
+static void cloud_opts(tr_run *c, gdt_cloud_opts *co, int replay)
+{
+    const gdt_options *opts = c->opts;
+    memset(co, 0, sizeof *co);
+    co->log = &c->log;
+    co->quantum = opts->quantum;
+    co->threads = gdt_cli_threads(opts->threads);
+    co->replay_dir = replay ? c->job : NULL;
+    co->filter = &opts->filter;
+}
+
+/* The tiler's options of this run (c->job_id seeds the tile files' sums). */
+static void tiler_opts(tr_run *c, gdt_tiler_opts *to)
+{
+    const gdt_options *opts = c->opts;
+    memset(to, 0, sizeof *to);
+    to->tile = opts->tile;
+    to->cell = opts->cell;
+    to->halo = opts->halo;
+    to->mem_budget = opts->mem_budget;
+    to->dup = opts->dup;
+    to->threads = gdt_cli_threads(opts->threads);
+    to->job_dir = c->job;
+    to->file_id[0] = c->job_id[0];
+    to->file_id[1] = c->job_id[1];
+    to->log = &c->log;
+    to->progress = tiler_progress;
+    to->progress_ctx = c;
+}
+
 gdt_status tr_run_pass1(tr_run *c, gdt_error *err)
 {
     const gdt_options *opts = c->opts;
@@ -144,28 +176,11 @@ gdt_status tr_run_pass1(tr_run *c, gdt_error *err)
     gdt_tiler_opts to;
     gdt_status st;
 
-    memset(&co, 0, sizeof co);
-    co.log = &c->log;
-    co.quantum = opts->quantum;
-    co.threads = gdt_cli_threads(opts->threads);
-    co.replay_dir = c->job; /* LAZ is decoded once, in pass 1 */
-    co.filter = &opts->filter;
+    cloud_opts(c, &co, 1);
     st = gdt_cloud_open(&c->cloud, opts->inputs, opts->ninputs, &co, err);
     if (st != GDT_OK)
         return st;
-    memset(&to, 0, sizeof to);
-    to.tile = opts->tile;
-    to.cell = opts->cell;
-    to.halo = opts->halo;
-    to.mem_budget = opts->mem_budget;
-    to.dup = opts->dup;
-    to.threads = gdt_cli_threads(opts->threads);
-    to.job_dir = c->job;
-    to.file_id[0] = c->job_id[0];
-    to.file_id[1] = c->job_id[1];
-    to.log = &c->log;
-    to.progress = tiler_progress;
-    to.progress_ctx = c;
+    tiler_opts(c, &to);
     st = gdt_tiler_create(&c->tiler, &to, c->cloud, err);
     if (st == GDT_OK)
         st = gdt_tiler_pass1(c->tiler, err);
@@ -210,10 +225,42 @@ gdt_status tr_run_pass1(tr_run *c, gdt_error *err)
     return GDT_OK;
 }
 
-gdt_status tr_run_pass2(tr_run *c, gdt_error *err)
+/* c->base (each tile's first output vertex), c->s.tiles, c->s.vertices.
+ * returns: GDT_OK; GDT_EINPUT 3801 (more than 2^31 - 1 vertices); 7001. */
+static gdt_status set_bases(tr_run *c, gdt_error *err)
 {
     const gdt_options *opts = c->opts;
     uint64_t ntiles;
+    gdt_status st;
+
+    ntiles = gdt_tiler_tile_count(c->tiler);
+    c->s.tiles = ntiles;
+    c->base = malloc((ntiles + 1) * sizeof *c->base);
+    if (c->base == NULL) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        return st;
+    }
+    c->base[0] = 0;
+    for (uint64_t k = 0; k < ntiles; k++) {
+        gdt_tile_desc d;
+        st = gdt_tiler_tile_info(c->tiler, k, &d, err);
+        if (st != GDT_OK)
+            return st;
+        c->base[k + 1] = c->base[k] + d.points;
+    }
+    c->s.vertices = c->base[ntiles];
+    if (c->s.vertices > (uint64_t)INT32_MAX) {
+        st = gdt_error_set(err, GDT_EINPUT, 3801,
+                           "%s: %" PRIu64 " distinct points; a face index of the output "
+                           "holds at most 2^31 - 1",
+                           opts->inputs[0], c->s.vertices);
+        return st;
+    }
+    return GDT_OK;
+}
+
+gdt_status tr_run_pass2(tr_run *c, gdt_error *err)
+{
     int done = 0;
     double t0;
     gdt_status st;
@@ -244,28 +291,39 @@ gdt_status tr_run_pass2(tr_run *c, gdt_error *err)
     c->s.t_pass2 = gdt_now() - t0;
     c->s.points_read = c->plan->points;
 
-    ntiles = gdt_tiler_tile_count(c->tiler);
-    c->s.tiles = ntiles;
-    c->base = malloc((ntiles + 1) * sizeof *c->base);
-    if (c->base == NULL) {
-        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    return set_bases(c, err);
+}
+
+gdt_status tr_run_attach(tr_run *c, const uint64_t job_id[2], const unsigned char *state,
+                         size_t len, gdt_error *err)
+{
+    const gdt_options *opts = c->opts;
+    gdt_cloud_opts co;
+    gdt_tiler_opts to;
+    gdt_status st;
+
+    c->job_id[0] = job_id[0];
+    c->job_id[1] = job_id[1];
+    cloud_opts(c, &co, 0);
+    st = gdt_cloud_open(&c->cloud, opts->inputs, opts->ninputs, &co, err);
+    if (st != GDT_OK)
         return st;
-    }
-    c->base[0] = 0;
-    for (uint64_t k = 0; k < ntiles; k++) {
-        gdt_tile_desc d;
-        st = gdt_tiler_tile_info(c->tiler, k, &d, err);
-        if (st != GDT_OK)
-            return st;
-        c->base[k + 1] = c->base[k] + d.points;
-    }
-    c->s.vertices = c->base[ntiles];
-    if (c->s.vertices > (uint64_t)INT32_MAX) {
-        st = gdt_error_set(err, GDT_EINPUT, 3801,
-                           "%s: %" PRIu64 " distinct points; a face index of the output "
-                           "holds at most 2^31 - 1",
-                           opts->inputs[0], c->s.vertices);
+    tiler_opts(c, &to);
+    st = gdt_tiler_create(&c->tiler, &to, c->cloud, err);
+    if (st == GDT_OK)
+        st = gdt_tiler_import(c->tiler, state, len, err);
+    if (st == GDT_OK)
+        st = tr_core_start_join(&c->cstart, &c->core, err);
+    if (st != GDT_OK)
         return st;
-    }
+    snprintf(c->s.device, sizeof c->s.device, "%s", gdt_core_device_name(c->core));
+    c->plan = gdt_tiler_get_plan(c->tiler);
+    c->s.points_read = c->plan->points;
+    st = set_bases(c, err);
+    if (st != GDT_OK)
+        return st;
+    c->trim = opts->trim;
+    c->trim.sx = c->plan->lattice.sx;
+    c->trim.sy = c->plan->lattice.sy;
     return GDT_OK;
 }

@@ -444,6 +444,10 @@ static gdt_status record_synced(tr_run *c, const tr_tile_set *set, gdt_error *er
     size_t n = c->nsynced;
     if (n == 0)
         return GDT_OK;
+    if (set->record != NULL) {
+        st = set->record(set->ctx, c->pending, n, err);
+        goto recorded;
+    }
     st = gdt_job_begin(c->jobdb, err);
     for (size_t i = 0; st == GDT_OK && i < n; i++) {
         gdt_tile_desc d;
@@ -458,6 +462,7 @@ static gdt_status record_synced(tr_run *c, const tr_tile_set *set, gdt_error *er
     }
     if (st == GDT_OK)
         st = gdt_job_commit(c->jobdb, err);
+recorded:
     for (size_t i = 0; st == GDT_OK && set->done != NULL && i < n; i++)
         set->done(set->ctx, c->pending[i].k);
     memmove(c->pending, c->pending + n, (c->npending - n) * sizeof *c->pending);
@@ -539,7 +544,7 @@ static gdt_status reuse_tile(tr_run *c, uint64_t k, uint64_t size, uint64_t sum,
 
 gdt_status tr_run_tiles(tr_run *c, const tr_tile_set *set, gdt_error *err)
 {
-    static const tr_tile_set all = {NULL, 0, NULL, NULL};
+    static const tr_tile_set all = {NULL, 0, NULL, NULL, NULL, NULL, NULL};
     uint64_t ntiles = gdt_tiler_tile_count(c->tiler), n;
     double t0;
     gdt_status st;
@@ -563,7 +568,16 @@ gdt_status tr_run_tiles(tr_run *c, const tr_tile_set *set, gdt_error *err)
             st = tr_interrupted(c->job, "the tile stage", err);
             return st;
         }
-        st = gdt_job_get_tile(c->jobdb, k, &found, &size, &sum, err);
+        if (set->poll != NULL && (st = set->poll(set->ctx, err)) != GDT_OK)
+            return st;
+        if (set->rec != NULL) {
+            found = set->rec[i].found;
+            size = set->rec[i].size;
+            sum = set->rec[i].sum;
+            st = GDT_OK;
+        } else {
+            st = gdt_job_get_tile(c->jobdb, k, &found, &size, &sum, err);
+        }
         /* reuse_tile shares the post stage's buffers */
         if (st == GDT_OK && found && (st = tr_post_join(c, err)) == GDT_OK)
             st = reuse_tile(c, k, size, sum, &ok, err);
@@ -575,7 +589,7 @@ gdt_status tr_run_tiles(tr_run *c, const tr_tile_set *set, gdt_error *err)
         /* tiles before k have their .tri files, and tile k if reused; a
          * failed output is reported after the merge, once the tiles are
          * safe in the job for a rerun */
-        if (st == GDT_OK && c->out != NULL)
+        if (st == GDT_OK && c->out != NULL && set->k == NULL)
             tr_out_ready(c->out, k + (ok ? 1 : 0));
         /* no post stage runs: the tiles the post stages synced go to the
          * journal (a short transaction) */
@@ -591,11 +605,14 @@ gdt_status tr_run_tiles(tr_run *c, const tr_tile_set *set, gdt_error *err)
             c->s.tiles_reused++;
         else
             c->s.tiles_redone++;
-        gdt_progress_update(&c->prog, c->base[k + 1]);
+        if (set->k == NULL) /* a subset's caller shows the progress of all */
+            gdt_progress_update(&c->prog, c->base[k + 1]);
     }
     st = tr_post_join(c, err);
     if (st == GDT_OK)
         st = flush_pending(c, set, err);
+    if (st == GDT_OK && set->poll != NULL)
+        st = set->poll(set->ctx, err);
     if (st != GDT_OK)
         return st;
     c->s.t_tiles = gdt_now() - t0;

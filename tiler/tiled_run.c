@@ -1,13 +1,19 @@
 /* The single-process tiled run (see private/tiled_run.h): every stage of
- * private/stages.h once, in order, over every tile. */
+ * private/stages.h once, in order, over every tile.  Under mpirun with
+ * more than one rank, the MPI scheduler (private/mpi_run.h) runs them. */
 #include "private/tiled_run.h"
 
+#include "private/mpi_run.h"
 #include "private/stages.h"
 
 gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
 {
     tr_run c;
-    gdt_status st = tr_run_init(&c, opts, err);
+    gdt_status st;
+
+    if (opts->comm != NULL && gdt_comm_size(opts->comm) > 1)
+        return gdt_cli_tiled_mpi(opts, opts->comm, err);
+    st = tr_run_init(&c, opts, err);
 
     if (st == GDT_OK)
         st = tr_run_start_core(&c, err);

@@ -651,6 +651,81 @@ done:
     return st;
 }
 
+/* The state bytes: a magic with the layout's sizes (another build's bytes
+ * are refused, never misread), the plan, the stats, the tile count and the
+ * tile table, each as its in-memory image. */
+#define TL_STATE_MAGIC UINT64_C(0x4744545354415431) /* "GDTSTAT1" */
+
+static uint64_t state_layout(void)
+{
+    return ((uint64_t)sizeof(gdt_tile_plan) << 40) ^ ((uint64_t)sizeof(gdt_tiler_stats) << 20) ^
+           (uint64_t)sizeof(tl_tile);
+}
+
+gdt_status gdt_tiler_export(const gdt_tiler *t, unsigned char **buf, size_t *len,
+                            gdt_error *err)
+{
+    uint64_t head[3] = {TL_STATE_MAGIC, state_layout(), t->ntiles};
+    size_t n = sizeof head + sizeof t->plan + sizeof t->stats + t->ntiles * sizeof *t->tiles;
+    unsigned char *p;
+
+    *buf = NULL;
+    *len = 0;
+    if (t->state != 2)
+        return gdt_error_set(err, GDT_EUSAGE, 2505, "the tiler's state before pass 2 is done");
+    p = malloc(n);
+    if (p == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    memcpy(p, head, sizeof head);
+    memcpy(p + sizeof head, &t->plan, sizeof t->plan);
+    memcpy(p + sizeof head + sizeof t->plan, &t->stats, sizeof t->stats);
+    if (t->ntiles > 0)
+        memcpy(p + sizeof head + sizeof t->plan + sizeof t->stats, t->tiles,
+               t->ntiles * sizeof *t->tiles);
+    *buf = p;
+    *len = n;
+    return GDT_OK;
+}
+
+gdt_status gdt_tiler_import(gdt_tiler *t, const unsigned char *buf, size_t len,
+                            gdt_error *err)
+{
+    uint64_t head[3];
+    size_t fixed = sizeof head + sizeof t->plan + sizeof t->stats;
+    tl_tile *tiles = NULL;
+    gdt_status st = GDT_OK;
+
+    if (t->state != 0)
+        return gdt_error_set(err, GDT_EUSAGE, 2505, "importing a state into a used tiler");
+    if (len < fixed)
+        return gdt_error_set(err, GDT_EINTERNAL, 7503, "tiler state of %zu bytes", len);
+    memcpy(head, buf, sizeof head);
+    if (head[0] != TL_STATE_MAGIC || head[1] != state_layout() ||
+        head[2] > (len - fixed) / sizeof(tl_tile) || len != fixed + head[2] * sizeof(tl_tile))
+        return gdt_error_set(err, GDT_EINTERNAL, 7503,
+                             "tiler state from another build of gdt-tile, or damaged");
+    if (head[2] > 0) {
+        tiles = malloc(head[2] * sizeof *tiles);
+        if (tiles == NULL)
+            return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        memcpy(tiles, buf + fixed, head[2] * sizeof *tiles);
+    }
+    memcpy(&t->plan, buf + sizeof head, sizeof t->plan);
+    memcpy(&t->stats, buf + sizeof head + sizeof t->plan, sizeof t->stats);
+    free(t->tiles);
+    t->tiles = tiles;
+    t->ntiles = head[2];
+    tl_map_free(&t->map);
+    for (uint64_t k = 0; st == GDT_OK && k < t->ntiles; k++) {
+        uint64_t *v;
+        st = tl_map_upsert(&t->map, t->tiles[k].i, t->tiles[k].j, &v, err);
+        if (st == GDT_OK)
+            *v = k;
+    }
+    t->state = st == GDT_OK ? 2 : -1;
+    return st;
+}
+
 gdt_status gdt_tiler_plan(const gdt_tiler_opts *opts, gdt_cloud *cloud, gdt_tile_plan *out,
                           gdt_error *err)
 {

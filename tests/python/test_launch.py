@@ -1,7 +1,8 @@
 """A parallel launcher (mpirun, srun) starting several gdt-tile processes:
-each would run the whole job on the same job directory and output, so every
-rank refuses before it touches anything (exit 2, GDT-2950, said once, by
-rank 0); one rank runs as a plain process."""
+only the tiled run and --resume are shared between ranks (test_mpi.py);
+every other mode, and any parallel launch of a build without MPI, is refused
+on every rank before it touches anything (exit 2, GDT-2951 or GDT-2950, said
+once, by rank 0); one rank runs as a plain process."""
 import os
 import shutil
 import sys
@@ -27,6 +28,13 @@ def clean_env(**extra):
     return env
 
 
+def has_mpi(gdt_bin, runner):
+    r = runner([gdt_bin, "--version"])
+    assert r.returncode == 0, r.stderr
+    return "mpi: yes" in r.stdout
+
+
+@pytest.mark.sanitize
 @pytest.mark.parametrize("variables,rank0", [
     ({"OMPI_COMM_WORLD_SIZE": "4", "OMPI_COMM_WORLD_RANK": "0"}, True),
     ({"OMPI_COMM_WORLD_SIZE": "4", "OMPI_COMM_WORLD_RANK": "3"}, False),
@@ -34,9 +42,12 @@ def clean_env(**extra):
     ({"PMI_SIZE": "2", "PMI_RANK": "1"}, False),
     ({"PMIX_RANK": "1"}, False),
 ])
-@pytest.mark.parametrize("mode", [(), ("--reference",), ("--info",)])
+@pytest.mark.parametrize("mode", [(), ("--reference",), ("--info",), ("--single-tile",)])
 def test_ranks_refuse_before_touching_anything(gdt_bin, runner, root, tmp_path, variables,
                                                rank0, mode):
+    mpi = has_mpi(gdt_bin, runner)
+    if mpi and mode == ():
+        pytest.skip("the tiled run of an MPI build is shared: test_mpi.py, under mpirun")
     c = cloud(runner, root, tmp_path)
     before = sorted(p.name for p in tmp_path.iterdir())
     out = tmp_path / "o.ply"
@@ -44,7 +55,10 @@ def test_ranks_refuse_before_touching_anything(gdt_bin, runner, root, tmp_path, 
     assert r.returncode == 2, r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == before  # no output, no job
     if rank0:
-        assert "GDT-2950" in r.stderr and "rank 0 of" in r.stderr and "-np 1" in r.stderr
+        code = "GDT-2951" if mpi else "GDT-2950"
+        assert code in r.stderr and "rank 0 of" in r.stderr and "one rank" in r.stderr
+        if not mpi:
+            assert "without MPI" in r.stderr and "-np 1" in r.stderr
     else:
         assert r.stderr == "", r.stderr
 
@@ -65,8 +79,13 @@ def test_one_rank_runs_as_a_plain_process(gdt_bin, runner, root, tmp_path, varia
     assert plain.read_bytes() == ranked.read_bytes()
 
 
+@pytest.mark.sanitize
 @pytest.mark.skipif(shutil.which("mpirun") is None, reason="Open MPI's mpirun is not installed")
-def test_under_mpirun(gdt_bin, runner, root, tmp_path):
+def test_under_mpirun_without_mpi(gdt_bin, runner, root, tmp_path):
+    """A build without MPI under a real mpirun: refused once, nothing made;
+    one rank runs."""
+    if has_mpi(gdt_bin, runner):
+        pytest.skip("this build has MPI: test_mpi.py")
     c = cloud(runner, root, tmp_path)
     out = tmp_path / "o.ply"
     env = clean_env(**ROOT_OK)

@@ -266,7 +266,23 @@ gdt_status tr_run_pass1(tr_run *c, gdt_error *err);
  * than 2^31 - 1 vertices); GDT_EINTERRUPTED 1302. */
 gdt_status tr_run_pass2(tr_run *c, gdt_error *err);
 
+/* Another rank of an MPI job, after tr_run_start_core, in place of
+ * tr_run_prepare_job, tr_run_pass1 and tr_run_pass2 (which rank 0 ran):
+ * takes the job's id and the tiler's state (gdt_tiler_export) from rank 0,
+ * opens the cloud (headers only: the input is not read), joins the core,
+ * and sets what the tile stage needs (c->plan, c->base, c->trim).  Such a
+ * context has no journal and no lock: it never writes job.db.
+ * returns: GDT_OK; the cloud's, tiler's and core's errors. */
+gdt_status tr_run_attach(tr_run *c, const uint64_t job_id[2], const unsigned char *state,
+                         size_t len, gdt_error *err);
+
 /* ---- run_tiles.c: the tile stage ---- */
+
+/* A tile's journal record as a rank without the journal is told it. */
+typedef struct tr_tile_rec {
+    int found;            /* the journal records the tile as finished */
+    uint64_t size, sum;   /* its .tri file's size and checksum */
+} tr_tile_rec;
 
 /* Which tiles a tile stage runs, and who hears of each finished one. */
 typedef struct tr_tile_set {
@@ -274,9 +290,18 @@ typedef struct tr_tile_set {
     const uint64_t *k;
     uint64_t n;
     /* NULL, or called on the caller's thread once per tile of the set when
-     * its .tri file is durable and recorded in the journal (a reused tile:
-     * when its file has been verified against its record) */
+     * its .tri file is durable and recorded (a reused tile: when its file
+     * has been verified against its record) */
     void (*done)(void *ctx, uint64_t k);
+    /* A context without the journal (c->jobdb NULL, another rank of an MPI
+     * job): rec[i] is the record of tile k[i], and record() takes the
+     * durable finished tiles p[0, n) in place of the journal; an error it
+     * returns ends the stage.  NULL with the journal. */
+    const tr_tile_rec *rec;
+    gdt_status (*record)(void *ctx, const tr_pending *p, size_t n, gdt_error *err);
+    /* NULL, or called on the caller's thread before each tile and at the
+     * end of the stage (messages of other ranks); an error ends the stage */
+    gdt_status (*poll)(void *ctx, gdt_error *err);
     void *ctx;
 } tr_tile_set;
 
@@ -286,9 +311,10 @@ typedef struct tr_tile_set {
  * does not, and the tile is redone); any other is loaded, triangulated by
  * the core, and handed to the post stage (certification, seam, trim
  * section), which writes J/tiles/tile_<i>_<j>.tri and whose files are
- * synced in batches and recorded in the journal.  The writer (c->out, if
- * any) is told of the tiles that have their files, as a prefix of the tile
- * order: a writer needs the set of every tile.  Leaves c->seam_total and
+ * synced in batches and recorded in the journal (or by set->record).  The
+ * writer (c->out, if any) is told of the tiles that have their files, as a
+ * prefix of the tile order, when the set is every tile; with a subset the
+ * caller tells it (tr_out_ready).  Leaves c->seam_total and
  * c->s (certified, tiles_reused, tiles_redone, t_tiles, the core's and
  * certification's counts); the core and the stage's buffers go to the
  * reclaim thread at the end, so it runs once per context.  Interrupted, it

@@ -1,0 +1,186 @@
+"""gdt-tile under mpirun: one tiled job shared by K ranks.
+
+The mesh (and every other output) is byte for byte that of a single process
+for any K, a job killed under one K resumes under another, and a failure is
+the whole job's exit code with one message.  Run as root in CI, so Open MPI
+is told that is allowed; --oversubscribe lets K exceed this machine's cores."""
+import json
+import os
+import shutil
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+
+import pytest
+
+from laz_util import write_laz
+
+ROOT_OK = {"OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
+LAUNCH_VARS = ("OMPI_COMM_WORLD_SIZE", "OMPI_COMM_WORLD_RANK", "OMPI_COMM_WORLD_LOCAL_RANK",
+               "PMI_SIZE", "PMI_RANK", "MPI_LOCALRANKID", "PMIX_RANK")
+
+
+def env():
+    e = {k: v for k, v in os.environ.items() if k not in LAUNCH_VARS}
+    e.update(ROOT_OK)
+    # one PoCL thread per rank: K ranks on this machine's few cores
+    e["POCL_MAX_PTHREAD_COUNT"] = "1"
+    return e
+
+
+@pytest.fixture(scope="module")
+def mpi_bin(gdt_bin):
+    if shutil.which("mpirun") is None:
+        pytest.skip("Open MPI's mpirun is not installed")
+    r = subprocess.run([gdt_bin, "--version"], capture_output=True, text=True)
+    if "mpi: yes" not in r.stdout:
+        pytest.skip("this gdt-tile was built without MPI")
+    return gdt_bin
+
+
+def gen(root, path, points, seed, *extra):
+    r = subprocess.run([sys.executable, root / "scripts" / "gen_cloud.py", path, "--points",
+                        str(points), "--seed", str(seed), "-q", *extra],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    return path
+
+
+def run(cmd, timeout=300):
+    return subprocess.run([str(c) for c in cmd], capture_output=True, text=True, env=env(),
+                          timeout=timeout)
+
+
+def mpirun(k, gdt, args, timeout=300):
+    return run(["mpirun", "--oversubscribe", "-np", str(k), gdt, *args], timeout)
+
+
+@pytest.fixture(scope="module")
+def clouds(root, tmp_path_factory):
+    d = tmp_path_factory.mktemp("mpi-clouds")
+    a = gen(root, d / "a.las", 30000, 11)
+    b = gen(root, d / "b.las", 12000, 12, "--offset", "500340", "4100100")
+    laz = write_laz(a, d / "a.laz", chunk=7000)
+    return {"a": a, "b": b, "laz": laz, "dir": d}
+
+
+CASES = {
+    # name: (inputs, options)
+    "las-64": (("a",), ("--tile", "64")),
+    "las-256-dem-trim": (("a",), ("--tile", "256", "--dem", "{d}/x.tif", "--dem-res", "2",
+                                  "--max-edge", "6")),
+    "two-inputs-64": (("a", "b"), ("--tile", "64")),
+    "laz-128": (("laz",), ("--tile", "128")),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_any_rank_count_writes_the_same_bytes(mpi_bin, clouds, tmp_path, case):
+    names, opts = CASES[case]
+    inputs = [clouds[n] for n in names]
+    outs = {}
+    for k in (1, 2, 3, 4):
+        d = tmp_path / f"k{k}"
+        d.mkdir()
+        args = [*inputs, "-o", d / "o.ply", "-q", "--json", d / "run.json",
+                *[o.replace("{d}", str(d)) for o in opts]]
+        # K = 1: a plain process, no mpirun
+        r = run([mpi_bin, *args]) if k == 1 else mpirun(k, mpi_bin, args)
+        assert r.returncode == 0, (k, r.stdout + r.stderr)
+        assert r.stderr == "", (k, r.stderr)  # -q: nothing, from any rank
+        outs[k] = d
+        assert not (d / "o.ply.gdt-job").exists()  # the job is removed as in a plain run
+    ref = (outs[1] / "o.ply").read_bytes()
+    for k in (2, 3, 4):
+        assert (outs[k] / "o.ply").read_bytes() == ref, k
+        if "--dem" in opts:
+            assert (outs[k] / "x.tif").read_bytes() == (outs[1] / "x.tif").read_bytes(), k
+        j = json.loads((outs[k] / "run.json").read_text())
+        j1 = json.loads((outs[1] / "run.json").read_text())
+        assert j["faces"] == j1["faces"] and j["vertices"] == j1["vertices"]
+
+
+def test_bad_input_fails_the_whole_job(mpi_bin, clouds, tmp_path):
+    bad = tmp_path / "bad.las"
+    data = clouds["a"].read_bytes()
+    bad.write_bytes(data[: len(data) // 2])  # records cut off: the header says more
+    out = tmp_path / "o.ply"
+    r = mpirun(3, mpi_bin, [bad, "-o", out, "--tile", "64", "-q"])
+    assert r.returncode == 3, r.stdout + r.stderr
+    assert r.stderr.count("error GDT-3") == 1, r.stderr  # said once, by rank 0
+    assert str(bad) in r.stderr
+    assert not out.exists()
+
+
+def tiles_recorded(job):
+    db = job / "job.db"
+    if not db.exists():
+        return 0
+    try:
+        con = sqlite3.connect(f"file:{db}?mode=ro", uri=True, timeout=0.2)
+        n = con.execute("select count(*) from tile").fetchone()[0]
+        con.close()
+        return n
+    except sqlite3.Error:
+        return 0
+
+
+def rank_pids(marker):
+    """pid -> rank of the gdt-tile processes whose command line holds marker."""
+    out = {}
+    for p in os.listdir("/proc"):
+        if not p.isdigit():
+            continue
+        try:
+            cmd = open(f"/proc/{p}/cmdline", "rb").read().split(b"\0")
+            if not cmd or not cmd[0].endswith(b"gdt-tile") or marker.encode() not in cmd:
+                continue
+            envs = open(f"/proc/{p}/environ", "rb").read().split(b"\0")
+        except OSError:
+            continue
+        for e in envs:
+            if e.startswith(b"OMPI_COMM_WORLD_RANK="):
+                out[int(p)] = int(e.split(b"=")[1])
+    return out
+
+
+@pytest.mark.parametrize("killed,k_first,k_then", [(1, 3, 2), (0, 2, 1)])
+def test_killed_rank_then_rerun_with_another_count(mpi_bin, root, tmp_path, killed, k_first,
+                                                   k_then):
+    """SIGKILL of one rank (another rank, or rank 0) mid-run: mpirun stops the
+    job; a rerun with another number of ranks (or a plain process) reuses the
+    recorded tiles and writes the bytes of an uninterrupted run."""
+    c = gen(root, tmp_path / "c.las", 400000, 5)
+    ref = tmp_path / "ref.ply"
+    r = run([mpi_bin, c, "-o", ref, "--tile", "64", "-q"])
+    assert r.returncode == 0, r.stderr
+    out = tmp_path / "o.ply"
+    job = tmp_path / "o.ply.gdt-job"
+    args = [c, "-o", out, "--tile", "64", "-q", "--threads", "1"]
+    p = subprocess.Popen(["mpirun", "--oversubscribe", "-np", str(k_first), str(mpi_bin),
+                          *[str(a) for a in args]], env=env(), stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.time() + 120
+        while tiles_recorded(job) < 40 and time.time() < deadline and p.poll() is None:
+            time.sleep(0.05)
+        assert p.poll() is None, "the run ended before it could be killed"
+        pids = {rank: pid for pid, rank in rank_pids(str(out)).items()}
+        assert killed in pids, pids
+        os.kill(pids[killed], signal.SIGKILL)
+        _, err = p.communicate(timeout=120)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    assert p.returncode != 0, err
+    assert not out.exists()
+    assert tiles_recorded(job) >= 40
+    rerun = ([*args, "--json", tmp_path / "j.json"])
+    r = run([mpi_bin, *rerun]) if k_then == 1 else mpirun(k_then, mpi_bin, rerun)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert out.read_bytes() == ref.read_bytes()
+    j = json.loads((tmp_path / "j.json").read_text())
+    assert j["reused"]["tiles"] >= 40, j["reused"]

@@ -1,0 +1,645 @@
+/* mpi_run.c — one tiled job over the ranks of an MPI launch (see
+ * private/mpi_run.h): a scheduler over the stages of private/stages.h.
+ *
+ * Protocol (tags below; every message is a gdt_pack of u64 fields):
+ *   rank 0: tr_run_init .. tr_run_output_start, exactly as a single
+ *     process (the job's lock, journal, pass 1, pass 2, mesh writer);
+ *     then GO to every other rank: the run's status so far, and when it is
+ *     GDT_OK the job's id, the tiler's state and the rank's tiles with
+ *     their journal records.
+ *   every rank: its tiles (tr_run_tiles over a tr_tile_set).  Another rank
+ *     sends RECORD (durable finished tiles: k, size, checksum) and DONE
+ *     (tile k finished or reused) to rank 0, which records them in the
+ *     journal (its one writer) and tells its mesh writer of the prefix of
+ *     tiles that have their files.  Then FINISHED: the rank's status, its
+ *     error, its counts and times.
+ *   rank 0: waits for every FINISHED (a rank's failure becomes the job's,
+ *     and STOP tells the others to stop at their next tile), then merges
+ *     and writes as a single process does, and sends FINAL: the job's
+ *     status, which every rank returns, so mpirun's exit code is the job's.
+ * A rank that is killed ends the job (mpirun stops the others); what rank
+ * 0 recorded stays in the journal, and a rerun with any number of ranks
+ * resumes from it.  The output does not depend on the number of ranks:
+ * every tile's file is the same whoever computes it, and rank 0 writes the
+ * mesh from the files in tile order. */
+#include "private/mpi_run.h"
+
+#include <inttypes.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "private/comm.h"
+#include "private/stages.h"
+#include "private/tiled_files.h"
+
+enum {
+    TAG_GO = 1,       /* 0 -> r */
+    TAG_RECORD = 2,   /* r -> 0 */
+    TAG_DONE = 3,     /* r -> 0 */
+    TAG_FINISHED = 4, /* r -> 0 */
+    TAG_STOP = 5,     /* 0 -> r */
+    TAG_FINAL = 6     /* 0 -> r */
+};
+
+/* What a rank reports at the end of its tiles. */
+typedef struct mr_report {
+    uint64_t certified, seam, reused, redone;
+    double t_tiles, t_core, t_certify, t_post;
+} mr_report;
+
+typedef struct mr_ctx {
+    tr_run *c;
+    gdt_comm *comm;
+    int rank, size;
+    /* rank 0 */
+    uint8_t *done;          /* per tile: its file is there */
+    uint64_t ntiles, prefix; /* done[0, prefix) are all set */
+    uint64_t done_points;   /* vertices of the done tiles (progress) */
+    int *finished;          /* per rank: FINISHED received */
+    int nfinished;
+    gdt_status job_st;      /* the first failure of any rank */
+    gdt_error job_err;
+    mr_report remote;       /* the other ranks' counts, summed */
+    int stop_sent;
+    /* another rank */
+    int stopped;            /* STOP received */
+} mr_ctx;
+
+static double as_double(uint64_t v)
+{
+    double d;
+    memcpy(&d, &v, sizeof d);
+    return d;
+}
+
+static uint64_t as_u64(double d)
+{
+    uint64_t v;
+    memcpy(&v, &d, sizeof v);
+    return v;
+}
+
+static gdt_status send_pack(mr_ctx *m, int dest, int tag, gdt_pack *p, gdt_error *err)
+{
+    gdt_status st = p->oom ? gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory")
+                           : gdt_comm_send(m->comm, dest, tag, p->p, p->n, err);
+    gdt_pack_free(p);
+    return st;
+}
+
+/* Receives the message the probe announced; *buf is malloc'd. */
+static gdt_status recv_msg(mr_ctx *m, int from, int tag, size_t len, unsigned char **buf,
+                           gdt_error *err)
+{
+    *buf = malloc(len > 0 ? len : 1);
+    if (*buf == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    return gdt_comm_recv(m->comm, from, tag, *buf, len, err);
+}
+
+static gdt_status bad_message(int from, int tag, gdt_error *err)
+{
+    return gdt_error_set(err, GDT_EINTERNAL, 7952,
+                         "MPI: a malformed message (tag %d) from rank %d", tag, from);
+}
+
+/* ---- rank 0 ---- */
+
+/* Tile k has its file: the writer hears of the grown prefix. */
+static void r0_mark(mr_ctx *m, uint64_t k)
+{
+    if (k >= m->ntiles || m->done[k])
+        return;
+    m->done[k] = 1;
+    m->done_points += m->c->base[k + 1] - m->c->base[k];
+    gdt_progress_update(&m->c->prog, m->done_points);
+    while (m->prefix < m->ntiles && m->done[m->prefix])
+        m->prefix++;
+    if (m->c->out != NULL)
+        tr_out_ready(m->c->out, m->prefix);
+}
+
+static void r0_done(void *ctx, uint64_t k)
+{
+    r0_mark(ctx, k);
+}
+
+/* A rank's failure is the job's (the first one stands). */
+static void r0_fail(mr_ctx *m, int from, gdt_status st, int code, const char *msg)
+{
+    if (m->job_st != GDT_OK)
+        return;
+    m->job_st = st;
+    gdt_error_clear(&m->job_err);
+    m->job_err.status = st;
+    m->job_err.code = code;
+    {
+        /* "rank R: " then as much of the message as fits */
+        int w = snprintf(m->job_err.msg, sizeof m->job_err.msg, "rank %d: ", from);
+        size_t at = w > 0 && (size_t)w < sizeof m->job_err.msg ? (size_t)w : 0;
+        size_t room = sizeof m->job_err.msg - at - 1, ml = strlen(msg);
+        memcpy(m->job_err.msg + at, msg, ml < room ? ml : room);
+        m->job_err.msg[at + (ml < room ? ml : room)] = '\0';
+    }
+}
+
+/* Tells every rank still at its tiles to stop. */
+static void r0_stop_all(mr_ctx *m)
+{
+    if (m->stop_sent)
+        return;
+    m->stop_sent = 1;
+    for (int r = 1; r < m->size; r++) {
+        gdt_error e;
+        uint64_t z = 0;
+        gdt_error_clear(&e);
+        if (!m->finished[r])
+            gdt_comm_send(m->comm, r, TAG_STOP, &z, sizeof z, &e);
+    }
+}
+
+/* Records another rank's durable tiles in the journal (one transaction). */
+static gdt_status r0_record(mr_ctx *m, gdt_unpack *u, int from, gdt_error *err)
+{
+    tr_run *c = m->c;
+    uint64_t n = gdt_unpack_u64(u);
+    gdt_status st;
+    if (u->bad || n > (u->n - u->at) / 24)
+        return bad_message(from, TAG_RECORD, err);
+    st = gdt_job_begin(c->jobdb, err);
+    for (uint64_t i = 0; st == GDT_OK && i < n; i++) {
+        uint64_t k = gdt_unpack_u64(u), size = gdt_unpack_u64(u), sum = gdt_unpack_u64(u);
+        gdt_tile_desc d;
+        char *path = NULL;
+        if (k >= m->ntiles) {
+            st = bad_message(from, TAG_RECORD, err);
+            break;
+        }
+        st = gdt_tiler_tile_info(c->tiler, k, &d, err);
+        if (st == GDT_OK)
+            st = tr_tile_path(c->tiles_dir, &d, "tri", &path, err);
+        if (st == GDT_OK)
+            st = gdt_job_put_tile(c->jobdb, k, path, size, sum, err);
+        free(path);
+    }
+    if (st == GDT_OK)
+        st = gdt_job_commit(c->jobdb, err);
+    return st;
+}
+
+static gdt_status r0_finished(mr_ctx *m, gdt_unpack *u, int from, gdt_error *err)
+{
+    gdt_status st = (gdt_status)gdt_unpack_u64(u);
+    int code = (int)gdt_unpack_u64(u);
+    size_t ml = 0;
+    const unsigned char *msg = gdt_unpack_bytes(u, &ml);
+    mr_report r;
+    r.certified = gdt_unpack_u64(u);
+    r.seam = gdt_unpack_u64(u);
+    r.reused = gdt_unpack_u64(u);
+    r.redone = gdt_unpack_u64(u);
+    r.t_tiles = as_double(gdt_unpack_u64(u));
+    r.t_core = as_double(gdt_unpack_u64(u));
+    r.t_certify = as_double(gdt_unpack_u64(u));
+    r.t_post = as_double(gdt_unpack_u64(u));
+    if (u->bad)
+        return bad_message(from, TAG_FINISHED, err);
+    m->finished[from] = 1;
+    m->nfinished++;
+    if (st != GDT_OK) {
+        char text[GDT_ERROR_MSG_MAX];
+        snprintf(text, sizeof text, "%.*s", (int)(ml < sizeof text ? ml : sizeof text - 1),
+                 (const char *)msg);
+        r0_fail(m, from, st, code, text);
+        r0_stop_all(m);
+        return GDT_OK;
+    }
+    m->remote.certified += r.certified;
+    m->remote.seam += r.seam;
+    m->remote.reused += r.reused;
+    m->remote.redone += r.redone;
+    if (r.t_tiles > m->remote.t_tiles)
+        m->remote.t_tiles = r.t_tiles;
+    m->remote.t_core += r.t_core;
+    m->remote.t_certify += r.t_certify;
+    m->remote.t_post += r.t_post;
+    return GDT_OK;
+}
+
+/* Handles one waiting message, if any (*got). */
+static gdt_status r0_handle(mr_ctx *m, int wait, int *got, gdt_error *err)
+{
+    int ready = 0, from = 0, tag = 0;
+    size_t len = 0;
+    unsigned char *buf = NULL;
+    gdt_unpack u;
+    gdt_status st = wait ? gdt_comm_wait(m->comm, -1, -1, NULL, &ready, &from, &tag, &len, err)
+                         : gdt_comm_probe(m->comm, -1, -1, &ready, &from, &tag, &len, err);
+    *got = ready;
+    if (st != GDT_OK || !ready)
+        return st;
+    st = recv_msg(m, from, tag, len, &buf, err);
+    if (st != GDT_OK) {
+        free(buf);
+        return st;
+    }
+    memset(&u, 0, sizeof u);
+    u.p = buf;
+    u.n = len;
+    switch (tag) {
+    case TAG_RECORD:
+        /* after a failure the journal takes nothing more: the job stops */
+        st = m->job_st == GDT_OK ? r0_record(m, &u, from, err) : GDT_OK;
+        break;
+    case TAG_DONE: {
+        uint64_t k = gdt_unpack_u64(&u);
+        if (u.bad || k >= m->ntiles)
+            st = bad_message(from, tag, err);
+        else
+            r0_mark(m, k);
+        break;
+    }
+    case TAG_FINISHED:
+        st = r0_finished(m, &u, from, err);
+        break;
+    default:
+        st = bad_message(from, tag, err);
+        break;
+    }
+    free(buf);
+    return st;
+}
+
+/* The tile stage's poll on rank 0: every waiting message; a rank's
+ * failure ends rank 0's tiles too. */
+static gdt_status r0_poll(void *ctx, gdt_error *err)
+{
+    mr_ctx *m = ctx;
+    int got = 1;
+    gdt_status st = GDT_OK;
+    while (st == GDT_OK && got)
+        st = r0_handle(m, 0, &got, err);
+    if (st == GDT_OK && m->job_st != GDT_OK) {
+        *err = m->job_err;
+        st = m->job_st;
+    }
+    return st;
+}
+
+/* The tiles of rank r: contiguous runs of tile order, balanced by point
+ * count (tile k goes to the rank whose share holds the middle of its
+ * points); the same for every run of the same job and rank count. */
+static int owner(const tr_run *c, uint64_t k, int size)
+{
+    uint64_t total = c->s.vertices;
+    long double mid = (long double)c->base[k] + (long double)(c->base[k + 1] - c->base[k]) / 2;
+    int r;
+    if (total == 0)
+        return 0;
+    r = (int)(mid * size / (long double)total);
+    return r < 0 ? 0 : r >= size ? size - 1 : r;
+}
+
+/* GO for rank r: the run's status, then (when it is GDT_OK) the job, the
+ * tiler's state and the rank's tiles with their records. */
+static gdt_status r0_go(mr_ctx *m, int r, gdt_status run_st, const unsigned char *state,
+                        size_t slen, gdt_error *err)
+{
+    tr_run *c = m->c;
+    gdt_pack p;
+    gdt_status st = GDT_OK;
+    uint64_t n = 0;
+    memset(&p, 0, sizeof p);
+    gdt_pack_u64(&p, (uint64_t)run_st);
+    if (run_st == GDT_OK) {
+        gdt_pack_u64(&p, c->job_id[0]);
+        gdt_pack_u64(&p, c->job_id[1]);
+        gdt_pack_bytes(&p, state, slen);
+        for (uint64_t k = 0; k < m->ntiles; k++)
+            n += owner(c, k, m->size) == r;
+        gdt_pack_u64(&p, n);
+        for (uint64_t k = 0; st == GDT_OK && k < m->ntiles; k++) {
+            int found = 0;
+            uint64_t size = 0, sum = 0;
+            if (owner(c, k, m->size) != r)
+                continue;
+            st = gdt_job_get_tile(c->jobdb, k, &found, &size, &sum, err);
+            gdt_pack_u64(&p, k);
+            gdt_pack_u64(&p, (uint64_t)found);
+            gdt_pack_u64(&p, size);
+            gdt_pack_u64(&p, sum);
+        }
+    }
+    if (st != GDT_OK) {
+        gdt_pack_free(&p);
+        return st;
+    }
+    return send_pack(m, r, TAG_GO, &p, err);
+}
+
+static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
+{
+    gdt_status st = tr_run_init(c, c->opts, err);
+    unsigned char *state = NULL;
+    size_t slen = 0;
+    uint64_t *mine = NULL, nmine = 0;
+
+    if (st == GDT_OK)
+        st = tr_run_start_core(c, err);
+    if (st == GDT_OK)
+        st = tr_run_prepare_job(c, err);
+    if (st == GDT_OK)
+        st = tr_run_pass1(c, err);
+    if (st == GDT_OK)
+        st = tr_run_pass2(c, err);
+    if (st == GDT_OK)
+        st = tr_run_output_start(c, err);
+    if (st == GDT_OK)
+        st = gdt_tiler_export(c->tiler, &state, &slen, err);
+    if (st == GDT_OK) {
+        m->ntiles = gdt_tiler_tile_count(c->tiler);
+        m->done = calloc(m->ntiles + 1, 1);
+        mine = malloc((m->ntiles + 1) * sizeof *mine);
+        if (m->done == NULL || mine == NULL)
+            st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    }
+    /* every other rank waits for its GO, also when there is nothing to do */
+    for (int r = 1; r < m->size; r++) {
+        gdt_error e2;
+        gdt_status s2;
+        gdt_error_clear(&e2);
+        s2 = r0_go(m, r, st, state, slen, &e2);
+        if (s2 != GDT_OK && st == GDT_OK) {
+            /* this rank would wait for ever: the job cannot go on */
+            gdt_error_print(&e2, stderr);
+            gdt_comm_abort(m->comm, (int)s2);
+        }
+    }
+    free(state);
+    if (st != GDT_OK) {
+        free(mine);
+        return st;
+    }
+    for (uint64_t k = 0; k < m->ntiles; k++)
+        if (owner(c, k, m->size) == 0)
+            mine[nmine++] = k;
+    {
+        tr_tile_set set;
+        memset(&set, 0, sizeof set);
+        set.k = mine;
+        set.n = nmine;
+        set.done = r0_done;
+        set.poll = r0_poll;
+        set.ctx = m;
+        st = tr_run_tiles(c, &set, err);
+    }
+    free(mine);
+    if (st != GDT_OK) {
+        /* the job's error, or rank 0's own first */
+        if (m->job_st == GDT_OK)
+            m->job_st = st, m->job_err = *err;
+        r0_stop_all(m);
+    }
+    /* every rank reports, whatever happened */
+    while (m->nfinished < m->size - 1) {
+        int got = 0;
+        gdt_error e2;
+        gdt_error_clear(&e2);
+        gdt_status s2 = r0_handle(m, 1, &got, &e2);
+        if (s2 != GDT_OK) {
+            gdt_error_print(&e2, stderr);
+            gdt_comm_abort(m->comm, (int)s2);
+        }
+    }
+    if (m->job_st != GDT_OK) {
+        *err = m->job_err;
+        return m->job_st;
+    }
+    if (m->prefix != m->ntiles)
+        return gdt_error_set(err, GDT_EINTERNAL, 7953,
+                             "MPI: %" PRIu64 " of %" PRIu64 " tiles were never reported done",
+                             m->ntiles - m->prefix, m->ntiles);
+    c->s.certified += m->remote.certified;
+    c->seam_total += m->remote.seam;
+    c->s.tiles_reused += m->remote.reused;
+    c->s.tiles_redone += m->remote.redone;
+    c->s.t_core += m->remote.t_core;
+    c->s.t_certify += m->remote.t_certify;
+    c->s.t_post += m->remote.t_post;
+    st = tr_run_merge(c, err);
+    if (st == GDT_OK)
+        st = tr_run_finish(c, err);
+    return st;
+}
+
+/* ---- another rank ---- */
+
+static gdt_status rn_record(void *ctx, const tr_pending *p, size_t n, gdt_error *err)
+{
+    mr_ctx *m = ctx;
+    gdt_pack pk;
+    memset(&pk, 0, sizeof pk);
+    gdt_pack_u64(&pk, (uint64_t)n);
+    for (size_t i = 0; i < n; i++) {
+        gdt_pack_u64(&pk, p[i].k);
+        gdt_pack_u64(&pk, p[i].size);
+        gdt_pack_u64(&pk, p[i].checksum);
+    }
+    return send_pack(m, 0, TAG_RECORD, &pk, err);
+}
+
+static void rn_done(void *ctx, uint64_t k)
+{
+    mr_ctx *m = ctx;
+    gdt_error e;
+    gdt_error_clear(&e);
+    if (gdt_comm_send(m->comm, 0, TAG_DONE, &k, sizeof k, &e) != GDT_OK) {
+        gdt_error_print(&e, stderr);
+        gdt_comm_abort(m->comm, (int)e.status);
+    }
+}
+
+static gdt_status rn_poll(void *ctx, gdt_error *err)
+{
+    mr_ctx *m = ctx;
+    int ready = 0, from = 0, tag = 0;
+    size_t len = 0;
+    gdt_status st = gdt_comm_probe(m->comm, 0, TAG_STOP, &ready, &from, &tag, &len, err);
+    if (st != GDT_OK || !ready)
+        return st;
+    {
+        uint64_t z;
+        st = len == sizeof z ? gdt_comm_recv(m->comm, 0, TAG_STOP, &z, sizeof z, err)
+                             : bad_message(0, TAG_STOP, err);
+    }
+    if (st != GDT_OK)
+        return st;
+    m->stopped = 1;
+    return gdt_error_set(err, GDT_EINTERRUPTED, 1303, "stopped: another rank failed");
+}
+
+/* Waits for one message with tag from rank 0 into *buf (malloc'd). */
+static gdt_status rn_wait(mr_ctx *m, int tag, unsigned char **buf, size_t *len, gdt_error *err)
+{
+    int ready = 0, from = 0, got_tag = 0;
+    gdt_status st = gdt_comm_wait(m->comm, 0, tag, NULL, &ready, &from, &got_tag, len, err);
+    *buf = NULL;
+    if (st == GDT_OK)
+        st = recv_msg(m, 0, tag, *len, buf, err);
+    return st;
+}
+
+static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
+{
+    gdt_status st = tr_run_init(c, c->opts, err), run_st = GDT_OK;
+    unsigned char *go = NULL, *fin = NULL;
+    size_t len = 0;
+    uint64_t *ks = NULL, n = 0;
+    tr_tile_rec *rec = NULL;
+    gdt_unpack u;
+    gdt_pack p;
+
+    if (st == GDT_OK)
+        st = tr_run_start_core(c, err);
+    /* whatever happened here, GO comes (rank 0 sends it to every rank) */
+    {
+        gdt_error e2;
+        gdt_error_clear(&e2);
+        gdt_status s2 = rn_wait(m, TAG_GO, &go, &len, &e2);
+        if (s2 != GDT_OK) {
+            gdt_error_print(&e2, stderr);
+            gdt_comm_abort(m->comm, (int)s2);
+        }
+    }
+    memset(&u, 0, sizeof u);
+    u.p = go;
+    u.n = len;
+    run_st = (gdt_status)gdt_unpack_u64(&u);
+    if (u.bad)
+        st = bad_message(0, TAG_GO, err);
+    if (run_st != GDT_OK) {
+        /* rank 0 failed before the tiles and says why: nothing to report */
+        free(go);
+        return run_st;
+    }
+    if (st == GDT_OK) {
+        uint64_t id[2];
+        size_t slen = 0;
+        const unsigned char *state;
+        id[0] = gdt_unpack_u64(&u);
+        id[1] = gdt_unpack_u64(&u);
+        state = gdt_unpack_bytes(&u, &slen);
+        n = gdt_unpack_u64(&u);
+        if (u.bad || n > (u.n - u.at) / 32)
+            st = bad_message(0, TAG_GO, err);
+        if (st == GDT_OK) {
+            ks = malloc((n + 1) * sizeof *ks);
+            rec = malloc((n + 1) * sizeof *rec);
+            if (ks == NULL || rec == NULL)
+                st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        }
+        for (uint64_t i = 0; st == GDT_OK && i < n; i++) {
+            ks[i] = gdt_unpack_u64(&u);
+            rec[i].found = gdt_unpack_u64(&u) != 0;
+            rec[i].size = gdt_unpack_u64(&u);
+            rec[i].sum = gdt_unpack_u64(&u);
+        }
+        if (st == GDT_OK)
+            st = tr_run_attach(c, id, state, slen, err);
+    }
+    free(go);
+    if (st == GDT_OK) {
+        tr_tile_set set;
+        memset(&set, 0, sizeof set);
+        set.k = ks;
+        set.n = n;
+        set.done = rn_done;
+        set.rec = rec;
+        set.record = rn_record;
+        set.poll = rn_poll;
+        set.ctx = m;
+        st = tr_run_tiles(c, &set, err);
+    }
+    free(ks);
+    free(rec);
+    /* FINISHED: rank 0 waits for it from every rank */
+    memset(&p, 0, sizeof p);
+    gdt_pack_u64(&p, (uint64_t)st);
+    gdt_pack_u64(&p, st != GDT_OK ? (uint64_t)err->code : 0);
+    gdt_pack_bytes(&p, st != GDT_OK ? err->msg : "", st != GDT_OK ? strlen(err->msg) : 0);
+    gdt_pack_u64(&p, c->s.certified);
+    gdt_pack_u64(&p, c->seam_total);
+    gdt_pack_u64(&p, c->s.tiles_reused);
+    gdt_pack_u64(&p, c->s.tiles_redone);
+    gdt_pack_u64(&p, as_u64(c->s.t_tiles));
+    gdt_pack_u64(&p, as_u64(c->s.t_core));
+    gdt_pack_u64(&p, as_u64(c->s.t_certify));
+    gdt_pack_u64(&p, as_u64(c->s.t_post));
+    {
+        gdt_error e2;
+        gdt_error_clear(&e2);
+        gdt_status s2 = send_pack(m, 0, TAG_FINISHED, &p, &e2);
+        if (s2 == GDT_OK)
+            s2 = rn_wait(m, TAG_FINAL, &fin, &len, &e2);
+        if (s2 != GDT_OK) {
+            gdt_error_print(&e2, stderr);
+            gdt_comm_abort(m->comm, (int)s2);
+        }
+    }
+    /* the job's status is every rank's; rank 0 reports the error */
+    memset(&u, 0, sizeof u);
+    u.p = fin;
+    u.n = len;
+    run_st = (gdt_status)gdt_unpack_u64(&u);
+    free(fin);
+    if (u.bad)
+        return bad_message(0, TAG_FINAL, err);
+    return run_st;
+}
+
+gdt_status gdt_cli_tiled_mpi(const gdt_options *opts, gdt_comm *comm, gdt_error *err)
+{
+    tr_run c;
+    mr_ctx m;
+    gdt_status st;
+    gdt_options quiet;
+
+    memset(&m, 0, sizeof m);
+    m.c = &c;
+    m.comm = comm;
+    m.rank = gdt_comm_rank(comm);
+    m.size = gdt_comm_size(comm);
+    m.job_st = GDT_OK;
+    gdt_error_clear(&m.job_err);
+    m.finished = calloc((size_t)m.size, sizeof *m.finished);
+    if (m.finished == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    if (m.rank == 0) {
+        /* tr_run_init zeroes c: opts is set through it */
+        c.opts = opts;
+        st = run_rank0(&m, &c, err);
+        for (int r = 1; r < m.size; r++) {
+            uint64_t v = (uint64_t)st;
+            gdt_error e2;
+            gdt_error_clear(&e2);
+            /* only ranks that got GO and reported wait for FINAL; those
+             * that got a failed GO have returned */
+            if (m.finished[r] && gdt_comm_send(comm, r, TAG_FINAL, &v, sizeof v, &e2) != GDT_OK)
+                gdt_error_print(&e2, stderr);
+        }
+    } else {
+        /* the other ranks print nothing: progress, warnings and the job's
+         * error come from rank 0 */
+        quiet = *opts;
+        quiet.verbosity = -1;
+        quiet.json = NULL;
+        c.opts = &quiet;
+        st = run_other(&m, &c, err);
+    }
+    st = tr_run_close(&c, st);
+    if (m.rank != 0)
+        gdt_error_clear(err); /* rank 0 reports the job's error */
+    free(m.done);
+    free(m.finished);
+    return st;
+}
