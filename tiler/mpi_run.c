@@ -337,6 +337,9 @@ static gdt_status r0_go(mr_ctx *m, int r, gdt_status run_st, const unsigned char
     return send_pack(m, r, TAG_GO, &p, err);
 }
 
+static gdt_status run_share(mr_ctx *m, const uint64_t *ks, uint64_t n, const tr_tile_rec *rec,
+                            gdt_error *err);
+
 static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
 {
     gdt_status st = tr_run_init(c, c->opts, err);
@@ -383,16 +386,7 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
     for (uint64_t k = 0; k < m->ntiles; k++)
         if (owner(c, k, m->size) == 0)
             mine[nmine++] = k;
-    {
-        tr_tile_set set;
-        memset(&set, 0, sizeof set);
-        set.k = mine;
-        set.n = nmine;
-        set.done = r0_done;
-        set.poll = r0_poll;
-        set.ctx = m;
-        st = tr_run_tiles(c, &set, err);
-    }
+    st = run_share(m, mine, nmine, NULL, err);
     free(mine);
     if (st != GDT_OK) {
         /* the job's error, or rank 0's own first */
@@ -548,18 +542,8 @@ static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
             st = tr_run_attach(c, id, state, slen, err);
     }
     free(go);
-    if (st == GDT_OK) {
-        tr_tile_set set;
-        memset(&set, 0, sizeof set);
-        set.k = ks;
-        set.n = n;
-        set.done = rn_done;
-        set.rec = rec;
-        set.record = rn_record;
-        set.poll = rn_poll;
-        set.ctx = m;
-        st = tr_run_tiles(c, &set, err);
-    }
+    if (st == GDT_OK)
+        st = run_share(m, ks, n, rec, err);
     free(ks);
     free(rec);
     /* FINISHED: rank 0 waits for it from every rank */
@@ -595,6 +579,23 @@ static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
     if (u.bad)
         return bad_message(0, TAG_FINAL, err);
     return run_st;
+}
+
+/* The tile stage over this rank's tiles ks[0, n): rank 0 with the journal
+ * (rec NULL), another rank with the records GO gave. */
+static gdt_status run_share(mr_ctx *m, const uint64_t *ks, uint64_t n, const tr_tile_rec *rec,
+                            gdt_error *err)
+{
+    tr_tile_set set;
+    memset(&set, 0, sizeof set);
+    set.k = ks;
+    set.n = n;
+    set.rec = rec;
+    set.ctx = m;
+    set.done = m->rank == 0 ? r0_done : rn_done;
+    set.poll = m->rank == 0 ? r0_poll : rn_poll;
+    set.record = m->rank == 0 ? NULL : rn_record;
+    return tr_run_tiles(m->c, &set, err);
 }
 
 gdt_status gdt_cli_tiled_mpi(const gdt_options *opts, gdt_comm *comm, gdt_error *err)
