@@ -331,6 +331,7 @@ gdt_status gdt_core_create(gdt_core **out, const gdt_core_opts *opts, gdt_error 
     c->log = c->opts.log;
     memset(&oo, 0, sizeof oo);
     oo.device = c->opts.device;
+    oo.local_rank = c->opts.local_rank;
     oo.cache_dir = c->opts.cache_dir;
     oo.kernel_dir = c->opts.kernel_dir;
     oo.force_no_fp64 = c->opts.force_no_fp64;

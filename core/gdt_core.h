@@ -75,6 +75,7 @@ typedef enum gdt_core_path_choice {
 
 typedef struct gdt_core_opts {
     const char *device;      /* OpenCL device SPEC (gdt_ocl.h); NULL = first device */
+    int local_rank;          /* rank on the node, for the "local" SPECs (0 alone) */
     const char *cache_dir;   /* PoCL kernel cache; NULL = default (gdt_ocl.h) */
     const char *kernel_dir;  /* NULL = built-in */
     gdt_log *log;            /* may be NULL */

@@ -12,7 +12,13 @@
  *   "N"          the N-th device (from 0) counting every device of every
  *                platform in enumeration order;
  *   "P:D"        device D of platform P;
- *   "cpu", "gpu" the first device of that type.
+ *   "cpu", "gpu" the first device of that type;
+ *   "local", "cpu/local", "gpu/local"
+ *                for one rank of an MPI job: device (local rank mod m) of
+ *                the m devices (of every type, or of that type), so that
+ *                the ranks on one node take its devices in turn (with 4
+ *                GPUs, local ranks 0..7 use GPUs 0, 1, 2, 3, 0, 1, 2, 3);
+ *                the local rank is gdt_ocl_opts.local_rank (0 alone).
  *
  * Programs: kernels/<file> is read, every #include "x.clh" of the kernel
  * directory is hashed into a comment line prepended to the source (so a
@@ -63,6 +69,7 @@ typedef struct gdt_ocl_opts {
     int force_no_fp64;      /* nonzero: build every program with -DGDT_X_NO_F64 */
     int profile;            /* nonzero: time every launch (gdt_ocl_profile_dump) */
     gdt_log *log;           /* notes (-v) and warnings; may be NULL */
+    int local_rank;         /* this process's rank on its node (the "local" SPECs) */
 } gdt_ocl_opts;
 
 /* Points POCL_CACHE_DIR at the kernel cache (above) once per process; later

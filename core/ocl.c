@@ -333,11 +333,11 @@ static int parse_uint(const char *s, const char *end, unsigned *v)
 
 /* The device SPEC grammar (gdt_ocl.h), in one place: the syntax check of
  * the command line and the selection both use it. */
-typedef enum spec_kind { SPEC_FIRST, SPEC_TYPE, SPEC_PAIR, SPEC_INDEX } spec_kind;
+typedef enum spec_kind { SPEC_FIRST, SPEC_TYPE, SPEC_PAIR, SPEC_INDEX, SPEC_LOCAL } spec_kind;
 
 typedef struct dev_spec {
     spec_kind kind;
-    cl_device_type type; /* SPEC_TYPE */
+    cl_device_type type; /* SPEC_TYPE, SPEC_LOCAL (0: any type) */
     unsigned a, b;       /* SPEC_INDEX: a; SPEC_PAIR: platform a, device b */
 } dev_spec;
 
@@ -353,6 +353,14 @@ static gdt_status parse_spec(const char *spec, dev_spec *out, gdt_error *err)
         out->type = spec[0] == 'c' ? CL_DEVICE_TYPE_CPU : CL_DEVICE_TYPE_GPU;
         return GDT_OK;
     }
+    if (strcmp(spec, "local") == 0 || strcmp(spec, "cpu/local") == 0 ||
+        strcmp(spec, "gpu/local") == 0) {
+        out->kind = SPEC_LOCAL;
+        out->type = spec[0] == 'c'   ? CL_DEVICE_TYPE_CPU
+                    : spec[0] == 'g' ? CL_DEVICE_TYPE_GPU
+                                     : 0;
+        return GDT_OK;
+    }
     colon = strchr(spec, ':');
     out->kind = colon != NULL ? SPEC_PAIR : SPEC_INDEX;
     if (colon != NULL ? parse_uint(spec, colon, &out->a) == 0 &&
@@ -360,8 +368,8 @@ static gdt_status parse_spec(const char *spec, dev_spec *out, gdt_error *err)
                       : parse_uint(spec, spec + strlen(spec), &out->a) == 0)
         return GDT_OK;
     return gdt_error_set(err, GDT_EUSAGE, 2110,
-                         "--device %s: expected an index N, PLATFORM:DEVICE, 'cpu' or 'gpu' "
-                         "(numbers up to 100000)",
+                         "--device %s: expected an index N, PLATFORM:DEVICE, 'cpu', 'gpu', "
+                         "'local', 'cpu/local' or 'gpu/local' (numbers up to 100000)",
                          spec);
 }
 
@@ -372,14 +380,33 @@ gdt_status gdt_ocl_check_device_spec(const char *spec, gdt_error *err)
 }
 
 /* Picks the device SPEC designates among devs[0..n). */
-static gdt_status select_device(const dev_entry *devs, size_t n, const char *spec, size_t *pick,
-                                gdt_error *err)
+static gdt_status select_device(const dev_entry *devs, size_t n, const char *spec,
+                                int local_rank, size_t *pick, gdt_error *err)
 {
     dev_spec ds;
     gdt_status st = parse_spec(spec, &ds, err);
 
     if (st != GDT_OK)
         return st;
+    if (ds.kind == SPEC_LOCAL) {
+        size_t m = 0, want, seen = 0;
+        for (size_t i = 0; i < n; i++)
+            m += ds.type == 0 || (devs[i].type & ds.type) != 0;
+        if (m == 0)
+            return gdt_error_set(err, GDT_EDEVICE, 5101,
+                                 "--device %s: no OpenCL device of that type among the %zu "
+                                 "found (%s)",
+                                 spec, n, gdt_ocl_error_name(CL_DEVICE_NOT_FOUND));
+        want = (size_t)(local_rank > 0 ? local_rank : 0) % m;
+        for (size_t i = 0; i < n; i++) {
+            if (!(ds.type == 0 || (devs[i].type & ds.type) != 0))
+                continue;
+            if (seen++ == want) {
+                *pick = i;
+                return GDT_OK;
+            }
+        }
+    }
     if (ds.kind == SPEC_FIRST) {
         *pick = 0;
         return GDT_OK;
@@ -480,7 +507,7 @@ gdt_status gdt_ocl_create(gdt_ocl **out, const gdt_ocl_opts *opts, gdt_error *er
     st = enumerate(&devs, &n, err);
     if (st != GDT_OK)
         return st;
-    st = select_device(devs, n, opts->device, &pick, err);
+    st = select_device(devs, n, opts->device, opts->local_rank, &pick, err);
     if (st != GDT_OK)
         goto fail;
     ocl = calloc(1, sizeof *ocl);

@@ -56,7 +56,8 @@ static const opt_spec OPTIONS[] = {
      "discard an existing job directory that does not match and start again"},
     {OPT_RESUME, "--resume", NULL, "DIR", NULL, "resume the job in DIR (needs nothing else)"},
     {OPT_DEVICE, "--device", NULL, "SPEC", "first device",
-     "OpenCL device: index, PLATFORM:DEVICE, 'cpu' or 'gpu'"},
+     "OpenCL device: index, PLATFORM:DEVICE, 'cpu' or 'gpu'; under mpirun 'gpu/local' "
+     "(or 'cpu/local', 'local') gives a node's ranks its devices in turn"},
     {OPT_THREADS, "--threads", NULL, "K", "all cores", "host worker threads, 1..1024"},
     {OPT_MEM, "--mem-budget", NULL, "SIZE", "auto",
      "memory budget, at least 16M, e.g. 512M or 4G (binary units)"},

@@ -13,6 +13,7 @@
 
 struct gdt_comm {
     int rank, size;
+    int local_rank; /* rank among the ranks of this node */
 };
 
 /* ---- packing (no MPI needed) ---- */
@@ -98,6 +99,11 @@ int gdt_comm_size(const gdt_comm *c)
     return c != NULL ? c->size : 1;
 }
 
+int gdt_comm_local_rank(const gdt_comm *c)
+{
+    return c != NULL ? c->local_rank : 0;
+}
+
 static void nap(void)
 {
     struct timespec ts = {0, 1000000L};
@@ -138,6 +144,16 @@ gdt_status gdt_comm_init(gdt_comm **out, gdt_error *err)
     MPI_Comm_set_errhandler(MPI_COMM_WORLD, MPI_ERRORS_RETURN);
     MPI_Comm_rank(MPI_COMM_WORLD, &c->rank);
     MPI_Comm_size(MPI_COMM_WORLD, &c->size);
+    {
+        /* the ranks that share this node's memory: a node's devices go to
+         * its local ranks in turn (--device gpu/local) */
+        MPI_Comm node;
+        if (MPI_Comm_split_type(MPI_COMM_WORLD, MPI_COMM_TYPE_SHARED, c->rank, MPI_INFO_NULL,
+                                &node) == MPI_SUCCESS) {
+            MPI_Comm_rank(node, &c->local_rank);
+            MPI_Comm_free(&node);
+        }
+    }
     *out = c;
     return GDT_OK;
 }

@@ -29,6 +29,7 @@
 #include <string.h>
 
 #include "private/comm.h"
+#include "private/run_stats.h"
 #include "private/stages.h"
 #include "private/tiled_files.h"
 
@@ -40,12 +41,6 @@ enum {
     TAG_STOP = 5,     /* 0 -> r */
     TAG_FINAL = 6     /* 0 -> r */
 };
-
-/* What a rank reports at the end of its tiles. */
-typedef struct mr_report {
-    uint64_t certified, seam, reused, redone;
-    double t_tiles, t_core, t_certify, t_post;
-} mr_report;
 
 typedef struct mr_ctx {
     tr_run *c;
@@ -59,7 +54,8 @@ typedef struct mr_ctx {
     int nfinished;
     gdt_status job_st;      /* the first failure of any rank */
     gdt_error job_err;
-    mr_report remote;       /* the other ranks' counts, summed */
+    tr_summary remote;      /* the other ranks' counts, summed */
+    uint64_t remote_seam;   /* and their seam vertices */
     int stop_sent;
     /* another rank */
     int stopped;            /* STOP received */
@@ -77,6 +73,71 @@ static uint64_t as_u64(double d)
     uint64_t v;
     memcpy(&v, &d, sizeof v);
     return v;
+}
+
+/* The counts of a rank's tile stage, in FINISHED: the fields of tr_summary
+ * that the tile stage fills, and the rank's own share. */
+static void pack_report(gdt_pack *p, const tr_run *c, uint64_t tiles, uint64_t vertices)
+{
+    const tr_summary *s = &c->s;
+    const gdt_cert_stats *q = &s->cert;
+    const uint64_t v[] = {tiles, vertices, s->certified, c->seam_total, s->tiles_reused,
+                          s->tiles_redone, s->gcd_tiles, s->insert_tiles, s->max_tile_points,
+                          s->max_halo_points, q->triangles, q->certified, q->inner,
+                          q->outside_known, q->halo_hit, q->halo_tests, q->pred.orient_calls,
+                          q->pred.incircle_calls, q->pred.incircle_exact,
+                          q->pred.tiebreak_calls, as_u64(s->t_tiles), as_u64(s->t_core),
+                          as_u64(s->t_certify), as_u64(s->t_post)};
+    for (size_t i = 0; i < sizeof v / sizeof v[0]; i++)
+        gdt_pack_u64(p, v[i]);
+    gdt_pack_bytes(p, s->device, strlen(s->device));
+}
+
+/* Adds a FINISHED report to sum (seam vertices into *seam) and describes the
+ * rank in *r. */
+static void unpack_report(gdt_unpack *u, tr_summary *sum, uint64_t *seam, tr_rank_stats *r)
+{
+    gdt_cert_stats *q = &sum->cert;
+    uint64_t v, w;
+    size_t dl = 0;
+    const unsigned char *dev;
+    memset(r, 0, sizeof *r);
+    r->tiles = gdt_unpack_u64(u);
+    r->vertices = gdt_unpack_u64(u);
+    r->certified = gdt_unpack_u64(u);
+    sum->certified += r->certified;
+    *seam += gdt_unpack_u64(u);
+    r->reused = gdt_unpack_u64(u);
+    sum->tiles_reused += r->reused;
+    sum->tiles_redone += gdt_unpack_u64(u);
+    sum->gcd_tiles += gdt_unpack_u64(u);
+    sum->insert_tiles += gdt_unpack_u64(u);
+    v = gdt_unpack_u64(u);
+    w = gdt_unpack_u64(u);
+    if (v > sum->max_tile_points)
+        sum->max_tile_points = v;
+    if (w > sum->max_halo_points)
+        sum->max_halo_points = w;
+    q->triangles += gdt_unpack_u64(u);
+    q->certified += gdt_unpack_u64(u);
+    q->inner += gdt_unpack_u64(u);
+    q->outside_known += gdt_unpack_u64(u);
+    q->halo_hit += gdt_unpack_u64(u);
+    q->halo_tests += gdt_unpack_u64(u);
+    q->pred.orient_calls += gdt_unpack_u64(u);
+    q->pred.incircle_calls += gdt_unpack_u64(u);
+    q->pred.incircle_exact += gdt_unpack_u64(u);
+    q->pred.tiebreak_calls += gdt_unpack_u64(u);
+    r->t_tiles = as_double(gdt_unpack_u64(u));
+    r->t_core = as_double(gdt_unpack_u64(u));
+    r->t_certify = as_double(gdt_unpack_u64(u));
+    r->t_post = as_double(gdt_unpack_u64(u));
+    sum->t_core += r->t_core;
+    sum->t_certify += r->t_certify;
+    sum->t_post += r->t_post;
+    dev = gdt_unpack_bytes(u, &dl);
+    if (dev != NULL)
+        snprintf(r->device, sizeof r->device, "%.*s", (int)(dl < sizeof r->device ? dl : sizeof r->device - 1), (const char *)dev);
 }
 
 static gdt_status send_pack(mr_ctx *m, int dest, int tag, gdt_pack *p, gdt_error *err)
@@ -193,36 +254,21 @@ static gdt_status r0_finished(mr_ctx *m, gdt_unpack *u, int from, gdt_error *err
     int code = (int)gdt_unpack_u64(u);
     size_t ml = 0;
     const unsigned char *msg = gdt_unpack_bytes(u, &ml);
-    mr_report r;
-    r.certified = gdt_unpack_u64(u);
-    r.seam = gdt_unpack_u64(u);
-    r.reused = gdt_unpack_u64(u);
-    r.redone = gdt_unpack_u64(u);
-    r.t_tiles = as_double(gdt_unpack_u64(u));
-    r.t_core = as_double(gdt_unpack_u64(u));
-    r.t_certify = as_double(gdt_unpack_u64(u));
-    r.t_post = as_double(gdt_unpack_u64(u));
+    tr_rank_stats r;
+    unpack_report(u, &m->remote, &m->remote_seam, &r);
     if (u->bad)
         return bad_message(from, TAG_FINISHED, err);
     m->finished[from] = 1;
     m->nfinished++;
+    if (m->c->s.ranks != NULL)
+        m->c->s.ranks[from] = r;
     if (st != GDT_OK) {
         char text[GDT_ERROR_MSG_MAX];
         snprintf(text, sizeof text, "%.*s", (int)(ml < sizeof text ? ml : sizeof text - 1),
                  (const char *)msg);
         r0_fail(m, from, st, code, text);
         r0_stop_all(m);
-        return GDT_OK;
     }
-    m->remote.certified += r.certified;
-    m->remote.seam += r.seam;
-    m->remote.reused += r.reused;
-    m->remote.redone += r.redone;
-    if (r.t_tiles > m->remote.t_tiles)
-        m->remote.t_tiles = r.t_tiles;
-    m->remote.t_core += r.t_core;
-    m->remote.t_certify += r.t_certify;
-    m->remote.t_post += r.t_post;
     return GDT_OK;
 }
 
@@ -345,8 +391,15 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
     gdt_status st = tr_run_init(c, c->opts, err);
     unsigned char *state = NULL;
     size_t slen = 0;
-    uint64_t *mine = NULL, nmine = 0;
+    uint64_t *mine = NULL, nmine = 0, vmine = 0;
+    double t_tiles0 = 0, t_own = 0;
 
+    if (st == GDT_OK) {
+        c->s.ranks = calloc((size_t)m->size, sizeof *c->s.ranks);
+        c->s.nranks = m->size;
+        if (c->s.ranks == NULL)
+            st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    }
     if (st == GDT_OK)
         st = tr_run_start_core(c, err);
     if (st == GDT_OK)
@@ -384,9 +437,13 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
         return st;
     }
     for (uint64_t k = 0; k < m->ntiles; k++)
-        if (owner(c, k, m->size) == 0)
+        if (owner(c, k, m->size) == 0) {
             mine[nmine++] = k;
+            vmine += c->base[k + 1] - c->base[k];
+        }
+    t_tiles0 = gdt_now();
     st = run_share(m, mine, nmine, NULL, err);
+    t_own = c->s.t_tiles;
     free(mine);
     if (st != GDT_OK) {
         /* the job's error, or rank 0's own first */
@@ -413,13 +470,42 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
         return gdt_error_set(err, GDT_EINTERNAL, 7953,
                              "MPI: %" PRIu64 " of %" PRIu64 " tiles were never reported done",
                              m->ntiles - m->prefix, m->ntiles);
-    c->s.certified += m->remote.certified;
-    c->seam_total += m->remote.seam;
-    c->s.tiles_reused += m->remote.reused;
-    c->s.tiles_redone += m->remote.redone;
-    c->s.t_core += m->remote.t_core;
-    c->s.t_certify += m->remote.t_certify;
-    c->s.t_post += m->remote.t_post;
+    {
+        /* rank 0's own share, then every rank's counts in the summary */
+        tr_summary *s = &c->s, *o = &m->remote;
+        tr_rank_stats *r0 = &s->ranks[0];
+        r0->tiles = nmine;
+        r0->vertices = vmine;
+        r0->certified = s->certified;
+        r0->reused = s->tiles_reused;
+        r0->t_tiles = t_own;
+        /* the job's tile stage: until the last rank reported */
+        s->t_tiles = gdt_now() - t_tiles0;
+        r0->t_core = s->t_core;
+        r0->t_certify = s->t_certify;
+        r0->t_post = s->t_post;
+        snprintf(r0->device, sizeof r0->device, "%s", s->device);
+        s->certified += o->certified;
+        c->seam_total += m->remote_seam;
+        s->tiles_reused += o->tiles_reused;
+        s->tiles_redone += o->tiles_redone;
+        s->gcd_tiles += o->gcd_tiles;
+        s->insert_tiles += o->insert_tiles;
+        if (o->max_tile_points > s->max_tile_points)
+            s->max_tile_points = o->max_tile_points;
+        if (o->max_halo_points > s->max_halo_points)
+            s->max_halo_points = o->max_halo_points;
+        s->cert.triangles += o->cert.triangles;
+        s->cert.certified += o->cert.certified;
+        s->cert.inner += o->cert.inner;
+        s->cert.outside_known += o->cert.outside_known;
+        s->cert.halo_hit += o->cert.halo_hit;
+        s->cert.halo_tests += o->cert.halo_tests;
+        gdt_pred_stats_add(&s->cert.pred, &o->cert.pred);
+        s->t_core += o->t_core;
+        s->t_certify += o->t_certify;
+        s->t_post += o->t_post;
+    }
     st = tr_run_merge(c, err);
     if (st == GDT_OK)
         st = tr_run_finish(c, err);
@@ -488,7 +574,7 @@ static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
     gdt_status st = tr_run_init(c, c->opts, err), run_st = GDT_OK;
     unsigned char *go = NULL, *fin = NULL;
     size_t len = 0;
-    uint64_t *ks = NULL, n = 0;
+    uint64_t *ks = NULL, n = 0, vmine = 0;
     tr_tile_rec *rec = NULL;
     gdt_unpack u;
     gdt_pack p;
@@ -542,8 +628,11 @@ static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
             st = tr_run_attach(c, id, state, slen, err);
     }
     free(go);
-    if (st == GDT_OK)
+    if (st == GDT_OK) {
+        for (uint64_t i = 0; i < n; i++)
+            vmine += c->base != NULL && ks[i] < c->s.tiles ? c->base[ks[i] + 1] - c->base[ks[i]] : 0;
         st = run_share(m, ks, n, rec, err);
+    }
     free(ks);
     free(rec);
     /* FINISHED: rank 0 waits for it from every rank */
@@ -551,14 +640,7 @@ static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
     gdt_pack_u64(&p, (uint64_t)st);
     gdt_pack_u64(&p, st != GDT_OK ? (uint64_t)err->code : 0);
     gdt_pack_bytes(&p, st != GDT_OK ? err->msg : "", st != GDT_OK ? strlen(err->msg) : 0);
-    gdt_pack_u64(&p, c->s.certified);
-    gdt_pack_u64(&p, c->seam_total);
-    gdt_pack_u64(&p, c->s.tiles_reused);
-    gdt_pack_u64(&p, c->s.tiles_redone);
-    gdt_pack_u64(&p, as_u64(c->s.t_tiles));
-    gdt_pack_u64(&p, as_u64(c->s.t_core));
-    gdt_pack_u64(&p, as_u64(c->s.t_certify));
-    gdt_pack_u64(&p, as_u64(c->s.t_post));
+    pack_report(&p, c, n, vmine);
     {
         gdt_error e2;
         gdt_error_clear(&e2);

@@ -119,6 +119,36 @@ static gdt_status write_summary(const tr_run *c, gdt_error *err)
         gdt_json_double(&j, "check", s->t_check);
     gdt_json_double(&j, "total", s->t_total);
     gdt_json_end_object(&j);
+    if (s->nranks > 1) {
+        double sum = 0, max = 0;
+        for (int r = 0; r < s->nranks; r++) {
+            sum += s->ranks[r].t_tiles;
+            if (s->ranks[r].t_tiles > max)
+                max = s->ranks[r].t_tiles;
+        }
+        gdt_json_begin_object(&j, "mpi");
+        gdt_json_int(&j, "ranks", s->nranks);
+        /* the slowest rank's tile stage over the mean: 1 is perfect */
+        gdt_json_double(&j, "load_balance", sum > 0 ? max * s->nranks / sum : 1.0);
+        gdt_json_begin_array(&j, "per_rank");
+        for (int r = 0; r < s->nranks; r++) {
+            const tr_rank_stats *q = &s->ranks[r];
+            gdt_json_begin_object(&j, NULL);
+            gdt_json_int(&j, "rank", r);
+            gdt_json_string(&j, "device", q->device);
+            gdt_json_uint(&j, "tiles", q->tiles);
+            gdt_json_uint(&j, "tiles_reused", q->reused);
+            gdt_json_uint(&j, "vertices", q->vertices);
+            gdt_json_uint(&j, "certified_faces", q->certified);
+            gdt_json_double(&j, "tiles_s", q->t_tiles);
+            gdt_json_double(&j, "core_s", q->t_core);
+            gdt_json_double(&j, "certify_s", q->t_certify);
+            gdt_json_double(&j, "post_s", q->t_post);
+            gdt_json_end_object(&j);
+        }
+        gdt_json_end_array(&j);
+        gdt_json_end_object(&j);
+    }
     gdt_json_bool(&j, "checked", s->checked);
     gdt_json_bool(&j, "resumed", s->resumed);
     gdt_json_begin_object(&j, "reused");
@@ -298,6 +328,7 @@ gdt_status tr_run_close(tr_run *c, gdt_status st)
     else
         gdt_progress_abort(&c->prog);
     free(c->pending);
+    free(c->s.ranks);
     gdt_seam_free(&c->seam);
     gdt_trim_graph_destroy(c->tgraph);
     gdt_trim_tile_free(&c->ttile);

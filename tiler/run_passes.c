@@ -13,6 +13,7 @@
 
 #include "gdt_ocl.h"
 #include "private/cli_modes.h"
+#include "private/comm.h"
 #include "private/tiled_files.h"
 
 /* The tiler's progress hook: shows progress and carries the stop request. */
@@ -132,6 +133,7 @@ gdt_status tr_run_start_core(tr_run *c, gdt_error *err)
 {
     /* the device while pass 1 runs */
     c->cstart.opts.device = c->opts->device;
+    c->cstart.opts.local_rank = gdt_comm_local_rank(c->opts->comm);
     c->cstart.opts.log = &c->log;
     core_start_begin(&c->cstart);
     return gdt_certifier_create(&c->certifier, gdt_cli_threads(c->opts->threads), err);

@@ -73,6 +73,8 @@ CASES = {
                                   "--max-edge", "6")),
     "two-inputs-64": (("a", "b"), ("--tile", "64")),
     "laz-128": (("laz",), ("--tile", "128")),
+    # every rank of the node takes the node's CPU devices in turn (here: the one)
+    "device-local-64": (("b",), ("--tile", "64", "--device", "cpu/local")),
 }
 
 
@@ -99,7 +101,17 @@ def test_any_rank_count_writes_the_same_bytes(mpi_bin, clouds, tmp_path, case):
             assert (outs[k] / "x.tif").read_bytes() == (outs[1] / "x.tif").read_bytes(), k
         j = json.loads((outs[k] / "run.json").read_text())
         j1 = json.loads((outs[1] / "run.json").read_text())
-        assert j["faces"] == j1["faces"] and j["vertices"] == j1["vertices"]
+        for key in ("faces", "vertices", "certified_faces", "merge_faces", "gcd_tiles",
+                    "insert_tiles", "max_tile_points", "max_halo_points", "certification"):
+            assert j[key] == j1[key], (k, key)
+        assert "mpi" not in j1
+        mpi = j["mpi"]
+        assert mpi["ranks"] == k and len(mpi["per_rank"]) == k
+        assert [q["rank"] for q in mpi["per_rank"]] == list(range(k))
+        assert sum(q["tiles"] for q in mpi["per_rank"]) == j["tiles"]
+        assert sum(q["vertices"] for q in mpi["per_rank"]) == j["vertices"]
+        assert sum(q["certified_faces"] for q in mpi["per_rank"]) == j["certified_faces"]
+        assert mpi["load_balance"] >= 1.0
 
 
 def test_bad_input_fails_the_whole_job(mpi_bin, clouds, tmp_path):

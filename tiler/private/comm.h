@@ -32,8 +32,11 @@ gdt_status gdt_comm_init(gdt_comm **out, gdt_error *err);
 /* Finalises MPI and frees c; NULL is accepted. */
 void gdt_comm_finish(gdt_comm *c);
 
+/* This rank, the ranks of the job, and this rank among those of its node
+ * (0, 1 and 0 for NULL: one process alone). */
 int gdt_comm_rank(const gdt_comm *c);
 int gdt_comm_size(const gdt_comm *c);
+int gdt_comm_local_rank(const gdt_comm *c);
 
 /* Sends len bytes to rank dest with tag (>= 0); returns when buf may be
  * reused.  returns: GDT_OK; GDT_EINTERNAL 7951. */

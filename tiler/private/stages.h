@@ -57,6 +57,13 @@
 #include "private/tiled_out.h"
 #include "private/trim_report.h"
 
+/* One rank's share of an MPI run (its tile stage). */
+typedef struct tr_rank_stats {
+    uint64_t tiles, vertices, certified, reused;
+    double t_tiles, t_core, t_certify, t_post;
+    char device[128];
+} tr_rank_stats;
+
 /* What the summary and --json report. */
 typedef struct tr_summary {
     uint64_t points_read, vertices, tiles, faces, certified, merge_faces;
@@ -73,6 +80,8 @@ typedef struct tr_summary {
     gdt_dem_geo dem_geo;
     gdt_dem_stats dem_stats;
     double t_dem;
+    int nranks;             /* ranks of an MPI run; 0 in a plain run */
+    tr_rank_stats *ranks;   /* nranks of them, rank 0 first; owned */
 } tr_summary;
 
 /* A finished tile file waiting for its journal record. */
