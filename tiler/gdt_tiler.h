@@ -234,6 +234,51 @@ const gdt_tile_plan *gdt_tiler_get_plan(const gdt_tiler *t);
  *   passes), GDT_EUSAGE 2505, GDT_EIO 4502..4505, GDT_EINTERNAL 7501/7502. */
 gdt_status gdt_tiler_pass2(gdt_tiler *t, gdt_error *err);
 
+/* Pass 2 shared between processes (the ranks of an MPI job) that see the
+ * same job directory: this tiler spills every point as gdt_tiler_pass2
+ * does, but runs the --dup merge only of the tiles mine(k) says are its
+ * own; every other tile goes to ship(k, recs, n), on the caller's thread,
+ * in tile order, before the own tiles are merged: recs are its n records
+ * in input order when pass 2 held them in memory, NULL when they are in
+ * the tile's .raw file of the job directory.  The process that owns the
+ * tile merges it (gdt_tiler_merge_shipped) and this tiler takes the result
+ * (gdt_tiler_set_tile_files); gdt_tiler_pass2_finish then completes
+ * pass 2.  mine() is called from the merge's threads: it must be a pure
+ * function.  The files and their sums are those of gdt_tiler_pass2.
+ * returns: as gdt_tiler_pass2; ship's errors. */
+typedef struct gdt_tiler_share {
+    int (*mine)(void *ctx, uint64_t k);
+    gdt_status (*ship)(void *ctx, uint64_t k, const gdt_point *recs, uint64_t n,
+                       gdt_error *err);
+    void *ctx;
+} gdt_tiler_share;
+
+gdt_status gdt_tiler_pass2_shared(gdt_tiler *t, const gdt_tiler_share *sh, gdt_error *err);
+
+/* What the --dup merge of one tile wrote. */
+typedef struct gdt_tiler_tile_files {
+    uint64_t points, edge; /* records of its .pts and .edge files */
+    uint64_t sum[2];       /* their checksums (gdt_tiler_file_sum) */
+    uint64_t deepest;      /* partition depth of the merge (0: in memory) */
+} gdt_tiler_tile_files;
+
+/* On the process that owns tile k, a tiler after pass 1 (gdt_tiler_import
+ * of the shipping tiler's state): the --dup merge of tile k from its
+ * records recs[0, n) in input order (reordered in place), or from its .raw
+ * file when recs is NULL; writes its .pts and .edge files and describes
+ * them in *out.  returns: as the merge of gdt_tiler_pass2. */
+gdt_status gdt_tiler_merge_shipped(gdt_tiler *t, uint64_t k, gdt_point *recs, uint64_t n,
+                                   gdt_tiler_tile_files *out, gdt_error *err);
+
+/* On the shipping tiler: tile k's files as their owner wrote them. */
+gdt_status gdt_tiler_set_tile_files(gdt_tiler *t, uint64_t k, const gdt_tiler_tile_files *in,
+                                    gdt_error *err);
+
+/* After gdt_tiler_pass2_shared and the files of every shipped tile: checks
+ * them, syncs the tile directory, and leaves the tiler as gdt_tiler_pass2
+ * does.  returns: GDT_EUSAGE 2505 (a tile without its files), GDT_EIO. */
+gdt_status gdt_tiler_pass2_finish(gdt_tiler *t, gdt_error *err);
+
 /* The size and checksum (gdt_hash64_wide over the whole file, seeded with
  * gdt_job_file_seed(opts.file_id, k, kind)) of one pass-2 file. */
 typedef struct gdt_tiler_file_sum {
@@ -246,12 +291,13 @@ typedef struct gdt_tiler_file_sum {
 gdt_status gdt_tiler_file_sums(const gdt_tiler *t, uint64_t k, gdt_tiler_file_sum out[2],
                                gdt_error *err);
 
-/* The tiler's state after pass 2 (plan, tile table, counts) as bytes, for
+/* The tiler's state after pass 1 or pass 2 (plan, tile table, counts) as bytes, for
  * the other ranks of an MPI job, which share the job directory and so its
  * tile files: gdt_tiler_import on a tiler of the same options and inputs
- * then behaves as this one after pass 2 (tile info, loading), without
- * reading the input.  The bytes are for the same build of gdt-tile only.
- * returns: GDT_EUSAGE 2505 (pass 2 not done), GDT_EINTERNAL 7001.
+ * then behaves as this one after that pass (tile info, loading; after
+ * pass 1, gdt_tiler_merge_shipped), without reading the input.  The bytes
+ * are for the same build of gdt-tile only.
+ * returns: GDT_EUSAGE 2505 (not after pass 1 or 2), GDT_EINTERNAL 7001.
  * Ownership: *buf is malloc'd, the caller frees it. */
 gdt_status gdt_tiler_export(const gdt_tiler *t, unsigned char **buf, size_t *len,
                             gdt_error *err);
@@ -276,6 +322,10 @@ gdt_status gdt_tiler_adopt_pass2(gdt_tiler *t, const gdt_tiler_file_sum *expect,
 
 /* Number of non-empty tiles (0 before pass 1). */
 uint64_t gdt_tiler_tile_count(const gdt_tiler *t);
+
+/* 1 when every tile has its files (after pass 2, its adoption, or the
+ * import of a state after pass 2). */
+int gdt_tiler_pass2_done(const gdt_tiler *t);
 
 /* Describes tile k (k < gdt_tiler_tile_count).  returns: GDT_EUSAGE 2505. */
 gdt_status gdt_tiler_tile_info(const gdt_tiler *t, uint64_t k, gdt_tile_desc *out,

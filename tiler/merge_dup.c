@@ -402,8 +402,8 @@ fail:
 
 /* The merge of tile k with the worker's scratch scr (cap records at most);
  * *deepest receives its partition depth (0: in memory). */
-static gdt_status merge_tile(gdt_tiler *t, uint64_t k, scratch *scr, size_t cap,
-                             unsigned *deepest, gdt_error *err)
+static gdt_status merge_tile(gdt_tiler *t, uint64_t k, gdt_point *recs, scratch *scr,
+                             size_t cap, unsigned *deepest, gdt_error *err)
 {
     tl_tile *tl = &t->tiles[k];
     char *raw = tl_tile_file(t, k, "raw", !t->opts.keep_spill);
@@ -432,10 +432,11 @@ static gdt_status merge_tile(gdt_tiler *t, uint64_t k, scratch *scr, size_t cap,
         m.cap = TL_MERGE_CAP_MAX; /* the result does not depend on cap */
     if (m.cap < 2)
         m.cap = 2;
-    if (t->resident != NULL) {
+    if (recs != NULL || t->resident != NULL) {
         /* the tile's records, in input order, where pass 2 left them
-         * (resident_workers in spill.c: fewer than TL_MERGE_CAP_MAX) */
-        m.buf = t->resident + t->res_off[k];
+         * (resident_workers in spill.c: fewer than TL_MERGE_CAP_MAX) or
+         * as another process shipped them */
+        m.buf = recs != NULL ? recs : t->resident + t->res_off[k];
         m.cap = (size_t)tl->count;
     } else if (m.cap > scr->cap) {
         free(scr->buf);
@@ -448,7 +449,7 @@ static gdt_status merge_tile(gdt_tiler *t, uint64_t k, scratch *scr, size_t cap,
         }
         scr->cap = m.cap;
     }
-    if (t->resident == NULL)
+    if (recs == NULL && t->resident == NULL)
         m.buf = scr->buf;
     st = tl_wfile_init(&wp, pts_tmp, pts, t->sz.part_recs, !t->opts.test_nosync, err);
     if (st == GDT_OK)
@@ -464,7 +465,7 @@ static gdt_status merge_tile(gdt_tiler *t, uint64_t k, scratch *scr, size_t cap,
     out.y0 = tl->j * t->plan.span;
     out.span = t->plan.span;
     out.h = t->plan.halo * t->plan.cell;
-    if (t->resident != NULL)
+    if (recs != NULL || t->resident != NULL)
         st = merge_memory(&m, (size_t)tl->count, &out, err);
     else
         st = merge_file(&m, raw, tl->count, 0, &out, err);
@@ -481,9 +482,11 @@ static gdt_status merge_tile(gdt_tiler *t, uint64_t k, scratch *scr, size_t cap,
         st = tl_wfile_commit(&we, err);
     if (st != GDT_OK)
         goto fail;
-    if (!t->opts.keep_spill && t->resident == NULL)
+    if (!t->opts.keep_spill && recs == NULL && t->resident == NULL)
         unlink(raw);
     *deepest = m.deepest;
+    tl->deepest = m.deepest;
+    tl->merged = 1;
 fail:
     tl_wfile_abort(&wp);
     tl_wfile_abort(&we);
@@ -500,6 +503,7 @@ fail:
 /* State shared by the workers of tl_merge_tiles; mu guards every field. */
 typedef struct pool {
     gdt_tiler *t;
+    const gdt_tiler_share *sh; /* NULL: every tile is this process's */
     size_t cap;          /* records per worker */
     pthread_mutex_t mu;
     uint64_t next;       /* the next tile to take */
@@ -534,7 +538,10 @@ static void work(worker *w, int report, uint64_t *reported)
         if (k >= p->t->ntiles)
             return;
         gdt_error_clear(&e);
-        st = merge_tile(p->t, k, &w->scr, p->cap, &p->deepest[k], &e);
+        if (p->sh != NULL && !p->sh->mine(p->sh->ctx, k)) /* shipped: its owner merges it */
+            st = GDT_OK;
+        else
+            st = merge_tile(p->t, k, NULL, &w->scr, p->cap, &p->deepest[k], &e);
         pthread_mutex_lock(&p->mu);
         if (st != GDT_OK) {
             p->stop = 1;
@@ -595,7 +602,7 @@ static unsigned worker_count(const gdt_tiler *t)
     return w;
 }
 
-gdt_status tl_merge_tiles(gdt_tiler *t, gdt_error *err)
+gdt_status tl_merge_tiles(gdt_tiler *t, const gdt_tiler_share *sh, gdt_error *err)
 {
     unsigned nw = worker_count(t), started = 0;
     worker ws[MAX_WORKERS];
@@ -603,9 +610,19 @@ gdt_status tl_merge_tiles(gdt_tiler *t, gdt_error *err)
     pool p;
     gdt_status st = GDT_OK;
 
+    /* the other processes' tiles first, so that they merge beside ours */
+    for (uint64_t k = 0; sh != NULL && k < t->ntiles; k++) {
+        if (sh->mine(sh->ctx, k))
+            continue;
+        st = sh->ship(sh->ctx, k, t->resident != NULL ? t->resident + t->res_off[k] : NULL,
+                      t->tiles[k].count, err);
+        if (st != GDT_OK)
+            return st;
+    }
     memset(&p, 0, sizeof p);
     memset(ws, 0, sizeof ws);
     p.t = t;
+    p.sh = sh;
     p.cap = t->sz.merge_cap / nw;
     p.err_k = UINT64_MAX;
     p.deepest = calloc(t->ntiles + 1, sizeof *p.deepest);
@@ -635,16 +652,8 @@ gdt_status tl_merge_tiles(gdt_tiler *t, gdt_error *err)
         st = p.st;
         *err = p.err;
     }
-    for (uint64_t k = 0; st == GDT_OK && k < t->ntiles; k++) {
-        const tl_tile *tl = &t->tiles[k];
-        t->stats.merged_duplicates += tl->count - tl->points;
-        if (p.deepest[k] > 0)
-            t->stats.external_merges++;
-        if (p.deepest[k] > t->stats.merge_levels)
-            t->stats.merge_levels = p.deepest[k];
-        if (tl->points > t->stats.max_tile_points)
-            t->stats.max_tile_points = tl->points;
-    }
+    if (st == GDT_OK && sh == NULL)
+        tl_merge_stats(t);
     for (unsigned i = 0; i < nw; i++) {
         free(ws[i].scr.buf);
         free(ws[i].scr.tab);
@@ -652,5 +661,36 @@ gdt_status tl_merge_tiles(gdt_tiler *t, gdt_error *err)
     tl_free_resident(t);
     pthread_mutex_destroy(&p.mu);
     free(p.deepest);
+    return st;
+}
+
+void tl_merge_stats(gdt_tiler *t)
+{
+    for (uint64_t k = 0; k < t->ntiles; k++) {
+        const tl_tile *tl = &t->tiles[k];
+        t->stats.merged_duplicates += tl->count - tl->points;
+        if (tl->deepest > 0)
+            t->stats.external_merges++;
+        if (tl->deepest > t->stats.merge_levels)
+            t->stats.merge_levels = (unsigned)tl->deepest;
+        if (tl->points > t->stats.max_tile_points)
+            t->stats.max_tile_points = tl->points;
+    }
+}
+
+gdt_status tl_merge_one(gdt_tiler *t, uint64_t k, gdt_point *recs, uint64_t n, gdt_error *err)
+{
+    scratch scr;
+    unsigned deepest = 0;
+    gdt_status st;
+    if (k >= t->ntiles || (recs != NULL && n != t->tiles[k].count))
+        return gdt_error_set(err, GDT_EINTERNAL, 7504,
+                             "tile %" PRIu64 ": %" PRIu64 " records shipped, pass 1 counted "
+                             "%" PRIu64,
+                             k, n, k < t->ntiles ? t->tiles[k].count : 0);
+    memset(&scr, 0, sizeof scr);
+    st = merge_tile(t, k, recs, &scr, t->sz.merge_cap, &deepest, err);
+    free(scr.buf);
+    free(scr.tab);
     return st;
 }

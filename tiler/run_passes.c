@@ -281,8 +281,18 @@ gdt_status tr_run_pass2(tr_run *c, gdt_error *err)
         st = gdt_job_set_stage(c->jobdb, "pass2", 0, err);
         if (st == GDT_OK)
             st = gdt_job_clear_tiles(c->jobdb, err);
-        if (st == GDT_OK)
+        if (st == GDT_OK && c->p2share != NULL) {
+            const tr_pass2_share *ps = c->p2share;
+            st = ps->begin(ps->ctx, err);
+            if (st == GDT_OK)
+                st = gdt_tiler_pass2_shared(c->tiler, &ps->sh, err);
+            if (st == GDT_OK)
+                st = ps->collect(ps->ctx, err);
+            if (st == GDT_OK)
+                st = gdt_tiler_pass2_finish(c->tiler, err);
+        } else if (st == GDT_OK) {
             st = gdt_tiler_pass2(c->tiler, err);
+        }
         if (st == GDT_EINTERRUPTED)
             st = tr_interrupted(c->job, "pass 2", err);
         if (st == GDT_OK)
@@ -306,21 +316,30 @@ gdt_status tr_run_attach(tr_run *c, const uint64_t job_id[2], const unsigned cha
 
     c->job_id[0] = job_id[0];
     c->job_id[1] = job_id[1];
-    cloud_opts(c, &co, 0);
-    st = gdt_cloud_open(&c->cloud, opts->inputs, opts->ninputs, &co, err);
-    if (st != GDT_OK)
-        return st;
+    if (c->cloud == NULL) {
+        cloud_opts(c, &co, 0);
+        st = gdt_cloud_open(&c->cloud, opts->inputs, opts->ninputs, &co, err);
+        if (st != GDT_OK)
+            return st;
+    }
+    gdt_tiler_destroy(c->tiler);
+    c->tiler = NULL;
+    c->plan = NULL;
     tiler_opts(c, &to);
     st = gdt_tiler_create(&c->tiler, &to, c->cloud, err);
     if (st == GDT_OK)
         st = gdt_tiler_import(c->tiler, state, len, err);
-    if (st == GDT_OK)
+    if (st == GDT_OK && c->core == NULL)
         st = tr_core_start_join(&c->cstart, &c->core, err);
     if (st != GDT_OK)
         return st;
+    if (gdt_tiler_get_plan(c->tiler) == NULL || c->base != NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7954, "a rank attached twice after pass 2");
     snprintf(c->s.device, sizeof c->s.device, "%s", gdt_core_device_name(c->core));
     c->plan = gdt_tiler_get_plan(c->tiler);
     c->s.points_read = c->plan->points;
+    if (!gdt_tiler_pass2_done(c->tiler))
+        return GDT_OK; /* the state after pass 1: for the shared pass 2 */
     st = set_bases(c, err);
     if (st != GDT_OK)
         return st;

@@ -420,6 +420,11 @@ const gdt_tile_plan *gdt_tiler_get_plan(const gdt_tiler *t)
     return t->state >= 1 ? &t->plan : NULL;
 }
 
+int gdt_tiler_pass2_done(const gdt_tiler *t)
+{
+    return t->state == 2;
+}
+
 uint64_t gdt_tiler_tile_count(const gdt_tiler *t)
 {
     return t->state >= 1 ? t->ntiles : 0;
@@ -504,9 +509,11 @@ static gdt_status prepare_tiles_dir(gdt_tiler *t, gdt_error *err)
     return GDT_OK;
 }
 
-gdt_status gdt_tiler_pass2(gdt_tiler *t, gdt_error *err)
+/* Pass 2 up to the --dup merge: the spill and its count check; *t1 is
+ * when the merge starts.  Leaves t->state -1 (in pass 2). */
+static gdt_status pass2_spill(gdt_tiler *t, double *t1, gdt_error *err)
 {
-    double t0 = gdt_now(), t1;
+    double t0 = gdt_now();
     gdt_status st;
 
     if (t->state != 1)
@@ -533,22 +540,107 @@ gdt_status gdt_tiler_pass2(gdt_tiler *t, gdt_error *err)
                                  t->tiles[k].i, t->tiles[k].j, t->tiles[k].written,
                                  t->tiles[k].count);
     }
-    t1 = gdt_now();
-    t->stats.t_pass2 = t1 - t0;
-    gdt_log_note(t->log, "tiler pass 2: %" PRIu64 " points in %.2f s (%u bucket levels)",
-                 t->plan.points, t->stats.t_pass2, t->stats.spill_levels);
-    st = tl_merge_tiles(t, err);
+    *t1 = gdt_now();
+    t->stats.t_pass2 = *t1 - t0;
+    if (t->stats.spill_in_memory)
+        gdt_log_note(t->log, "tiler pass 2: %" PRIu64 " points in %.2f s (in memory)",
+                     t->plan.points, t->stats.t_pass2);
+    else
+        gdt_log_note(t->log, "tiler pass 2: %" PRIu64 " points in %.2f s (%u bucket levels)",
+                     t->plan.points, t->stats.t_pass2, t->stats.spill_levels);
+    t->merge_t0 = *t1;
+    return GDT_OK;
+}
+
+/* Every tile merged: the tile directory synced, the counters, state 2. */
+static gdt_status pass2_done(gdt_tiler *t, gdt_error *err)
+{
+    gdt_status st = tl_sync_dir(t->tiles_dir, err);
     if (st != GDT_OK)
         return st;
-    st = tl_sync_dir(t->tiles_dir, err);
-    if (st != GDT_OK)
-        return st;
-    t->stats.t_merge = gdt_now() - t1;
+    t->stats.t_merge = gdt_now() - t->merge_t0;
     gdt_log_note(t->log, "tiler --dup merge: %" PRIu64 " duplicates merged in %.2f s (%" PRIu64
                          " tiles out of core)",
                  t->stats.merged_duplicates, t->stats.t_merge, t->stats.external_merges);
     t->state = 2;
     return GDT_OK;
+}
+
+gdt_status gdt_tiler_pass2(gdt_tiler *t, gdt_error *err)
+{
+    double t1;
+    gdt_status st = pass2_spill(t, &t1, err);
+    if (st == GDT_OK)
+        st = tl_merge_tiles(t, NULL, err);
+    if (st == GDT_OK)
+        st = pass2_done(t, err);
+    return st;
+}
+
+gdt_status gdt_tiler_pass2_shared(gdt_tiler *t, const gdt_tiler_share *sh, gdt_error *err)
+{
+    double t1;
+    gdt_status st = sh == NULL || sh->mine == NULL || sh->ship == NULL
+                        ? gdt_error_set(err, GDT_EUSAGE, 2505, "a shared pass 2 needs its hooks")
+                        : pass2_spill(t, &t1, err);
+    if (st == GDT_OK)
+        st = tl_merge_tiles(t, sh, err);
+    if (st == GDT_OK)
+        t->state = 3; /* waiting for the shipped tiles' files */
+    return st;
+}
+
+gdt_status gdt_tiler_merge_shipped(gdt_tiler *t, uint64_t k, gdt_point *recs, uint64_t n,
+                                   gdt_tiler_tile_files *out, gdt_error *err)
+{
+    gdt_status st;
+    if (t->state != 1 || t->job_dir == NULL || k >= t->ntiles)
+        return gdt_error_set(err, GDT_EUSAGE, 2505,
+                             "merging a shipped tile needs the state after pass 1 and a job "
+                             "directory");
+    st = tl_merge_one(t, k, recs, n, err);
+    if (st != GDT_OK)
+        return st;
+    out->points = t->tiles[k].points;
+    out->edge = t->tiles[k].edge;
+    out->sum[0] = t->tiles[k].sum[0];
+    out->sum[1] = t->tiles[k].sum[1];
+    out->deepest = t->tiles[k].deepest;
+    return GDT_OK;
+}
+
+gdt_status gdt_tiler_set_tile_files(gdt_tiler *t, uint64_t k, const gdt_tiler_tile_files *in,
+                                    gdt_error *err)
+{
+    tl_tile *tl;
+    if (t->state != 3 || k >= t->ntiles)
+        return gdt_error_set(err, GDT_EUSAGE, 2505, "tile %" PRIu64 ": no shared pass 2", k);
+    tl = &t->tiles[k];
+    if (tl->merged || in->points == 0 || in->points > tl->count || in->edge > in->points)
+        return gdt_error_set(err, GDT_EINTERNAL, 7505,
+                             "tile %" PRIu64 ": %" PRIu64 " points and %" PRIu64
+                             " edge points reported for %" PRIu64 " records%s",
+                             k, in->points, in->edge, tl->count,
+                             tl->merged ? ", merged already" : "");
+    tl->points = in->points;
+    tl->edge = in->edge;
+    tl->sum[0] = in->sum[0];
+    tl->sum[1] = in->sum[1];
+    tl->deepest = in->deepest;
+    tl->merged = 1;
+    return GDT_OK;
+}
+
+gdt_status gdt_tiler_pass2_finish(gdt_tiler *t, gdt_error *err)
+{
+    if (t->state != 3)
+        return gdt_error_set(err, GDT_EUSAGE, 2505, "no shared pass 2 to finish");
+    for (uint64_t k = 0; k < t->ntiles; k++)
+        if (!t->tiles[k].merged)
+            return gdt_error_set(err, GDT_EUSAGE, 2505,
+                                 "tile %" PRIu64 " of the shared pass 2 has no files", k);
+    tl_merge_stats(t);
+    return pass2_done(t, err);
 }
 
 gdt_status gdt_tiler_file_sums(const gdt_tiler *t, uint64_t k, gdt_tiler_file_sum out[2],
@@ -665,14 +757,15 @@ static uint64_t state_layout(void)
 gdt_status gdt_tiler_export(const gdt_tiler *t, unsigned char **buf, size_t *len,
                             gdt_error *err)
 {
-    uint64_t head[3] = {TL_STATE_MAGIC, state_layout(), t->ntiles};
+    uint64_t head[4] = {TL_STATE_MAGIC, state_layout(), t->ntiles, (uint64_t)t->state};
     size_t n = sizeof head + sizeof t->plan + sizeof t->stats + t->ntiles * sizeof *t->tiles;
     unsigned char *p;
 
     *buf = NULL;
     *len = 0;
-    if (t->state != 2)
-        return gdt_error_set(err, GDT_EUSAGE, 2505, "the tiler's state before pass 2 is done");
+    if (t->state != 1 && t->state != 2)
+        return gdt_error_set(err, GDT_EUSAGE, 2505,
+                             "the tiler's state before pass 1 or inside pass 2");
     p = malloc(n);
     if (p == NULL)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
@@ -690,7 +783,7 @@ gdt_status gdt_tiler_export(const gdt_tiler *t, unsigned char **buf, size_t *len
 gdt_status gdt_tiler_import(gdt_tiler *t, const unsigned char *buf, size_t len,
                             gdt_error *err)
 {
-    uint64_t head[3];
+    uint64_t head[4];
     size_t fixed = sizeof head + sizeof t->plan + sizeof t->stats;
     tl_tile *tiles = NULL;
     gdt_status st = GDT_OK;
@@ -700,7 +793,7 @@ gdt_status gdt_tiler_import(gdt_tiler *t, const unsigned char *buf, size_t len,
     if (len < fixed)
         return gdt_error_set(err, GDT_EINTERNAL, 7503, "tiler state of %zu bytes", len);
     memcpy(head, buf, sizeof head);
-    if (head[0] != TL_STATE_MAGIC || head[1] != state_layout() ||
+    if (head[0] != TL_STATE_MAGIC || head[1] != state_layout() || (head[3] != 1 && head[3] != 2) ||
         head[2] > (len - fixed) / sizeof(tl_tile) || len != fixed + head[2] * sizeof(tl_tile))
         return gdt_error_set(err, GDT_EINTERNAL, 7503,
                              "tiler state from another build of gdt-tile, or damaged");
@@ -722,7 +815,7 @@ gdt_status gdt_tiler_import(gdt_tiler *t, const unsigned char *buf, size_t len,
         if (st == GDT_OK)
             *v = k;
     }
-    t->state = st == GDT_OK ? 2 : -1;
+    t->state = st == GDT_OK ? (int)head[3] : -1;
     return st;
 }
 

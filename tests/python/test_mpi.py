@@ -114,6 +114,22 @@ def test_any_rank_count_writes_the_same_bytes(mpi_bin, clouds, tmp_path, case):
         assert mpi["load_balance"] >= 1.0
 
 
+def test_shared_pass2_out_of_core(mpi_bin, root, tmp_path):
+    """A budget too small to hold the points: pass 2 spills to .raw files on
+    the shared job directory, and each tile's owner merges it from there."""
+    c = gen(root, tmp_path / "c.las", 300000, 8)
+    args = ["--tile", "128", "--mem-budget", "16M"]
+    ref = tmp_path / "ref.ply"
+    r = run([mpi_bin, c, "-o", ref, *args, "-v"])
+    assert r.returncode == 0, r.stderr
+    assert "bucket levels" in r.stderr, r.stderr  # not in memory
+    out = tmp_path / "o.ply"
+    r = mpirun(3, mpi_bin, [c, "-o", out, *args, "-v"])
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "bucket levels" in r.stderr
+    assert out.read_bytes() == ref.read_bytes()
+
+
 def test_bad_input_fails_the_whole_job(mpi_bin, clouds, tmp_path):
     bad = tmp_path / "bad.las"
     data = clouds["a"].read_bytes()

@@ -105,6 +105,18 @@ typedef struct tr_slot {
 
 typedef struct tr_run tr_run;
 
+/* Pass 2 shared with other processes (the MPI scheduler): when pass 2 is
+ * to be run, begin() is called after pass 1 (the others get the tiler's
+ * state), then gdt_tiler_pass2_shared with sh, then collect() (the shipped
+ * tiles' files into the tiler, gdt_tiler_set_tile_files), then
+ * gdt_tiler_pass2_finish; an adopted pass 2 calls none of them. */
+typedef struct tr_pass2_share {
+    gdt_tiler_share sh;
+    gdt_status (*begin)(void *ctx, gdt_error *err);
+    gdt_status (*collect)(void *ctx, gdt_error *err);
+    void *ctx;
+} tr_pass2_share;
+
 /* The post stage of a tile (certification, seam, sorted faces, .tri file,
  * pending record) runs on its own thread while the main thread loads the
  * next tile and runs the core on it.  While it runs it alone touches cert,
@@ -197,6 +209,7 @@ struct tr_run {
     double t_flushed;
     gdt_progress prog;
     tr_summary s;
+    const tr_pass2_share *p2share; /* set by the caller after tr_run_init; NULL: alone */
 };
 
 /* 1 when a signal asked the run to stop. */
@@ -269,6 +282,7 @@ gdt_status tr_run_pass1(tr_run *c, gdt_error *err);
  * recorded .pts/.edge file matches, adopts them (c->s.pass2_reused);
  * otherwise clears the journal's pass-2 and tile records, runs pass 2
  * (writes J/tiles/tile_*.pts, .edge) and records its files and the stage.
+ * With c->p2share, pass 2 is shared (tr_pass2_share).
  * Then c->base (each tile's first output vertex), c->s.tiles, c->s.vertices,
  * c->s.points_read, c->s.t_pass2.
  * returns: GDT_OK; the tiler's and journal's errors; GDT_EINPUT 3801 (more
@@ -279,8 +293,11 @@ gdt_status tr_run_pass2(tr_run *c, gdt_error *err);
  * tr_run_prepare_job, tr_run_pass1 and tr_run_pass2 (which rank 0 ran):
  * takes the job's id and the tiler's state (gdt_tiler_export) from rank 0,
  * opens the cloud (headers only: the input is not read), joins the core,
- * and sets what the tile stage needs (c->plan, c->base, c->trim).  Such a
- * context has no journal and no lock: it never writes job.db.
+ * and with the state after pass 2 sets what the tile stage needs (c->plan,
+ * c->base, c->trim).  Called again, it replaces the tiler: first with the
+ * state after pass 1 (a shared pass 2, gdt_tiler_merge_shipped), then
+ * after pass 2.  Such a context has no journal and no lock: it never
+ * writes job.db.
  * returns: GDT_OK; the cloud's, tiler's and core's errors. */
 gdt_status tr_run_attach(tr_run *c, const uint64_t job_id[2], const unsigned char *state,
                          size_t len, gdt_error *err);

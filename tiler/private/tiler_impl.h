@@ -23,6 +23,8 @@ typedef struct tl_tile {
     uint64_t points;    /* after the --dup merge */
     uint64_t edge;      /* records of the .edge file */
     uint64_t sum[2];    /* checksums of the .pts and .edge files */
+    uint64_t deepest;   /* partition depth of its --dup merge (0: in memory) */
+    int merged;         /* its .pts and .edge files are written (pass 2) */
 } tl_tile;
 
 /* Open addressing (linear probing) from tile (i, j) to a value. */
@@ -85,7 +87,9 @@ struct gdt_tiler {
     unsigned fd_budget;
     tl_sizes sz;
     int64_t user_cell;      /* > 0: given --cell in lattice steps */
-    int state;              /* 0 new, 1 after pass 1, 2 after pass 2, -1 failed */
+    int state;              /* 0 new, 1 after pass 1, 2 after pass 2, 3 a shared pass 2
+                               waiting for shipped tiles, -1 failed */
+    double merge_t0;        /* when pass 2's --dup merge began */
     gdt_tile_plan plan;
     tl_tile *tiles;         /* owned */
     uint64_t ntiles;
@@ -116,7 +120,14 @@ gdt_status tl_spill(gdt_tiler *t, gdt_error *err);
  * records -> .pts + .edge), on up to opts.threads workers; fills
  * tiles[].points/.edge and the merge counters of t->stats, and frees the
  * resident records. */
-gdt_status tl_merge_tiles(gdt_tiler *t, gdt_error *err);
+gdt_status tl_merge_tiles(gdt_tiler *t, const gdt_tiler_share *sh, gdt_error *err);
+
+/* merge_dup.c: the --dup merge of tile k alone, from recs[0, n) (input
+ * order) or, when recs is NULL, from its .raw file; on the caller's thread. */
+gdt_status tl_merge_one(gdt_tiler *t, uint64_t k, gdt_point *recs, uint64_t n, gdt_error *err);
+
+/* The merge counters of t->stats from the tile table (every tile merged). */
+void tl_merge_stats(gdt_tiler *t);
 
 /* Paths of tile k's files; malloc'd, NULL when out of memory.  kind is
  * "raw", "pts" or "edge"; tmp adds ".tmp". */
