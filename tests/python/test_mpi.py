@@ -212,3 +212,27 @@ def test_killed_rank_then_rerun_with_another_count(mpi_bin, root, tmp_path, kill
     assert out.read_bytes() == ref.read_bytes()
     j = json.loads((tmp_path / "j.json").read_text())
     assert j["reused"]["tiles"] >= 40, j["reused"]
+
+
+def test_resume_under_mpirun(mpi_bin, root, tmp_path):
+    """A plain run interrupted (SIGINT, exit 130) and resumed by
+    mpirun -np 2 gdt-tile --resume JOB: the bytes of an uninterrupted run."""
+    c = gen(root, tmp_path / "c.las", 300000, 6)
+    ref = tmp_path / "ref.ply"
+    r = run([mpi_bin, c, "-o", ref, "--tile", "64", "-q"])
+    assert r.returncode == 0, r.stderr
+    out, job = tmp_path / "o.ply", tmp_path / "job"
+    p = subprocess.Popen([str(mpi_bin), str(c), "-o", str(out), "--tile", "64", "-q",
+                          "--threads", "1", "--job", str(job)], env=env(),
+                         stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 120
+    while tiles_recorded(job) < 20 and time.time() < deadline and p.poll() is None:
+        time.sleep(0.05)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == 130, err
+    r = mpirun(2, mpi_bin, ["--resume", job, "-q", "--json", tmp_path / "j.json"])
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert out.read_bytes() == ref.read_bytes()
+    j = json.loads((tmp_path / "j.json").read_text())
+    assert j["resumed"] and j["reused"]["tiles"] >= 20 and j["mpi"]["ranks"] == 2
