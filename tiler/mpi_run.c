@@ -149,7 +149,8 @@ static void unpack_report(gdt_unpack *u, tr_summary *sum, uint64_t *seam, tr_ran
     sum->t_post += r->t_post;
     dev = gdt_unpack_bytes(u, &dl);
     if (dev != NULL)
-        snprintf(r->device, sizeof r->device, "%.*s", (int)(dl < sizeof r->device ? dl : sizeof r->device - 1), (const char *)dev);
+        snprintf(r->device, sizeof r->device, "%.*s",
+                 (int)(dl < sizeof r->device ? dl : sizeof r->device - 1), (const char *)dev);
 }
 
 static gdt_status send_pack(mr_ctx *m, int dest, int tag, gdt_pack *p, gdt_error *err)
@@ -190,6 +191,7 @@ static void r0_mark(mr_ctx *m, uint64_t k)
         m->prefix++;
     if (m->c->out != NULL)
         tr_out_ready(m->c->out, m->prefix);
+    tr_merge_ready(m->c, m->prefix);
 }
 
 static void r0_done(void *ctx, uint64_t k)
@@ -614,6 +616,8 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
     if (st == GDT_OK)
         st = tr_run_output_start(c, err);
     if (st == GDT_OK)
+        st = tr_run_merge_start(c, err);
+    if (st == GDT_OK)
         st = gdt_tiler_export(c->tiler, &state, &slen, err);
     if (st == GDT_OK) {
         m->ntiles = gdt_tiler_tile_count(c->tiler);
@@ -687,7 +691,7 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
         r0->t_core = s->t_core;
         r0->t_certify = s->t_certify;
         r0->t_post = s->t_post;
-        snprintf(r0->device, sizeof r0->device, "%s", s->device);
+        snprintf(r0->device, sizeof r0->device, "%.*s", (int)sizeof r0->device - 1, s->device);
         s->certified += o->certified;
         c->seam_total += m->remote_seam;
         s->tiles_reused += o->tiles_reused;

@@ -320,6 +320,7 @@ gdt_status tr_run_close(tr_run *c, gdt_status st)
     gdt_error_clear(&e2);
     tr_core_start_join(&c->cstart, &c->core, &e2);
     tr_post_join(c, &e2);
+    tr_merge_abort(c);
     tr_out_abort(c->out); /* its thread feeds the DEM: first */
     tr_dem_abort(c->dem);
     tr_reclaim_join(c);
@@ -330,6 +331,8 @@ gdt_status tr_run_close(tr_run *c, gdt_status st)
     free(c->pending);
     free(c->s.ranks);
     gdt_seam_free(&c->seam);
+    gdt_seam_free(&c->mseam);
+    free(c->mbuf);
     gdt_trim_graph_destroy(c->tgraph);
     gdt_trim_tile_free(&c->ttile);
     free(c->topen);

@@ -5,6 +5,7 @@
 
 #include <errno.h>
 #include <fcntl.h>
+#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
@@ -45,14 +46,14 @@ static gdt_status read_seam(tr_run *c, uint64_t k, gdt_error *err)
 
     if (st == GDT_OK)
         st = tr_open_tri(c->tiles_dir, &d, &f, &size, &path, err);
-    if (st == GDT_OK && tr_reserve(&c->fbuf, &c->cap_fbuf, TR_SEAM_VERTEX * (size_t)TR_CHUNK, 1) != 0)
+    if (st == GDT_OK && tr_reserve(&c->mbuf, &c->cap_mbuf, TR_SEAM_VERTEX * (size_t)TR_CHUNK, 1) != 0)
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     if (st == GDT_OK) {
         tr_tri_expect ex = {c->base[k], d.points, c->job_id, c->tgraph != NULL};
-        st = tr_tri_read_seam(f, size, &ex, &c->seam, c->fbuf, path, err);
+        st = tr_tri_read_seam(f, size, &ex, &c->mseam, c->mbuf, path, err);
         /* the tile's open edges meet the merge faces in the trim graph */
         if (st == GDT_OK && ex.trim)
-            st = tr_tri_read_open(f, size, &ex, &c->topen, &c->ntopen, &c->cap_topen, c->fbuf,
+            st = tr_tri_read_open(f, size, &ex, &c->topen, &c->ntopen, &c->cap_topen, c->mbuf,
                                   path, err);
         if (st == GDT_OK && ex.trim)
             st = gdt_trim_graph_add_tile(c->tgraph, k, c->topen, c->ntopen, err);
@@ -89,13 +90,27 @@ static gdt_status put_merge_dem(tr_run *c, int fd, const char *tmp, const gdt_me
     return GDT_OK;
 }
 
+/* The merge thread: waits until tiles [0, need) have their files; 0 when
+ * the run gave up. */
+static int wait_ready(tr_run *c, uint64_t need)
+{
+    tr_merge_bg *b = &c->mbg;
+    int go;
+    pthread_mutex_lock(&b->mu);
+    while (b->ready < need && !b->quit && !tr_stopped(c))
+        pthread_cond_wait(&b->cv, &b->mu);
+    go = !b->quit && !tr_stopped(c);
+    pthread_mutex_unlock(&b->mu);
+    return go;
+}
+
 /* The seam merge by rows of tiles (gdt_seam.h).  Each row's seam
  * is read from its tiles' .tri files; each round's final faces are appended
  * to <job>/merge.faces ("GDTMRG01", u64 face count, then 3 x u32 output
  * indices per face, little-endian), written under merge.faces.tmp, fsync'd
  * and renamed.  Holds one row of seams, the merger's band and a write
  * buffer. */
-static gdt_status merge_rows(tr_run *c, gdt_error *err)
+static gdt_status merge_rows(tr_run *c, int bg, gdt_error *err)
 {
     const gdt_tile_plan *pl = c->plan;
     uint64_t ntiles = gdt_tiler_tile_count(c->tiler), k = 0, nmf = 0, done_v = 0;
@@ -145,7 +160,8 @@ static gdt_status merge_rows(tr_run *c, gdt_error *err)
     memset(buf, 0, MF_HEADER);
     memcpy(buf, MF_MAGIC, 8);
     nbuf = MF_HEADER;
-    gdt_progress_stage(&c->prog, "merge", c->seam_total, "points");
+    if (!bg)
+        gdt_progress_stage(&c->prog, "merge", c->seam_total, "points");
     while (k < ntiles) {
         gdt_tile_desc d;
         const uint64_t *f = NULL;
@@ -160,8 +176,8 @@ static gdt_status merge_rows(tr_run *c, gdt_error *err)
         if (st != GDT_OK)
             goto fail;
         row = d.j;
-        c->seam.nv = 0;
-        c->seam.ne = 0;
+        c->mseam.nv = 0;
+        c->mseam.ne = 0;
         /* tiles are sorted by (j, i): a row is a run of equal j */
         while (k1 < ntiles) {
             st = gdt_tiler_tile_info(c->tiler, k1, &d, err);
@@ -171,12 +187,16 @@ static gdt_status merge_rows(tr_run *c, gdt_error *err)
                 y_next = d.y0 - pl->min_y;
                 break;
             }
+            if (bg && !wait_ready(c, k1 + 1)) {
+                st = tr_interrupted(c->job, "the seam merge", err);
+                goto fail;
+            }
             st = read_seam(c, k1, err);
             if (st != GDT_OK)
                 goto fail;
             k1++;
         }
-        st = gdt_merger_round(m, &c->seam, y_next, k1 == ntiles, &f, &nf, err);
+        st = gdt_merger_round(m, &c->mseam, y_next, k1 == ntiles, &f, &nf, err);
         if (st == GDT_OK && c->tgraph != NULL)
             st = gdt_trim_graph_add_faces(c->tgraph, f, gdt_merger_face_points(m), nf, err);
         if (st == GDT_OK && dfd >= 0)
@@ -195,8 +215,9 @@ static gdt_status merge_rows(tr_run *c, gdt_error *err)
             nbuf += 12;
         }
         nmf += nf;
-        done_v += c->seam.nv;
-        gdt_progress_update(&c->prog, done_v);
+        done_v += c->mseam.nv;
+        if (!bg) /* the tile stage shows its progress meanwhile */
+            gdt_progress_update(&c->prog, done_v);
         k = k1;
     }
     st = write_all(fd, buf, nbuf, tmp, err);
@@ -249,13 +270,90 @@ fail:
     return st;
 }
 
+static void *merge_main(void *arg)
+{
+    tr_run *c = arg;
+    gdt_error_clear(&c->mbg.err);
+    c->mbg.st = merge_rows(c, 1, &c->mbg.err);
+    c->mbg.t_end = gdt_now();
+    return NULL;
+}
+
+gdt_status tr_run_merge_start(tr_run *c, gdt_error *err)
+{
+    tr_merge_bg *b = &c->mbg;
+    (void)err;
+    if (pthread_mutex_init(&b->mu, NULL) != 0)
+        return GDT_OK; /* tr_run_merge merges itself */
+    if (pthread_cond_init(&b->cv, NULL) != 0) {
+        pthread_mutex_destroy(&b->mu);
+        return GDT_OK;
+    }
+    b->sync_made = 1;
+    b->running = pthread_create(&b->tid, NULL, merge_main, c) == 0;
+    return GDT_OK;
+}
+
+void tr_merge_ready(tr_run *c, uint64_t prefix)
+{
+    tr_merge_bg *b = &c->mbg;
+    if (!b->running)
+        return;
+    pthread_mutex_lock(&b->mu);
+    if (prefix > b->ready)
+        b->ready = prefix;
+    pthread_cond_broadcast(&b->cv);
+    pthread_mutex_unlock(&b->mu);
+}
+
+/* Stops the merge thread (if one runs) and waits for it; quit: the run
+ * gives up (else every tile is ready). */
+static void merge_join(tr_run *c, int quit)
+{
+    tr_merge_bg *b = &c->mbg;
+    if (b->running) {
+        pthread_mutex_lock(&b->mu);
+        if (quit)
+            b->quit = 1;
+        else
+            b->ready = UINT64_MAX;
+        pthread_cond_broadcast(&b->cv);
+        pthread_mutex_unlock(&b->mu);
+        pthread_join(b->tid, NULL);
+        b->running = 0;
+    }
+}
+
+void tr_merge_abort(tr_run *c)
+{
+    merge_join(c, 1);
+    if (c->mbg.sync_made) {
+        pthread_cond_destroy(&c->mbg.cv);
+        pthread_mutex_destroy(&c->mbg.mu);
+        c->mbg.sync_made = 0;
+    }
+}
+
 gdt_status tr_run_merge(tr_run *c, gdt_error *err)
 {
     double t0 = gdt_now();
-    gdt_status st = merge_rows(c, err);
+    gdt_status st;
+    if (c->mbg.running) {
+        /* the rows that wait for the last tiles: the merge stage of the
+         * progress lines (the thread itself shows none) */
+        gdt_progress_stage(&c->prog, "merge", c->seam_total, "points");
+        merge_join(c, 0);
+        st = c->mbg.st;
+        if (st == GDT_OK)
+            gdt_progress_update(&c->prog, c->seam_total);
+        if (st != GDT_OK)
+            *err = c->mbg.err;
+    } else {
+        st = merge_rows(c, 0, err);
+    }
     if (st != GDT_OK)
         return st;
-    gdt_seam_free(&c->seam);
+    gdt_seam_free(&c->mseam);
     c->s.faces = c->s.certified + c->s.merge_faces;
     c->s.t_merge = gdt_now() - t0;
     return GDT_OK;

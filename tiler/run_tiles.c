@@ -589,8 +589,11 @@ gdt_status tr_run_tiles(tr_run *c, const tr_tile_set *set, gdt_error *err)
         /* tiles before k have their .tri files, and tile k if reused; a
          * failed output is reported after the merge, once the tiles are
          * safe in the job for a rerun */
-        if (st == GDT_OK && c->out != NULL && set->k == NULL)
-            tr_out_ready(c->out, k + (ok ? 1 : 0));
+        if (st == GDT_OK && set->k == NULL) {
+            if (c->out != NULL)
+                tr_out_ready(c->out, k + (ok ? 1 : 0));
+            tr_merge_ready(c, k + (ok ? 1 : 0));
+        }
         /* no post stage runs: the tiles the post stages synced go to the
          * journal (a short transaction) */
         if (st == GDT_OK)

@@ -26,6 +26,8 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     if (st == GDT_OK)
         st = tr_run_output_start(&c, err);
     if (st == GDT_OK)
+        st = tr_run_merge_start(&c, err);
+    if (st == GDT_OK)
         st = tr_run_tiles(&c, NULL, err); /* NULL: every tile */
     if (st == GDT_OK)
         st = tr_run_merge(&c, err);

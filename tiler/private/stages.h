@@ -144,6 +144,23 @@ typedef struct tr_reclaim {
     void *bufs[5];
 } tr_reclaim;
 
+/* The seam merge on a thread of its own, beside the tile stage: a row of
+ * tiles is merged as soon as its tiles have their .tri files (ready, which
+ * the tile stage or the MPI scheduler raises, tr_merge_ready).  It has its
+ * own seam and buffers; mu guards ready and quit. */
+typedef struct tr_merge_bg {
+    pthread_t tid;
+    int running;        /* a thread was started and not yet joined */
+    pthread_mutex_t mu;
+    pthread_cond_t cv;
+    int sync_made;      /* mu and cv exist */
+    uint64_t ready;     /* tiles [0, ready) have their .tri files */
+    int quit;           /* the run gives up: stop at the next wait */
+    gdt_status st;
+    gdt_error err;
+    double t_end;       /* when the thread finished */
+} tr_merge_bg;
+
 /* The core is created (OpenCL context, kernels from the cache: about 0.2 s
  * on a CPU device) on a thread of its own while pass 1 reads the input, and
  * joined after it.  When pass 1 fails first, its error is the one reported:
@@ -193,7 +210,11 @@ struct tr_run {
     size_t cap_count;
     unsigned char *fbuf; /* the .tri file image */
     size_t cap_fbuf;
-    gdt_seam seam;      /* one tile's seam (tile stage), one row's (merge) */
+    gdt_seam seam;      /* one tile's seam (tile stage) */
+    gdt_seam mseam;     /* one row's seam (merge) */
+    unsigned char *mbuf; /* the merge's read buffer */
+    size_t cap_mbuf;
+    tr_merge_bg mbg;    /* the merge's thread (tr_run_merge_start) */
     gdt_trim_rule trim; /* --max-edge, --concavity with the lattice steps */
     gdt_trim_tile ttile; /* one tile's trim section (post stage) */
     gdt_trim_graph *tgraph; /* the run's long edges (merge), with a rule on */
@@ -358,11 +379,28 @@ void tr_reclaim_join(tr_run *c);
 
 /* ---- run_merge.c: the seam merge ---- */
 
+/* After tr_run_output_start, before tr_run_tiles (optional): starts the
+ * seam merge on a thread of its own, which merges each row of tiles as
+ * soon as tr_merge_ready says its tiles have their files; tr_run_merge
+ * then waits for it.  Without it (or when no thread can be started),
+ * tr_run_merge merges every row itself.
+ * returns: GDT_OK; GDT_EINTERNAL 7001. */
+gdt_status tr_run_merge_start(tr_run *c, gdt_error *err);
+
+/* Tiles [0, prefix) have their .tri files (from the caller's thread of
+ * the tile stage; no effect without a merge thread). */
+void tr_merge_ready(tr_run *c, uint64_t prefix);
+
+/* Stops the merge thread, if one runs, without waiting for the tiles
+ * (tr_run_close). */
+void tr_merge_abort(tr_run *c);
+
 /* After tr_run_tiles has finished every tile: the seam merge by rows of
- * tiles, reading each row's seams from their .tri files; writes J/merge.faces
+ * tiles, reading each row's seams from their .tri files, or the end of the
+ * merge thread that does so; writes J/merge.faces
  * (and with --dem J/merge.dem) anew, synced with the directory; with a
  * trim rule, the trim graph resolved.  Leaves c->s.merge, merge_faces,
- * faces, t_merge.
+ * faces, t_merge (the time the merge adds after the tile stage).
  * returns: GDT_OK; the merger's errors; GDT_EIO 48xx; GDT_EJOB 6801-6802;
  * GDT_EINTERRUPTED 1302. */
 gdt_status tr_run_merge(tr_run *c, gdt_error *err);
