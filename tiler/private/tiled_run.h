@@ -11,8 +11,9 @@
  *      points, the halo is loaded beside them, gdt_certify.h marks the final
  *      triangles, and tiles/tile_<i>_<j>.tri receives the certified faces and
  *      the tile's seam (gdt_seam.h);
- *   3. the seam merge by rows of tiles (gdt_merger_round, gdt_seam.h): the
- *      seams of one row are read back from its .tri files, and each round's
+ *   3. the seam merge by rows of tiles (gdt_merger_round, gdt_seam.h), on a
+ *      thread of its own beside stage 2, each row as soon as its tiles have
+ *      their files: the seams of one row are read back from its .tri files, and each round's
  *      final faces are appended to merge.faces in the job directory
  *      ("GDTMRG01", u64 face count, then 3 x u32 output indices per face;
  *      written under a temporary name, fsync'd, renamed; a resumed run
