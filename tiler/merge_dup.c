@@ -485,8 +485,9 @@ static gdt_status merge_tile(gdt_tiler *t, uint64_t k, gdt_point *recs, scratch 
     if (!t->opts.keep_spill && recs == NULL && t->resident == NULL)
         unlink(raw);
     *deepest = m.deepest;
-    tl->deepest = m.deepest;
-    tl->merged = 1;
+    /* distinct bytes per tile: the workers never share one */
+    t->merge_mark[k] =
+        (uint8_t)(TL_MARK_MERGED | (m.deepest < TL_MARK_DEPTH ? m.deepest : TL_MARK_DEPTH));
 fail:
     tl_wfile_abort(&wp);
     tl_wfile_abort(&we);
@@ -610,6 +611,9 @@ gdt_status tl_merge_tiles(gdt_tiler *t, const gdt_tiler_share *sh, gdt_error *er
     pool p;
     gdt_status st = GDT_OK;
 
+    st = tl_merge_marks(t, err);
+    if (st != GDT_OK)
+        return st;
     /* the other processes' tiles first, so that they merge beside ours */
     for (uint64_t k = 0; sh != NULL && k < t->ntiles; k++) {
         if (sh->mine(sh->ctx, k))
@@ -669,10 +673,11 @@ void tl_merge_stats(gdt_tiler *t)
     for (uint64_t k = 0; k < t->ntiles; k++) {
         const tl_tile *tl = &t->tiles[k];
         t->stats.merged_duplicates += tl->count - tl->points;
-        if (tl->deepest > 0)
+        unsigned depth = t->merge_mark != NULL ? t->merge_mark[k] & TL_MARK_DEPTH : 0;
+        if (depth > 0)
             t->stats.external_merges++;
-        if (tl->deepest > t->stats.merge_levels)
-            t->stats.merge_levels = (unsigned)tl->deepest;
+        if (depth > t->stats.merge_levels)
+            t->stats.merge_levels = depth;
         if (tl->points > t->stats.max_tile_points)
             t->stats.max_tile_points = tl->points;
     }
@@ -688,9 +693,19 @@ gdt_status tl_merge_one(gdt_tiler *t, uint64_t k, gdt_point *recs, uint64_t n, g
                              "tile %" PRIu64 ": %" PRIu64 " records shipped, pass 1 counted "
                              "%" PRIu64,
                              k, n, k < t->ntiles ? t->tiles[k].count : 0);
+    st = tl_merge_marks(t, err);
+    if (st != GDT_OK)
+        return st;
     memset(&scr, 0, sizeof scr);
     st = merge_tile(t, k, recs, &scr, t->sz.merge_cap, &deepest, err);
     free(scr.buf);
     free(scr.tab);
     return st;
+}
+
+gdt_status tl_merge_marks(gdt_tiler *t, gdt_error *err)
+{
+    if (t->merge_mark == NULL && (t->merge_mark = calloc(t->ntiles + 1, 1)) == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    return GDT_OK;
 }

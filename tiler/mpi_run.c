@@ -21,57 +21,19 @@
  * 0 recorded stays in the journal, and a rerun with any number of ranks
  * resumes from it.  The output does not depend on the number of ranks:
  * every tile's file is the same whoever computes it, and rank 0 writes the
- * mesh from the files in tile order. */
+ * mesh from the files in tile order.  The shared pass 2 (PLAN, RECS,
+ * RECDATA, FILES) is in mpi_pass2.c; private/mpi_sched.h holds what the
+ * files share. */
 #include "private/mpi_run.h"
 
 #include <inttypes.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
-#include "private/comm.h"
+#include "private/mpi_sched.h"
 #include "private/run_stats.h"
-#include "private/stages.h"
 #include "private/tiled_files.h"
-
-enum {
-    TAG_GO = 1,       /* 0 -> r */
-    TAG_RECORD = 2,   /* r -> 0 */
-    TAG_DONE = 3,     /* r -> 0 */
-    TAG_FINISHED = 4, /* r -> 0 */
-    TAG_STOP = 5,     /* 0 -> r */
-    TAG_FINAL = 6,    /* 0 -> r */
-    TAG_PLAN = 7,     /* 0 -> r: a shared pass 2 begins */
-    TAG_RECS = 8,     /* 0 -> r: a tile to merge (then TAG_RECDATA chunks) */
-    TAG_RECDATA = 9,  /* 0 -> r */
-    TAG_FILES = 10    /* r -> 0: a merged tile's files */
-};
-
-/* Records per TAG_RECDATA message (32 MiB of gdt_point). */
-#define RECS_PER_MSG ((size_t)(32u << 20) / sizeof(gdt_point))
-
-typedef struct mr_ctx {
-    tr_run *c;
-    gdt_comm *comm;
-    int rank, size;
-    /* rank 0 */
-    uint8_t *done;          /* per tile: its file is there */
-    uint64_t ntiles, prefix; /* done[0, prefix) are all set */
-    uint64_t done_points;   /* vertices of the done tiles (progress) */
-    int *finished;          /* per rank: FINISHED received */
-    int nfinished;
-    gdt_status job_st;      /* the first failure of any rank */
-    gdt_error job_err;
-    tr_summary remote;      /* the other ranks' counts, summed */
-    uint64_t remote_seam;   /* and their seam vertices */
-    int stop_sent;
-    /* the shared pass 2: its owners weigh the tiles' pass-1 counts */
-    uint64_t *raw_pre;      /* ntiles + 1 prefix sums of the pass-1 counts */
-    uint64_t raw_n;
-    uint64_t shipped, files_got;
-    tr_pass2_share p2;
-    /* another rank */
-    int stopped;            /* STOP received */
-} mr_ctx;
 
 static double as_double(uint64_t v)
 {
@@ -153,30 +115,6 @@ static void unpack_report(gdt_unpack *u, tr_summary *sum, uint64_t *seam, tr_ran
                  (int)(dl < sizeof r->device ? dl : sizeof r->device - 1), (const char *)dev);
 }
 
-static gdt_status send_pack(mr_ctx *m, int dest, int tag, gdt_pack *p, gdt_error *err)
-{
-    gdt_status st = p->oom ? gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory")
-                           : gdt_comm_send(m->comm, dest, tag, p->p, p->n, err);
-    gdt_pack_free(p);
-    return st;
-}
-
-/* Receives the message the probe announced; *buf is malloc'd. */
-static gdt_status recv_msg(mr_ctx *m, int from, int tag, size_t len, unsigned char **buf,
-                           gdt_error *err)
-{
-    *buf = malloc(len > 0 ? len : 1);
-    if (*buf == NULL)
-        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-    return gdt_comm_recv(m->comm, from, tag, *buf, len, err);
-}
-
-static gdt_status bad_message(int from, int tag, gdt_error *err)
-{
-    return gdt_error_set(err, GDT_EINTERNAL, 7952,
-                         "MPI: a malformed message (tag %d) from rank %d", tag, from);
-}
-
 /* ---- rank 0 ---- */
 
 /* Tile k has its file: the writer hears of the grown prefix. */
@@ -200,7 +138,7 @@ static void r0_done(void *ctx, uint64_t k)
 }
 
 /* A rank's failure is the job's (the first one stands). */
-static void r0_fail(mr_ctx *m, int from, gdt_status st, int code, const char *msg)
+void mr_fail(mr_ctx *m, int from, gdt_status st, int code, const char *msg)
 {
     if (m->job_st != GDT_OK)
         return;
@@ -240,14 +178,14 @@ static gdt_status r0_record(mr_ctx *m, gdt_unpack *u, int from, gdt_error *err)
     uint64_t n = gdt_unpack_u64(u);
     gdt_status st;
     if (u->bad || n > (u->n - u->at) / 24)
-        return bad_message(from, TAG_RECORD, err);
+        return mr_bad_message(from, TAG_RECORD, err);
     st = gdt_job_begin(c->jobdb, err);
     for (uint64_t i = 0; st == GDT_OK && i < n; i++) {
         uint64_t k = gdt_unpack_u64(u), size = gdt_unpack_u64(u), sum = gdt_unpack_u64(u);
         gdt_tile_desc d;
         char *path = NULL;
         if (k >= m->ntiles) {
-            st = bad_message(from, TAG_RECORD, err);
+            st = mr_bad_message(from, TAG_RECORD, err);
             break;
         }
         st = gdt_tiler_tile_info(c->tiler, k, &d, err);
@@ -271,7 +209,7 @@ static gdt_status r0_finished(mr_ctx *m, gdt_unpack *u, int from, gdt_error *err
     tr_rank_stats r;
     unpack_report(u, &m->remote, &m->remote_seam, &r);
     if (u->bad)
-        return bad_message(from, TAG_FINISHED, err);
+        return mr_bad_message(from, TAG_FINISHED, err);
     m->finished[from] = 1;
     m->nfinished++;
     if (m->c->s.ranks != NULL)
@@ -280,7 +218,7 @@ static gdt_status r0_finished(mr_ctx *m, gdt_unpack *u, int from, gdt_error *err
         char text[GDT_ERROR_MSG_MAX];
         snprintf(text, sizeof text, "%.*s", (int)(ml < sizeof text ? ml : sizeof text - 1),
                  (const char *)msg);
-        r0_fail(m, from, st, code, text);
+        mr_fail(m, from, st, code, text);
         r0_stop_all(m);
     }
     return GDT_OK;
@@ -298,7 +236,7 @@ static gdt_status r0_handle(mr_ctx *m, int wait, int *got, gdt_error *err)
     *got = ready;
     if (st != GDT_OK || !ready)
         return st;
-    st = recv_msg(m, from, tag, len, &buf, err);
+    st = mr_recv(m, from, tag, len, &buf, err);
     if (st != GDT_OK) {
         free(buf);
         return st;
@@ -314,7 +252,7 @@ static gdt_status r0_handle(mr_ctx *m, int wait, int *got, gdt_error *err)
     case TAG_DONE: {
         uint64_t k = gdt_unpack_u64(&u);
         if (u.bad || k >= m->ntiles)
-            st = bad_message(from, tag, err);
+            st = mr_bad_message(from, tag, err);
         else
             r0_mark(m, k);
         break;
@@ -323,7 +261,7 @@ static gdt_status r0_handle(mr_ctx *m, int wait, int *got, gdt_error *err)
         st = r0_finished(m, &u, from, err);
         break;
     default:
-        st = bad_message(from, tag, err);
+        st = mr_bad_message(from, tag, err);
         break;
     }
     free(buf);
@@ -349,199 +287,10 @@ static gdt_status r0_poll(void *ctx, gdt_error *err)
 /* The tiles of rank r: contiguous runs of tile order, balanced by point
  * count (tile k goes to the rank whose share holds the middle of its
  * points); the same for every run of the same job and rank count. */
-/* The rank of tile k among size ranks, given the prefix sums pre[0, n]
- * of the tiles' weights: the rank whose share of the total holds the
- * middle of tile k's weight.  Contiguous runs of tile order, balanced by
- * weight; a pure function of the weights. */
-static int owner_of(const uint64_t *pre, uint64_t n, uint64_t k, int size)
-{
-    uint64_t total = pre[n];
-    long double mid = (long double)pre[k] + (long double)(pre[k + 1] - pre[k]) / 2;
-    int r;
-    if (total == 0)
-        return 0;
-    r = (int)(mid * size / (long double)total);
-    return r < 0 ? 0 : r >= size ? size - 1 : r;
-}
-
-/* ---- the shared pass 2 ---- */
-
-/* The pass-1 prefix sums of the tiler's tiles into m->raw_pre. */
-static gdt_status raw_prefix(mr_ctx *m, const gdt_tiler *t, gdt_error *err)
-{
-    uint64_t n = gdt_tiler_tile_count(t);
-    free(m->raw_pre);
-    m->raw_pre = malloc((n + 1) * sizeof *m->raw_pre);
-    if (m->raw_pre == NULL)
-        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-    m->raw_n = n;
-    m->raw_pre[0] = 0;
-    for (uint64_t k = 0; k < n; k++) {
-        gdt_tile_desc d;
-        gdt_status st = gdt_tiler_tile_info(t, k, &d, err);
-        if (st != GDT_OK)
-            return st;
-        m->raw_pre[k + 1] = m->raw_pre[k] + d.raw_points;
-    }
-    return GDT_OK;
-}
-
-static int p2_owner(const mr_ctx *m, uint64_t k)
-{
-    return owner_of(m->raw_pre, m->raw_n, k, m->size);
-}
-
-static int p2_mine(void *ctx, uint64_t k)
-{
-    return p2_owner(ctx, k) == 0;
-}
-
-/* Rank 0, after pass 1: the tiler's state to every other rank. */
-static gdt_status p2_begin(void *ctx, gdt_error *err)
-{
-    mr_ctx *m = ctx;
-    tr_run *c = m->c;
-    unsigned char *state = NULL;
-    size_t slen = 0;
-    gdt_status st = raw_prefix(m, c->tiler, err);
-    if (st == GDT_OK)
-        st = gdt_tiler_export(c->tiler, &state, &slen, err);
-    for (int r = 1; st == GDT_OK && r < m->size; r++) {
-        gdt_pack p;
-        memset(&p, 0, sizeof p);
-        gdt_pack_u64(&p, c->job_id[0]);
-        gdt_pack_u64(&p, c->job_id[1]);
-        gdt_pack_bytes(&p, state, slen);
-        st = send_pack(m, r, TAG_PLAN, &p, err);
-    }
-    free(state);
-    return st;
-}
-
-/* Rank 0: tile k's records (or where they are) to its owner. */
-static gdt_status p2_ship(void *ctx, uint64_t k, const gdt_point *recs, uint64_t n,
-                          gdt_error *err)
-{
-    mr_ctx *m = ctx;
-    int to = p2_owner(m, k);
-    gdt_pack p;
-    gdt_status st;
-    memset(&p, 0, sizeof p);
-    gdt_pack_u64(&p, k);
-    gdt_pack_u64(&p, n);
-    gdt_pack_u64(&p, recs != NULL);
-    st = send_pack(m, to, TAG_RECS, &p, err);
-    for (uint64_t at = 0; st == GDT_OK && recs != NULL && at < n; at += RECS_PER_MSG) {
-        uint64_t q = n - at < RECS_PER_MSG ? n - at : RECS_PER_MSG;
-        st = gdt_comm_send(m->comm, to, TAG_RECDATA, recs + at, (size_t)q * sizeof *recs, err);
-    }
-    if (st == GDT_OK)
-        m->shipped++;
-    return st;
-}
-
-/* Rank 0: the files of every shipped tile into the tiler. */
-static gdt_status p2_collect(void *ctx, gdt_error *err)
-{
-    mr_ctx *m = ctx;
-    gdt_status st = GDT_OK;
-    while (st == GDT_OK && m->files_got < m->shipped) {
-        int ready = 0, from = 0, tag = 0;
-        size_t len = 0;
-        unsigned char *buf = NULL;
-        gdt_unpack u;
-        st = gdt_comm_wait(m->comm, -1, TAG_FILES, m->c->opts->stop, &ready, &from, &tag, &len,
-                           err);
-        if (st == GDT_OK && !ready)
-            st = tr_interrupted(m->c->job, "pass 2", err);
-        if (st == GDT_OK)
-            st = recv_msg(m, from, tag, len, &buf, err);
-        if (st == GDT_OK) {
-            gdt_tiler_tile_files f;
-            uint64_t k;
-            gdt_status rst;
-            int code;
-            size_t ml = 0;
-            const unsigned char *msg;
-            memset(&u, 0, sizeof u);
-            u.p = buf;
-            u.n = len;
-            k = gdt_unpack_u64(&u);
-            rst = (gdt_status)gdt_unpack_u64(&u);
-            code = (int)gdt_unpack_u64(&u);
-            msg = gdt_unpack_bytes(&u, &ml);
-            f.points = gdt_unpack_u64(&u);
-            f.edge = gdt_unpack_u64(&u);
-            f.sum[0] = gdt_unpack_u64(&u);
-            f.sum[1] = gdt_unpack_u64(&u);
-            f.deepest = gdt_unpack_u64(&u);
-            if (u.bad) {
-                st = bad_message(from, tag, err);
-            } else if (rst != GDT_OK) {
-                char text[GDT_ERROR_MSG_MAX];
-                snprintf(text, sizeof text, "%.*s",
-                         (int)(ml < sizeof text ? ml : sizeof text - 1), (const char *)msg);
-                r0_fail(m, from, rst, code, text);
-                *err = m->job_err;
-                st = rst;
-            } else {
-                st = gdt_tiler_set_tile_files(m->c->tiler, k, &f, err);
-                m->files_got++;
-            }
-        }
-        free(buf);
-    }
-    return st;
-}
-
-/* Another rank: one shipped tile, held until the rank has all of its own. */
-typedef struct rn_tile {
-    uint64_t k, n;
-    gdt_point *recs; /* NULL: the tile's .raw file */
-} rn_tile;
-
-/* Another rank: merges its shipped tiles and reports each one's files;
- * a failure (st, err: the rank could not take the state) is reported for
- * every tile instead. */
-static void rn_merge_all(mr_ctx *m, rn_tile *tiles, size_t n, gdt_status st0,
-                         const gdt_error *err0)
-{
-    for (size_t i = 0; i < n; i++) {
-        gdt_tiler_tile_files f;
-        gdt_error e;
-        gdt_status st = st0;
-        gdt_pack p;
-        memset(&f, 0, sizeof f);
-        gdt_error_clear(&e);
-        if (st == GDT_OK)
-            st = gdt_tiler_merge_shipped(m->c->tiler, tiles[i].k, tiles[i].recs, tiles[i].n, &f,
-                                         &e);
-        else
-            e = *err0;
-        free(tiles[i].recs);
-        tiles[i].recs = NULL;
-        memset(&p, 0, sizeof p);
-        gdt_pack_u64(&p, tiles[i].k);
-        gdt_pack_u64(&p, (uint64_t)st);
-        gdt_pack_u64(&p, st != GDT_OK ? (uint64_t)e.code : 0);
-        gdt_pack_bytes(&p, st != GDT_OK ? e.msg : "", st != GDT_OK ? strlen(e.msg) : 0);
-        gdt_pack_u64(&p, f.points);
-        gdt_pack_u64(&p, f.edge);
-        gdt_pack_u64(&p, f.sum[0]);
-        gdt_pack_u64(&p, f.sum[1]);
-        gdt_pack_u64(&p, f.deepest);
-        gdt_error_clear(&e);
-        if (send_pack(m, 0, TAG_FILES, &p, &e) != GDT_OK) {
-            gdt_error_print(&e, stderr);
-            gdt_comm_abort(m->comm, (int)e.status);
-        }
-    }
-}
-
 /* The tile stage's owner: weights are the tiles' vertices. */
 static int owner(const tr_run *c, uint64_t k, int size)
 {
-    return owner_of(c->base, c->s.tiles, k, size);
+    return mr_owner_of(c->base, c->s.tiles, k, size);
 }
 
 /* GO for rank r: the run's status, then (when it is GDT_OK) the job, the
@@ -578,7 +327,7 @@ static gdt_status r0_go(mr_ctx *m, int r, gdt_status run_st, const unsigned char
         gdt_pack_free(&p);
         return st;
     }
-    return send_pack(m, r, TAG_GO, &p, err);
+    return mr_send_pack(m, r, TAG_GO, &p, err);
 }
 
 static gdt_status run_share(mr_ctx *m, const uint64_t *ks, uint64_t n, const tr_tile_rec *rec,
@@ -592,12 +341,7 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
     uint64_t *mine = NULL, nmine = 0, vmine = 0;
     double t_tiles0 = 0, t_own = 0;
 
-    m->p2.sh.mine = p2_mine;
-    m->p2.sh.ship = p2_ship;
-    m->p2.sh.ctx = m;
-    m->p2.begin = p2_begin;
-    m->p2.collect = p2_collect;
-    m->p2.ctx = m;
+    mr_pass2_hooks(m);
     c->p2share = &m->p2;
     if (st == GDT_OK) {
         c->s.ranks = calloc((size_t)m->size, sizeof *c->s.ranks);
@@ -732,7 +476,7 @@ static gdt_status rn_record(void *ctx, const tr_pending *p, size_t n, gdt_error 
         gdt_pack_u64(&pk, p[i].size);
         gdt_pack_u64(&pk, p[i].checksum);
     }
-    return send_pack(m, 0, TAG_RECORD, &pk, err);
+    return mr_send_pack(m, 0, TAG_RECORD, &pk, err);
 }
 
 static void rn_done(void *ctx, uint64_t k)
@@ -757,7 +501,7 @@ static gdt_status rn_poll(void *ctx, gdt_error *err)
     {
         uint64_t z;
         st = len == sizeof z ? gdt_comm_recv(m->comm, 0, TAG_STOP, &z, sizeof z, err)
-                             : bad_message(0, TAG_STOP, err);
+                             : mr_bad_message(0, TAG_STOP, err);
     }
     if (st != GDT_OK)
         return st;
@@ -772,7 +516,7 @@ static gdt_status rn_wait(mr_ctx *m, int tag, unsigned char **buf, size_t *len, 
     gdt_status st = gdt_comm_wait(m->comm, 0, tag, NULL, &ready, &from, &got_tag, len, err);
     *buf = NULL;
     if (st == GDT_OK)
-        st = recv_msg(m, 0, tag, *len, buf, err);
+        st = mr_recv(m, 0, tag, *len, buf, err);
     return st;
 }
 
@@ -790,103 +534,13 @@ static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
         st = tr_run_start_core(c, err);
     /* whatever happened here, GO comes (rank 0 sends it to every rank);
      * before it, a shared pass 2 may ship this rank its tiles */
-    {
-        gdt_error e2, pe;
-        gdt_status s2 = GDT_OK, pst = st;
-        rn_tile *tl = NULL;
-        size_t ntl = 0, want = 0;
-        gdt_error_clear(&e2);
-        pe = *err;
-        for (;;) {
-            int ready = 0, from = 0, tag = 0;
-            unsigned char *msg = NULL;
-            s2 = gdt_comm_wait(m->comm, 0, -1, NULL, &ready, &from, &tag, &len, &e2);
-            if (s2 == GDT_OK && tag == TAG_GO) {
-                s2 = recv_msg(m, 0, TAG_GO, len, &go, &e2);
-                break;
-            }
-            if (s2 == GDT_OK)
-                s2 = recv_msg(m, 0, tag, len, &msg, &e2);
-            if (s2 == GDT_OK && tag == TAG_PLAN) {
-                uint64_t id[2];
-                size_t slen = 0;
-                const unsigned char *state;
-                memset(&u, 0, sizeof u);
-                u.p = msg;
-                u.n = len;
-                id[0] = gdt_unpack_u64(&u);
-                id[1] = gdt_unpack_u64(&u);
-                state = gdt_unpack_bytes(&u, &slen);
-                if (u.bad)
-                    pst = bad_message(0, tag, &pe);
-                if (pst == GDT_OK)
-                    pst = tr_run_attach(c, id, state, slen, &pe);
-                if (pst == GDT_OK)
-                    pst = raw_prefix(m, c->tiler, &pe);
-                want = 0;
-                for (uint64_t k = 0; pst == GDT_OK && k < m->raw_n; k++)
-                    want += p2_owner(m, k) == m->rank;
-                tl = calloc(want + 1, sizeof *tl);
-                if (tl == NULL)
-                    s2 = gdt_error_set(&e2, GDT_EINTERNAL, 7001, "out of memory");
-            } else if (s2 == GDT_OK && tag == TAG_RECS) {
-                uint64_t rk, rn, inl;
-                memset(&u, 0, sizeof u);
-                u.p = msg;
-                u.n = len;
-                rk = gdt_unpack_u64(&u);
-                rn = gdt_unpack_u64(&u);
-                inl = gdt_unpack_u64(&u);
-                if (u.bad || tl == NULL || ntl >= want) {
-                    s2 = bad_message(0, tag, &e2);
-                } else {
-                    gdt_point *recs = NULL;
-                    if (inl && (recs = malloc((size_t)(rn > 0 ? rn : 1) * sizeof *recs)) == NULL)
-                        s2 = gdt_error_set(&e2, GDT_EINTERNAL, 7001,
-                                           "out of memory (a shipped tile of %" PRIu64
-                                           " points)",
-                                           rn);
-                    for (uint64_t at = 0; s2 == GDT_OK && inl && at < rn; at += RECS_PER_MSG) {
-                        uint64_t q = rn - at < RECS_PER_MSG ? rn - at : RECS_PER_MSG;
-                        int rd = 0, fr = 0, tg = 0;
-                        size_t l2 = 0;
-                        s2 = gdt_comm_wait(m->comm, 0, TAG_RECDATA, NULL, &rd, &fr, &tg, &l2,
-                                           &e2);
-                        if (s2 == GDT_OK && l2 != q * sizeof *recs)
-                            s2 = bad_message(0, TAG_RECDATA, &e2);
-                        if (s2 == GDT_OK)
-                            s2 = gdt_comm_recv(m->comm, 0, TAG_RECDATA, recs + at, l2, &e2);
-                    }
-                    tl[ntl].k = rk;
-                    tl[ntl].n = rn;
-                    tl[ntl].recs = recs;
-                    ntl++;
-                    /* all of this rank's tiles are here: merge them now,
-                     * beside rank 0's own */
-                    if (s2 == GDT_OK && ntl == want)
-                        rn_merge_all(m, tl, ntl, pst, &pe);
-                }
-            } else if (s2 == GDT_OK) {
-                s2 = bad_message(0, tag, &e2);
-            }
-            free(msg);
-            if (s2 != GDT_OK)
-                break;
-        }
-        for (size_t i = 0; i < ntl; i++)
-            free(tl[i].recs);
-        free(tl);
-        if (s2 != GDT_OK) {
-            gdt_error_print(&e2, stderr);
-            gdt_comm_abort(m->comm, (int)s2);
-        }
-    }
+    mr_wait_go(m, st, err, &go, &len);
     memset(&u, 0, sizeof u);
     u.p = go;
     u.n = len;
     run_st = (gdt_status)gdt_unpack_u64(&u);
     if (u.bad)
-        st = bad_message(0, TAG_GO, err);
+        st = mr_bad_message(0, TAG_GO, err);
     if (run_st != GDT_OK) {
         /* rank 0 failed before the tiles and says why: nothing to report */
         free(go);
@@ -901,7 +555,7 @@ static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
         state = gdt_unpack_bytes(&u, &slen);
         n = gdt_unpack_u64(&u);
         if (u.bad || n > (u.n - u.at) / 32)
-            st = bad_message(0, TAG_GO, err);
+            st = mr_bad_message(0, TAG_GO, err);
         if (st == GDT_OK) {
             ks = malloc((n + 1) * sizeof *ks);
             rec = malloc((n + 1) * sizeof *rec);
@@ -934,7 +588,7 @@ static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
     {
         gdt_error e2;
         gdt_error_clear(&e2);
-        gdt_status s2 = send_pack(m, 0, TAG_FINISHED, &p, &e2);
+        gdt_status s2 = mr_send_pack(m, 0, TAG_FINISHED, &p, &e2);
         if (s2 == GDT_OK)
             s2 = rn_wait(m, TAG_FINAL, &fin, &len, &e2);
         if (s2 != GDT_OK) {
@@ -949,7 +603,7 @@ static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
     run_st = (gdt_status)gdt_unpack_u64(&u);
     free(fin);
     if (u.bad)
-        return bad_message(0, TAG_FINAL, err);
+        return mr_bad_message(0, TAG_FINAL, err);
     return run_st;
 }
 

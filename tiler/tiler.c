@@ -228,6 +228,7 @@ void gdt_tiler_destroy(gdt_tiler *t)
     tl_density_free(&t->density);
     tl_map_free(&t->map);
     tl_free_resident(t);
+    free(t->merge_mark);
     free(t->tiles);
     free(t->job_dir);
     free(t->tiles_dir);
@@ -605,7 +606,7 @@ gdt_status gdt_tiler_merge_shipped(gdt_tiler *t, uint64_t k, gdt_point *recs, ui
     out->edge = t->tiles[k].edge;
     out->sum[0] = t->tiles[k].sum[0];
     out->sum[1] = t->tiles[k].sum[1];
-    out->deepest = t->tiles[k].deepest;
+    out->deepest = t->merge_mark[k] & TL_MARK_DEPTH;
     return GDT_OK;
 }
 
@@ -616,18 +617,21 @@ gdt_status gdt_tiler_set_tile_files(gdt_tiler *t, uint64_t k, const gdt_tiler_ti
     if (t->state != 3 || k >= t->ntiles)
         return gdt_error_set(err, GDT_EUSAGE, 2505, "tile %" PRIu64 ": no shared pass 2", k);
     tl = &t->tiles[k];
-    if (tl->merged || in->points == 0 || in->points > tl->count || in->edge > in->points)
+    if (tl_merge_marks(t, err) != GDT_OK)
+        return GDT_EINTERNAL;
+    if ((t->merge_mark[k] & TL_MARK_MERGED) || in->points == 0 || in->points > tl->count ||
+        in->edge > in->points)
         return gdt_error_set(err, GDT_EINTERNAL, 7505,
                              "tile %" PRIu64 ": %" PRIu64 " points and %" PRIu64
                              " edge points reported for %" PRIu64 " records%s",
                              k, in->points, in->edge, tl->count,
-                             tl->merged ? ", merged already" : "");
+                             (t->merge_mark[k] & TL_MARK_MERGED) ? ", merged already" : "");
     tl->points = in->points;
     tl->edge = in->edge;
     tl->sum[0] = in->sum[0];
     tl->sum[1] = in->sum[1];
-    tl->deepest = in->deepest;
-    tl->merged = 1;
+    t->merge_mark[k] = (uint8_t)(TL_MARK_MERGED |
+                                 (in->deepest < TL_MARK_DEPTH ? in->deepest : TL_MARK_DEPTH));
     return GDT_OK;
 }
 
@@ -636,7 +640,7 @@ gdt_status gdt_tiler_pass2_finish(gdt_tiler *t, gdt_error *err)
     if (t->state != 3)
         return gdt_error_set(err, GDT_EUSAGE, 2505, "no shared pass 2 to finish");
     for (uint64_t k = 0; k < t->ntiles; k++)
-        if (!t->tiles[k].merged)
+        if (t->merge_mark == NULL || !(t->merge_mark[k] & TL_MARK_MERGED))
             return gdt_error_set(err, GDT_EUSAGE, 2505,
                                  "tile %" PRIu64 " of the shared pass 2 has no files", k);
     tl_merge_stats(t);

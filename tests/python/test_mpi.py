@@ -236,3 +236,22 @@ def test_resume_under_mpirun(mpi_bin, root, tmp_path):
     assert out.read_bytes() == ref.read_bytes()
     j = json.loads((tmp_path / "j.json").read_text())
     assert j["resumed"] and j["reused"]["tiles"] >= 20 and j["mpi"]["ranks"] == 2
+
+
+def test_another_rank_failing_fails_the_job_with_its_message(mpi_bin, clouds, tmp_path):
+    """Rank 1 alone has no OpenCL platform (an MPMD launch gives it another
+    environment): the job exits 5, rank 0 prints rank 1's error once, the
+    job directory stays, and a plain rerun finishes it."""
+    out, job = tmp_path / "o.ply", tmp_path / "job"
+    args = [str(clouds["a"]), "-o", str(out), "--tile", "64", "-q", "--job", str(job)]
+    r = run(["mpirun", "--oversubscribe", "-np", "1", mpi_bin, *args, ":", "-np", "1", "env",
+             "OCL_ICD_VENDORS=/nonexistent", mpi_bin, *args])
+    assert r.returncode == 5, r.stdout + r.stderr
+    assert r.stderr.count("error GDT-5") == 1 and "rank 1: " in r.stderr, r.stderr
+    assert not out.exists() and job.is_dir()
+    r = run([mpi_bin, *args])
+    assert r.returncode == 0, r.stderr
+    ref = tmp_path / "ref.ply"
+    r = run([mpi_bin, clouds["a"], "-o", ref, "--tile", "64", "-q"])
+    assert r.returncode == 0, r.stderr
+    assert out.read_bytes() == ref.read_bytes()

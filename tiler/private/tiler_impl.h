@@ -23,9 +23,12 @@ typedef struct tl_tile {
     uint64_t points;    /* after the --dup merge */
     uint64_t edge;      /* records of the .edge file */
     uint64_t sum[2];    /* checksums of the .pts and .edge files */
-    uint64_t deepest;   /* partition depth of its --dup merge (0: in memory) */
-    int merged;         /* its .pts and .edge files are written (pass 2) */
 } tl_tile;
+
+/* Pass 2's mark of a tile (gdt_tiler.merge_mark): its files are written,
+ * and the partition depth of its --dup merge (0: in memory; at most 127). */
+#define TL_MARK_MERGED 0x80u
+#define TL_MARK_DEPTH 0x7fu
 
 /* Open addressing (linear probing) from tile (i, j) to a value. */
 typedef struct tl_map_entry {
@@ -90,6 +93,7 @@ struct gdt_tiler {
     int state;              /* 0 new, 1 after pass 1, 2 after pass 2, 3 a shared pass 2
                                waiting for shipped tiles, -1 failed */
     double merge_t0;        /* when pass 2's --dup merge began */
+    uint8_t *merge_mark;    /* ntiles marks (TL_MARK_*) while pass 2 merges; owned */
     gdt_tile_plan plan;
     tl_tile *tiles;         /* owned */
     uint64_t ntiles;
@@ -125,6 +129,9 @@ gdt_status tl_merge_tiles(gdt_tiler *t, const gdt_tiler_share *sh, gdt_error *er
 /* merge_dup.c: the --dup merge of tile k alone, from recs[0, n) (input
  * order) or, when recs is NULL, from its .raw file; on the caller's thread. */
 gdt_status tl_merge_one(gdt_tiler *t, uint64_t k, gdt_point *recs, uint64_t n, gdt_error *err);
+
+/* t->merge_mark, allocated (zeroed) if it is not yet.  returns: 7001. */
+gdt_status tl_merge_marks(gdt_tiler *t, gdt_error *err);
 
 /* The merge counters of t->stats from the tile table (every tile merged). */
 void tl_merge_stats(gdt_tiler *t);

@@ -1,0 +1,45 @@
+/* Message helpers of the MPI scheduler (private/mpi_sched.h). */
+#include "private/mpi_sched.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+gdt_status mr_send_pack(mr_ctx *m, int dest, int tag, gdt_pack *p, gdt_error *err)
+{
+    gdt_status st = p->oom ? gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory")
+                           : gdt_comm_send(m->comm, dest, tag, p->p, p->n, err);
+    gdt_pack_free(p);
+    return st;
+}
+
+/* Receives the message the probe announced; *buf is malloc'd. */
+gdt_status mr_recv(mr_ctx *m, int from, int tag, size_t len, unsigned char **buf,
+                           gdt_error *err)
+{
+    *buf = malloc(len > 0 ? len : 1);
+    if (*buf == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    return gdt_comm_recv(m->comm, from, tag, *buf, len, err);
+}
+
+gdt_status mr_bad_message(int from, int tag, gdt_error *err)
+{
+    return gdt_error_set(err, GDT_EINTERNAL, 7952,
+                         "MPI: a malformed message (tag %d) from rank %d", tag, from);
+}
+
+/* The rank of tile k among size ranks, given the prefix sums pre[0, n]
+ * of the tiles' weights: the rank whose share of the total holds the
+ * middle of tile k's weight.  Contiguous runs of tile order, balanced by
+ * weight; a pure function of the weights. */
+int mr_owner_of(const uint64_t *pre, uint64_t n, uint64_t k, int size)
+{
+    uint64_t total = pre[n];
+    long double mid = (long double)pre[k] + (long double)(pre[k + 1] - pre[k]) / 2;
+    int r;
+    if (total == 0)
+        return 0;
+    r = (int)(mid * size / (long double)total);
+    return r < 0 ? 0 : r >= size ? size - 1 : r;
+}
+

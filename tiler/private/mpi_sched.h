@@ -1,0 +1,80 @@
+/* mpi_sched.h — the MPI scheduler's shared state and messages (mpi_run.c:
+ * the ranks' stages; mpi_pass2.c: the shared pass 2; mpi_msg.c: message
+ * helpers).  Internal to those files. */
+#ifndef GDT_MPI_SCHED_H
+#define GDT_MPI_SCHED_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "private/comm.h"
+#include "private/stages.h"
+
+enum {
+    TAG_GO = 1,       /* 0 -> r */
+    TAG_RECORD = 2,   /* r -> 0 */
+    TAG_DONE = 3,     /* r -> 0 */
+    TAG_FINISHED = 4, /* r -> 0 */
+    TAG_STOP = 5,     /* 0 -> r */
+    TAG_FINAL = 6,    /* 0 -> r */
+    TAG_PLAN = 7,     /* 0 -> r: a shared pass 2 begins */
+    TAG_RECS = 8,     /* 0 -> r: a tile to merge (then TAG_RECDATA chunks) */
+    TAG_RECDATA = 9,  /* 0 -> r */
+    TAG_FILES = 10    /* r -> 0: a merged tile's files */
+};
+
+/* Records per TAG_RECDATA message (32 MiB of gdt_point). */
+#define RECS_PER_MSG ((size_t)(32u << 20) / sizeof(gdt_point))
+
+typedef struct mr_ctx {
+    tr_run *c;
+    gdt_comm *comm;
+    int rank, size;
+    /* rank 0 */
+    uint8_t *done;          /* per tile: its file is there */
+    uint64_t ntiles, prefix; /* done[0, prefix) are all set */
+    uint64_t done_points;   /* vertices of the done tiles (progress) */
+    int *finished;          /* per rank: FINISHED received */
+    int nfinished;
+    gdt_status job_st;      /* the first failure of any rank */
+    gdt_error job_err;
+    tr_summary remote;      /* the other ranks' counts, summed */
+    uint64_t remote_seam;   /* and their seam vertices */
+    int stop_sent;
+    /* the shared pass 2: its owners weigh the tiles' pass-1 counts */
+    uint64_t *raw_pre;      /* ntiles + 1 prefix sums of the pass-1 counts */
+    uint64_t raw_n;
+    uint64_t shipped, files_got;
+    tr_pass2_share p2;
+    /* another rank */
+    int stopped;            /* STOP received */
+} mr_ctx;
+
+/* Sends the packed message p to dest and frees it. */
+gdt_status mr_send_pack(mr_ctx *m, int dest, int tag, gdt_pack *p, gdt_error *err);
+
+/* Receives the message a probe announced (from, tag, len); *buf is malloc'd. */
+gdt_status mr_recv(mr_ctx *m, int from, int tag, size_t len, unsigned char **buf,
+                   gdt_error *err);
+
+/* GDT_EINTERNAL 7952: a message that does not parse. */
+gdt_status mr_bad_message(int from, int tag, gdt_error *err);
+
+/* The rank of tile k (contiguous shares of tile order balanced by the
+ * weights whose prefix sums are pre[0, n]). */
+int mr_owner_of(const uint64_t *pre, uint64_t n, uint64_t k, int size);
+
+/* Rank 0: a rank's failure becomes the job's (the first one stands). */
+void mr_fail(mr_ctx *m, int from, gdt_status st, int code, const char *msg);
+
+/* Rank 0: the hooks of the shared pass 2 into m->p2 (mpi_pass2.c). */
+void mr_pass2_hooks(mr_ctx *m);
+
+/* Another rank: waits for GO, meanwhile merging the tiles a shared pass 2
+ * ships it (st, err: this rank's state so far; a failure is reported for
+ * each of them); *go (malloc'd) and *len receive GO.  Ends the job
+ * (gdt_comm_abort) when the messages themselves fail. */
+void mr_wait_go(mr_ctx *m, gdt_status st, const gdt_error *err, unsigned char **go,
+                size_t *len);
+
+#endif
