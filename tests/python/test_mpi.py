@@ -180,7 +180,7 @@ def test_killed_rank_then_rerun_with_another_count(mpi_bin, root, tmp_path, kill
     """SIGKILL of one rank (another rank, or rank 0) mid-run: mpirun stops the
     job; a rerun with another number of ranks (or a plain process) reuses the
     recorded tiles and writes the bytes of an uninterrupted run."""
-    c = gen(root, tmp_path / "c.las", 400000, 5)
+    c = gen(root, tmp_path / "c.las", 1000000, 5)  # a tile stage of seconds
     ref = tmp_path / "ref.ply"
     r = run([mpi_bin, c, "-o", ref, "--tile", "64", "-q"])
     assert r.returncode == 0, r.stderr
@@ -192,8 +192,11 @@ def test_killed_rank_then_rerun_with_another_count(mpi_bin, root, tmp_path, kill
                          stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.time() + 120
-        while tiles_recorded(job) < 40 and time.time() < deadline and p.poll() is None:
-            time.sleep(0.05)
+        # rank 0 records the others' tiles in batches: kill once some are
+        # recorded and at most a third of the tile files exist
+        while (tiles_recorded(job) < 20 or len(list((job / "tiles").glob("*.tri"))) < 40) and \
+                time.time() < deadline and p.poll() is None:
+            time.sleep(0.02)
         assert p.poll() is None, "the run ended before it could be killed"
         pids = {rank: pid for pid, rank in rank_pids(str(out)).items()}
         assert killed in pids, pids
@@ -205,13 +208,14 @@ def test_killed_rank_then_rerun_with_another_count(mpi_bin, root, tmp_path, kill
             p.wait()
     assert p.returncode != 0, err
     assert not out.exists()
-    assert tiles_recorded(job) >= 40
+    recorded = tiles_recorded(job)
+    assert recorded >= 20
     rerun = ([*args, "--json", tmp_path / "j.json"])
     r = run([mpi_bin, *rerun]) if k_then == 1 else mpirun(k_then, mpi_bin, rerun)
     assert r.returncode == 0, r.stdout + r.stderr
     assert out.read_bytes() == ref.read_bytes()
     j = json.loads((tmp_path / "j.json").read_text())
-    assert j["reused"]["tiles"] >= 40, j["reused"]
+    assert j["reused"]["tiles"] >= recorded, (j["reused"], recorded)
 
 
 def test_resume_under_mpirun(mpi_bin, root, tmp_path):
