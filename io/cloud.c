@@ -16,6 +16,10 @@
  *    next_ord counts the points kept by the filter, so ordinals have no gaps.
  *    in[i].counts (and census) describe the records of input i read in this
  *    pass: after a whole pass they are the same in every pass.
+ *  - ranged (gdt_cloud_set_range): only the records [r_first, r_end) of the
+ *    record sequence are read, ordinals from r_ord; input cur is read from
+ *    its record cur_read to cur_end (its point count when the share ends
+ *    at or after its end); a share neither replays nor records a replay.
  */
 #include "gdt_cloud.h"
 #include "gdt_filter.h"
@@ -70,6 +74,12 @@ struct gdt_cloud {
     struct timespec *mtime; /* per input: modification time when pass 0 read it */
     int replaying, recording;
     int replay_noted;
+    /* gdt_cloud_set_range: the share [r_first, r_end) of the record
+     * sequence, ordinals from r_ord; cur_end: input cur is read up to its
+     * record cur_end (its point count outside a share) */
+    int ranged;
+    uint64_t r_first, r_end, r_ord;
+    uint64_t cur_end;
 };
 
 /* ---- pure lattice and CRS decisions ---------------------------------- */
@@ -632,7 +642,7 @@ static gdt_status open_current(gdt_cloud *c, gdt_error *err)
     gdt_source_opts so;
     gdt_status st;
 
-    if (c->pass > 0 && gdt_replay_has(c->replay, c->cur))
+    if (c->pass > 0 && !c->ranged && gdt_replay_has(c->replay, c->cur))
         return replay_current(c, err);
 
     memset(&so, 0, sizeof so);
@@ -654,7 +664,7 @@ static gdt_status open_current(gdt_cloud *c, gdt_error *err)
                              "%s: the file changed since it was opened (header or size differ)",
                              ci->path);
     c->cur_read = 0;
-    if (c->pass == 0 && c->replay != NULL && ci->info.compressed) {
+    if (c->pass == 0 && c->replay != NULL && !c->ranged && ci->info.compressed) {
         struct stat sb;
         if (stat(ci->path, &sb) == 0) {
             c->mtime[c->cur] = sb.st_mtim;
@@ -807,6 +817,97 @@ static void report_filter(gdt_cloud *c, size_t i)
     }
 }
 
+/* The first record of input i in the record sequence. */
+static uint64_t input_base(const gdt_cloud *c, size_t i)
+{
+    uint64_t b = 0;
+    for (size_t k = 0; k < i; k++)
+        b += c->in[k].info.point_count;
+    return b;
+}
+
+/* 1 when input i can start at any record. */
+static int input_seekable(const cloud_input *ci)
+{
+    return ci->info.format == GDT_FORMAT_LAS && !ci->info.compressed;
+}
+
+/* The records [*lo, *hi) of input i in the share; 0 when there are none. */
+static int share_of(const gdt_cloud *c, size_t i, uint64_t *lo, uint64_t *hi)
+{
+    uint64_t b = input_base(c, i), e = b + c->in[i].info.point_count;
+    uint64_t a = b > c->r_first ? b : c->r_first, z = e < c->r_end ? e : c->r_end;
+    if (a >= z)
+        return 0;
+    *lo = a - b;
+    *hi = z - b;
+    return 1;
+}
+
+gdt_status gdt_cloud_set_range(gdt_cloud *cloud, uint64_t first, uint64_t end,
+                               uint64_t ord_base, gdt_error *err)
+{
+    if (cloud->src != NULL || cloud->replaying || cloud->cur != 0 || cloud->cur_read != 0 ||
+        cloud->next_ord != cloud->r_ord)
+        gdt_cloud_rewind(cloud, err);
+    if (first > end)
+        return gdt_error_set(err, GDT_EINTERNAL, 7403, "share [%" PRIu64 ", %" PRIu64 ") of "
+                             "the cloud is empty the wrong way round", first, end);
+    for (size_t i = 0; i < cloud->nin; i++) {
+        uint64_t b = input_base(cloud, i), e = b + cloud->in[i].info.point_count;
+        if (input_seekable(&cloud->in[i]))
+            continue;
+        if ((first > b && first < e) || (end > b && end < e))
+            return gdt_error_set(err, GDT_EINTERNAL, 7403,
+                                 "%s: a share of the cloud cannot start or end inside it "
+                                 "(it is read from its first record)",
+                                 cloud->in[i].path);
+    }
+    cloud->ranged = !(first == 0 && end == UINT64_MAX);
+    cloud->r_first = first;
+    cloud->r_end = end;
+    cloud->r_ord = ord_base;
+    cloud->next_ord = ord_base;
+    return GDT_OK;
+}
+
+int gdt_cloud_split(const gdt_cloud *cloud, int n, uint64_t *bounds)
+{
+    uint64_t total = input_base(cloud, cloud->nin);
+    int ok = 1;
+    for (size_t i = 0; i < cloud->nin; i++)
+        ok &= !cloud->in[i].info.compressed;
+    bounds[0] = 0;
+    for (int j = 1; j < n; j++) {
+        /* floor(total * j / n) without overflow */
+        uint64_t t = total / (uint64_t)n * (uint64_t)j +
+                     total % (uint64_t)n * (uint64_t)j / (uint64_t)n;
+        uint64_t b = 0;
+        size_t i = 0;
+        while (i < cloud->nin && b + cloud->in[i].info.point_count <= t)
+            b += cloud->in[i++].info.point_count;
+        if (i < cloud->nin && t > b && !input_seekable(&cloud->in[i])) {
+            uint64_t e = b + cloud->in[i].info.point_count;
+            t = t - b < e - t ? b : e;
+        }
+        bounds[j] = t > bounds[j - 1] ? t : bounds[j - 1];
+    }
+    bounds[n] = total;
+    return ok;
+}
+
+void gdt_cloud_add_counts(gdt_cloud *cloud, size_t i, const gdt_filter_counts *k)
+{
+    if (i < cloud->nin)
+        gdt_filter_counts_add(&cloud->in[i].counts, k);
+}
+
+void gdt_cloud_report_counts(gdt_cloud *cloud)
+{
+    for (size_t i = 0; i < cloud->nin; i++)
+        report_filter(cloud, i);
+}
+
 gdt_status gdt_cloud_read(gdt_cloud *cloud, gdt_point *buf, size_t cap, size_t *n,
                           gdt_error *err)
 {
@@ -823,9 +924,32 @@ gdt_status gdt_cloud_read(gdt_cloud *cloud, gdt_point *buf, size_t cap, size_t *
         const cloud_input *ci = &cloud->in[cloud->cur];
         size_t want = cap < cloud->scap ? cap : cloud->scap;
         if (cloud->src == NULL && !cloud->replaying) {
+            uint64_t lo = 0, hi = 0;
+            if (cloud->ranged && !share_of(cloud, cloud->cur, &lo, &hi)) {
+                cloud->cur++;
+                continue;
+            }
             st = open_current(cloud, &cloud->failed);
+            cloud->cur_end = ci->info.point_count;
+            if (st == GDT_OK && cloud->ranged) {
+                /* a share never replays: src is open */
+                if (lo > 0)
+                    st = gdt_source_seek(cloud->src, lo, &cloud->failed);
+                cloud->cur_read = lo;
+                cloud->cur_end = hi;
+            }
             if (st != GDT_OK)
                 goto fail;
+        }
+        if (cloud->cur_end < ci->info.point_count) {
+            /* a share that ends inside this input */
+            if (cloud->cur_read == cloud->cur_end) {
+                end_current(cloud, 0);
+                cloud->cur++;
+                continue;
+            }
+            if (want > cloud->cur_end - cloud->cur_read)
+                want = (size_t)(cloud->cur_end - cloud->cur_read);
         }
         if (cloud->replaying)
             st = gdt_replay_read(cloud->replay, cloud->sbuf, want, &got, &cloud->failed);
@@ -843,7 +967,7 @@ gdt_status gdt_cloud_read(gdt_cloud *cloud, gdt_point *buf, size_t cap, size_t *
                 goto fail;
             }
             end_current(cloud, 1);
-            if (cloud->pass == 0)
+            if (cloud->pass == 0 && !cloud->ranged)
                 report_filter(cloud, cloud->cur);
             cloud->cur++;
             continue;
@@ -878,7 +1002,8 @@ gdt_status gdt_cloud_rewind(gdt_cloud *cloud, gdt_error *err)
     end_current(cloud, 0);
     cloud->cur = 0;
     cloud->cur_read = 0;
-    cloud->next_ord = 0;
+    cloud->cur_end = 0;
+    cloud->next_ord = cloud->r_ord;
     cloud->pass++;
     for (size_t i = 0; i < cloud->nin; i++) {
         memset(&cloud->in[i].counts, 0, sizeof cloud->in[i].counts);

@@ -189,6 +189,36 @@ const gdt_las_census *gdt_cloud_input_census(const gdt_cloud *cloud, size_t i);
 /* The cloud's filter (the default one when opts.filter was NULL). */
 const gdt_point_filter *gdt_cloud_filter(const gdt_cloud *cloud);
 
+/* A share of the cloud, for a pass shared between processes: the records
+ * [first, end) of the inputs taken as one sequence in input order (record r
+ * of input i is number b_i + r, b_i the sum of the header point counts of
+ * the inputs before it), with ordinals from ord_base (the kept points before
+ * the share).  Set after gdt_cloud_open or gdt_cloud_rewind, or else the
+ * cloud starts again (gdt_cloud_rewind); it holds over rewinds until set
+ * again (0, UINT64_MAX, 0: the whole cloud).  Boundaries inside an input are allowed only where it can
+ * start at a record (gdt_cloud_split puts them only there).  A share keeps
+ * no replay and gives no per-input notes: the caller sums the shares'
+ * counts (gdt_cloud_add_counts) and reports them (gdt_cloud_report_counts).
+ * Empty inputs belong to no share.  returns: GDT_EINTERNAL 7403 (first >
+ * end, or a boundary inside an input that cannot seek). */
+gdt_status gdt_cloud_set_range(gdt_cloud *cloud, uint64_t first, uint64_t end,
+                               uint64_t ord_base, gdt_error *err);
+
+/* Cuts the cloud's records into n >= 1 shares balanced by count:
+ * bounds[0 .. n], bounds[0] = 0, bounds[n] = every record, nondecreasing;
+ * a boundary inside an input only where it can seek (uncompressed LAS),
+ * elsewhere at the nearer end of the input.  Depends on the headers and n
+ * only.  returns 1, or 0 when the cloud is better read by one process (a
+ * compressed input: its first pass decodes it once for every later pass). */
+int gdt_cloud_split(const gdt_cloud *cloud, int n, uint64_t *bounds);
+
+/* Adds a share's counts of input i to this pass's (see gdt_cloud_set_range). */
+void gdt_cloud_add_counts(gdt_cloud *cloud, size_t i, const gdt_filter_counts *k);
+
+/* The notes a whole first pass gives (each input's counts, and warning 3431
+ * when the filter kept no point): after the shares' counts were added. */
+void gdt_cloud_report_counts(gdt_cloud *cloud);
+
 /* Starts again from the first point of the first input (second pass); the
  * stream that follows is identical to the first one.  The counts and
  * census start again from zero. */

@@ -119,6 +119,16 @@ const char *gdt_source_path(const gdt_source *src);
 gdt_status gdt_source_read(gdt_source *src, gdt_src_point *buf, size_t cap, size_t *n,
                            gdt_error *err);
 
+/* 1 when gdt_source_seek can start src at any record: an uncompressed LAS
+ * file (fixed-size records).  LAZ (chunks) and PCD (text lines, or one
+ * compressed block) are read from their first record only. */
+int gdt_source_can_seek(const gdt_source *src);
+
+/* Makes record rec (0 <= rec <= point count) the next one read, before the
+ * first read only.  returns: GDT_EINTERNAL 7102 (the format cannot, or rec is
+ * out of range, or points were read already). */
+gdt_status gdt_source_seek(gdt_source *src, uint64_t rec, gdt_error *err);
+
 /* Closes the file and frees everything; src may be NULL. */
 void gdt_source_close(gdt_source *src);
 

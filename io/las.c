@@ -83,7 +83,7 @@ typedef struct las_impl {
     int fd;
     unsigned char *buf;
     size_t buf_cap, buf_pos, buf_len;
-    uint64_t file_pos, points_end;
+    uint64_t file_pos, points_start, points_end;
     uint64_t next_point, point_count;
     unsigned record_length;
     unsigned point_format;
@@ -604,7 +604,20 @@ static void las_close(gdt_source *src)
     src->impl = NULL;
 }
 
-static const gdt_source_vtable las_vtable = {las_read, las_close};
+/* Uncompressed records only (gdt_source_can_seek), before the first read. */
+static gdt_status las_seek(gdt_source *src, uint64_t rec, gdt_error *err)
+{
+    las_impl *im = src->impl;
+    if (im->laz != NULL || im->next_point != 0 || im->buf_len != 0)
+        return gdt_error_set(err, GDT_EINTERNAL, 7102,
+                             "%s: seeking to point record %" PRIu64 " after reading", src->path,
+                             rec);
+    im->next_point = rec;
+    im->file_pos = im->points_start + rec * im->record_length;
+    return GDT_OK;
+}
+
+static const gdt_source_vtable las_vtable = {las_read, las_close, las_seek};
 
 /* LAZ: the records come from a LAZ stream over [offset to points,
  * points_end).  The LASzip VLR is required: without it the point data
@@ -749,6 +762,7 @@ gdt_status gdt_las_open(gdt_source *src, gdt_error *err)
         im->buf_cap = cap;
     }
     im->file_pos = h.offset_to_points;
+    im->points_start = h.offset_to_points;
     im->points_end = points_end;
     im->point_count = h.point_count;
     im->record_length = h.record_length;

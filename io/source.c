@@ -4,6 +4,7 @@
 
 #include <errno.h>
 #include <fcntl.h>
+#include <inttypes.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
@@ -160,6 +161,20 @@ gdt_status gdt_source_read(gdt_source *src, gdt_src_point *buf, size_t cap, size
     if (cap == 0)
         return GDT_OK;
     return src->vt->read(src, buf, cap, n, err);
+}
+
+int gdt_source_can_seek(const gdt_source *src)
+{
+    return src->vt->seek != NULL && !src->info.compressed && src->info.format == GDT_FORMAT_LAS;
+}
+
+gdt_status gdt_source_seek(gdt_source *src, uint64_t rec, gdt_error *err)
+{
+    if (!gdt_source_can_seek(src) || rec > src->info.point_count)
+        return gdt_error_set(err, GDT_EINTERNAL, 7102,
+                             "%s: cannot start reading at point record %" PRIu64, src->path,
+                             rec);
+    return src->vt->seek(src, rec, err);
 }
 
 void gdt_source_close(gdt_source *src)

@@ -113,13 +113,62 @@ gdt_status tl_density_add(tl_density *d, const gdt_point *pts, size_t n, gdt_err
             return st;
         *c += run;
         k += run;
-        if (d->map.n > d->max_voxels) {
+        while (d->map.n > d->max_voxels) {
             st = coarsen(d, err);
             if (st != GDT_OK)
                 return st;
         }
     }
     return GDT_OK;
+}
+
+gdt_status tl_density_export(const tl_density *d, uint64_t **out, size_t *n, gdt_error *err)
+{
+    vrec *v;
+    uint64_t *w;
+    gdt_status st = extract(d, &v, n, err);
+    *out = NULL;
+    if (st != GDT_OK)
+        return st;
+    w = malloc((*n > 0 ? *n : 1) * 3 * sizeof *w);
+    if (w == NULL) {
+        free(v);
+        *n = 0;
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory (density grid)");
+    }
+    for (size_t k = 0; k < *n; k++) {
+        w[3 * k] = (uint64_t)v[k].x;
+        w[3 * k + 1] = (uint64_t)v[k].y;
+        w[3 * k + 2] = v[k].n;
+    }
+    free(v);
+    *out = w;
+    return GDT_OK;
+}
+
+/* The union's shift is at least either part's (a rule true for a part is
+ * true for the union); from there on, rule (1) coarsens as tl_density_add
+ * does, and rule (2) holds for both parts already (coarsening only shrinks
+ * indices); rule (3) is tl_density_finish's. */
+gdt_status tl_density_merge(tl_density *d, int s, const uint64_t *v, size_t n, gdt_error *err)
+{
+    gdt_status st = GDT_OK;
+    if (s < 0 || s >= 62)
+        return gdt_error_set(err, GDT_EINTERNAL, 7501, "density grid at shift %d", s);
+    while (d->shift < s && st == GDT_OK)
+        st = coarsen(d, err);
+    for (size_t k = 0; k < n && st == GDT_OK; k++) {
+        int64_t vx = floor_shift((int64_t)v[3 * k], d->shift - s);
+        int64_t vy = floor_shift((int64_t)v[3 * k + 1], d->shift - s);
+        uint64_t *c;
+        st = tl_map_upsert(&d->map, vx, vy, &c, err);
+        if (st != GDT_OK)
+            break;
+        *c += v[3 * k + 2];
+        while (st == GDT_OK && d->map.n > d->max_voxels)
+            st = coarsen(d, err);
+    }
+    return st;
 }
 
 /* Distinct (floor(x / 2^s), floor(y / 2^s)) among v[0..n) (sorts v). */

@@ -223,6 +223,23 @@ gdt_status gdt_tiler_create(gdt_tiler **out, const gdt_tiler_opts *opts, gdt_clo
  *   GDT_EINTERNAL. */
 gdt_status gdt_tiler_pass1(gdt_tiler *t, gdt_error *err);
 
+/* Pass 1 shared between processes.  Every process creates a tiler over its
+ * own cloud, sets the cloud to its share (gdt_cloud_set_range) and reads it
+ * with gdt_tiler_pass1_part; the others export what they read
+ * (gdt_tiler_pass1_part_export), the planning one adds each share
+ * (gdt_tiler_pass1_part_merge, any order) and ends pass 1 with
+ * gdt_tiler_pass1_end.  Plan, index and the cloud's filter counts are then
+ * those gdt_tiler_pass1 gives over the whole cloud (gdt_tiler_pass1 is part
+ * then end).  The planner reports the counts (gdt_cloud_report_counts).
+ * returns: as gdt_tiler_pass1; GDT_EUSAGE 2505 (out of order); part_merge
+ * GDT_EINTERNAL 7506 (bytes of another build, or damaged). */
+gdt_status gdt_tiler_pass1_part(gdt_tiler *t, gdt_error *err);
+gdt_status gdt_tiler_pass1_part_export(const gdt_tiler *t, unsigned char **buf, size_t *len,
+                                       gdt_error *err);
+gdt_status gdt_tiler_pass1_part_merge(gdt_tiler *t, const unsigned char *buf, size_t len,
+                                      gdt_error *err);
+gdt_status gdt_tiler_pass1_end(gdt_tiler *t, gdt_error *err);
+
 /* Valid after pass 1 until gdt_tiler_destroy; NULL before. */
 const gdt_tile_plan *gdt_tiler_get_plan(const gdt_tiler *t);
 

@@ -341,6 +341,8 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
     uint64_t *mine = NULL, nmine = 0, vmine = 0;
     double t_tiles0 = 0, t_own = 0;
 
+    mr_pass1_hooks(m);
+    c->p1share = &m->p1;
     mr_pass2_hooks(m);
     c->p2share = &m->p2;
     if (st == GDT_OK) {

@@ -171,6 +171,63 @@ static void tiler_opts(tr_run *c, gdt_tiler_opts *to)
     to->progress_ctx = c;
 }
 
+/* Pass 1 through c->p1share: this process's share, then the others'. */
+static gdt_status pass1_shared(tr_run *c, gdt_error *err)
+{
+    const tr_pass1_share *ps = c->p1share;
+    uint64_t first = 0, end = 0;
+    int shared = 0;
+    gdt_status st = ps->begin(ps->ctx, &shared, &first, &end, err);
+    if (st != GDT_OK)
+        return st;
+    if (!shared)
+        return gdt_tiler_pass1(c->tiler, err);
+    st = gdt_cloud_set_range(c->cloud, first, end, 0, err);
+    if (st == GDT_OK)
+        st = gdt_tiler_pass1_part(c->tiler, err);
+    st = ps->collect(ps->ctx, st, err);
+    if (st == GDT_OK)
+        st = gdt_tiler_pass1_end(c->tiler, err);
+    if (st == GDT_OK) {
+        /* the progress line counts every share's points */
+        gdt_progress_update(&c->prog, gdt_tiler_get_plan(c->tiler)->points);
+        gdt_cloud_report_counts(c->cloud);
+        /* pass 2 reads the whole cloud */
+        st = gdt_cloud_set_range(c->cloud, 0, UINT64_MAX, 0, err);
+    }
+    return st;
+}
+
+gdt_status tr_run_pass1_share(tr_run *c, uint64_t first, uint64_t end, unsigned char **buf,
+                              size_t *len, gdt_error *err)
+{
+    gdt_cloud_opts co;
+    gdt_tiler_opts to;
+    gdt_cloud *cloud = NULL;
+    gdt_tiler *t = NULL;
+    gdt_status st;
+
+    *buf = NULL;
+    *len = 0;
+    cloud_opts(c, &co, 0);
+    st = gdt_cloud_open(&cloud, c->opts->inputs, c->opts->ninputs, &co, err);
+    if (st == GDT_OK) {
+        tiler_opts(c, &to);
+        to.job_dir = NULL; /* the planning rank saves the index */
+        to.progress = NULL;
+        st = gdt_tiler_create(&t, &to, cloud, err);
+    }
+    if (st == GDT_OK)
+        st = gdt_cloud_set_range(cloud, first, end, 0, err);
+    if (st == GDT_OK)
+        st = gdt_tiler_pass1_part(t, err);
+    if (st == GDT_OK)
+        st = gdt_tiler_pass1_part_export(t, buf, len, err);
+    gdt_tiler_destroy(t);
+    gdt_cloud_close(cloud);
+    return st;
+}
+
 gdt_status tr_run_pass1(tr_run *c, gdt_error *err)
 {
     const gdt_options *opts = c->opts;
@@ -184,7 +241,9 @@ gdt_status tr_run_pass1(tr_run *c, gdt_error *err)
         return st;
     tiler_opts(c, &to);
     st = gdt_tiler_create(&c->tiler, &to, c->cloud, err);
-    if (st == GDT_OK)
+    if (st == GDT_OK && c->p1share != NULL)
+        st = pass1_shared(c, err);
+    else if (st == GDT_OK)
         st = gdt_tiler_pass1(c->tiler, err);
     if (st == GDT_EINTERRUPTED)
         st = tr_interrupted(c->job, "pass 1", err);

@@ -236,10 +236,15 @@ void gdt_tiler_destroy(gdt_tiler *t)
 }
 
 /* Counts pts into the tile map (given --cell only). */
-static gdt_status count_tiles(gdt_tiler *t, const gdt_point *pts, size_t n, gdt_error *err)
+size_t tl_max_counted_tiles(const gdt_tiler *t)
+{
+    return t->sz.tiles_bytes / (sizeof(tl_tile) + 2 * sizeof(tl_map_entry));
+}
+
+gdt_status tl_count_tiles(gdt_tiler *t, const gdt_point *pts, size_t n, gdt_error *err)
 {
     const int64_t T = (int64_t)t->opts.tile * t->user_cell;
-    const size_t max_tiles = t->sz.tiles_bytes / (sizeof(tl_tile) + 2 * sizeof(tl_map_entry));
+    const size_t max_tiles = tl_max_counted_tiles(t);
     int64_t ci = 0, cj = 0;
     uint64_t run = 0;
 
@@ -339,29 +344,23 @@ fail:
     return st;
 }
 
-gdt_status gdt_tiler_pass1(gdt_tiler *t, gdt_error *err)
+/* Pass 1's reading: the bounds, counts and histograms of the points the
+ * cloud gives (all of them, or the share it was set to). */
+static gdt_status pass1_read(gdt_tiler *t, gdt_error *err)
 {
     gdt_tile_plan *p = &t->plan;
     gdt_point *buf = NULL;
-    double t0 = gdt_now();
     gdt_status st;
 
-    if (t->state != 0)
-        return gdt_error_set(err, GDT_EUSAGE, 2505, "tiler pass 1 called twice");
-    t->state = -1;
     buf = malloc(t->sz.read_cap * sizeof *buf);
-    if (buf == NULL) {
-        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-        goto fail;
-    }
+    if (buf == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     p->min_x = p->min_y = INT64_MAX;
     p->max_x = p->max_y = INT64_MIN;
     for (;;) {
         size_t n = 0;
         st = gdt_cloud_read(t->cloud, buf, t->sz.read_cap, &n, err);
-        if (st != GDT_OK)
-            goto fail;
-        if (n == 0)
+        if (st != GDT_OK || n == 0)
             break;
         if (p->points == 0)
             p->min_z = p->max_z = buf[0].z;
@@ -376,16 +375,41 @@ gdt_status gdt_tiler_pass1(gdt_tiler *t, gdt_error *err)
         }
         p->points += n;
         if (t->user_cell > 0) {
-            st = count_tiles(t, buf, n, err);
+            st = tl_count_tiles(t, buf, n, err);
             if (st != GDT_OK)
-                goto fail;
+                break;
         }
         st = tl_density_add(&t->density, buf, n, err);
         if (st == GDT_OK)
             st = tl_progress(t, 1, p->points, gdt_cloud_get_info(t->cloud)->point_count, err);
         if (st != GDT_OK)
-            goto fail;
+            break;
     }
+    free(buf);
+    return st;
+}
+
+gdt_status gdt_tiler_pass1_part(gdt_tiler *t, gdt_error *err)
+{
+    gdt_status st;
+    if (t->state != 0)
+        return gdt_error_set(err, GDT_EUSAGE, 2505, "tiler pass 1 called twice");
+    t->state = -1;
+    t->pass1_t0 = gdt_now();
+    st = pass1_read(t, err);
+    if (st == GDT_OK)
+        t->state = 4;
+    return st;
+}
+
+gdt_status gdt_tiler_pass1_end(gdt_tiler *t, gdt_error *err)
+{
+    gdt_tile_plan *p = &t->plan;
+    gdt_status st;
+
+    if (t->state != 4)
+        return gdt_error_set(err, GDT_EUSAGE, 2505, "tiler pass 1 ended before it was read");
+    t->state = -1;
     if (p->points == 0)
         p->min_x = p->min_y = p->max_x = p->max_y = 0;
     {
@@ -393,32 +417,38 @@ gdt_status gdt_tiler_pass1(gdt_tiler *t, gdt_error *err)
         gdt_vdb_node_bytes(nb);
         st = tl_density_finish(&t->density, GDT_TILER_DENSITY_TREE_BYTES, nb, err);
         if (st != GDT_OK)
-            goto fail;
+            return st;
     }
     st = tl_plan_finish(t, err);
     if (st != GDT_OK)
-        goto fail;
+        return st;
     if (t->job_dir != NULL) {
         st = save_index(t, err);
         if (st != GDT_OK)
-            goto fail;
+            return st;
     }
     tl_density_free(&t->density); /* pass 2 needs only the tile table */
     t->stats.points = p->points;
-    t->stats.t_pass1 = gdt_now() - t0;
+    t->stats.t_pass1 = gdt_now() - t->pass1_t0;
     gdt_log_note(t->log,
                  "tiler pass 1: %" PRIu64 " points in %.2f s, %" PRIu64 " tiles of %d texels "
                  "of %" PRId64 " steps, halo %" PRId64,
                  p->points, t->stats.t_pass1, p->tiles, p->tile, p->cell, p->halo);
     t->state = 1;
-fail:
-    free(buf);
+    return GDT_OK;
+}
+
+gdt_status gdt_tiler_pass1(gdt_tiler *t, gdt_error *err)
+{
+    gdt_status st = gdt_tiler_pass1_part(t, err);
+    if (st == GDT_OK)
+        st = gdt_tiler_pass1_end(t, err);
     return st;
 }
 
 const gdt_tile_plan *gdt_tiler_get_plan(const gdt_tiler *t)
 {
-    return t->state >= 1 ? &t->plan : NULL;
+    return t->state >= 1 && t->state <= 3 ? &t->plan : NULL;
 }
 
 int gdt_tiler_pass2_done(const gdt_tiler *t)
@@ -428,7 +458,7 @@ int gdt_tiler_pass2_done(const gdt_tiler *t)
 
 uint64_t gdt_tiler_tile_count(const gdt_tiler *t)
 {
-    return t->state >= 1 ? t->ntiles : 0;
+    return t->state >= 1 && t->state <= 3 ? t->ntiles : 0;
 }
 
 const gdt_tiler_stats *gdt_tiler_get_stats(const gdt_tiler *t)
@@ -441,7 +471,7 @@ gdt_status gdt_tiler_tile_info(const gdt_tiler *t, uint64_t k, gdt_tile_desc *ou
 {
     const tl_tile *tl;
     int64_t h;
-    if (t->state < 1 || k >= t->ntiles)
+    if (t->state < 1 || t->state > 3 || k >= t->ntiles)
         return gdt_error_set(err, GDT_EUSAGE, 2505, "tile %" PRIu64 " does not exist", k);
     tl = &t->tiles[k];
     h = t->plan.halo * t->plan.cell;
@@ -465,7 +495,7 @@ int gdt_tiler_tile_path(const gdt_tiler *t, uint64_t k, const char *kind, char *
 {
     char *p;
     int rc = -1;
-    if (t->state < 1 || kind == NULL ||
+    if (t->state < 1 || t->state > 3 || kind == NULL ||
         (strcmp(kind, "raw") != 0 && strcmp(kind, "pts") != 0 && strcmp(kind, "edge") != 0))
         return -1;
     p = tl_tile_file(t, k, kind, 0);

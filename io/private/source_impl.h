@@ -10,6 +10,9 @@ typedef struct gdt_source_vtable {
                        gdt_error *err);
     /* Frees src->impl (not src itself). */
     void (*close)(gdt_source *src);
+    /* Same contract as gdt_source_seek, 0 <= rec <= point count checked;
+     * NULL where the format cannot start at a record. */
+    gdt_status (*seek)(gdt_source *src, uint64_t rec, gdt_error *err);
 } gdt_source_vtable;
 
 struct gdt_source {

@@ -278,6 +278,54 @@ static void test_mixed_lattices(void)
               "chunk %zu: stream differs after rewind", chunks[t]);
         free(s.p);
     }
+    /* shares: for every count, the shares one after the other are the
+     * stream (ordinals from the records before each share: no filter);
+     * no boundary inside c.pcd; a share inside LAS inputs starts at its
+     * record; a boundary inside the PCD input is refused */
+    for (int k = 1; k <= 7; k++) {
+        uint64_t bounds[8];
+        size_t at = 0;
+        int ok = 1;
+        CHECK(gdt_cloud_split(cl, k, bounds) == 1, "an uncompressed cloud is shared");
+        CHECK(bounds[0] == 0 && bounds[k] == ref.n, "%d shares: bounds", k);
+        for (int j = 0; j < k; j++) {
+            uint64_t pcd0 = NA + NB, pcd1 = NA + NB + NC;
+            CHECK(bounds[j] <= bounds[j + 1], "%d shares: bounds decrease", k);
+            CHECK(bounds[j + 1] <= pcd0 || bounds[j + 1] >= pcd1, "%d shares: inside c.pcd", k);
+            CHECK(gdt_cloud_rewind(cl, &err) == GDT_OK, "rewind");
+            CHECK(gdt_cloud_set_range(cl, bounds[j], bounds[j + 1], bounds[j], &err) == GDT_OK,
+                  "set share: %s", err.msg);
+            CHECK(read_stream(cl, 97, &s, &err) == GDT_OK, "share: %s", err.msg);
+            ok &= at + s.n <= ref.n && s.n == bounds[j + 1] - bounds[j] &&
+                  (s.n == 0 || memcmp(s.p, ref.p + at, s.n * sizeof *s.p) == 0);
+            at += s.n;
+            free(s.p);
+        }
+        CHECK(ok && at == ref.n, "%d shares are not the stream", k);
+    }
+    {
+        /* across a.las and b.las, and inside d.las to e.las */
+        static const uint64_t r[2][2] = {{5, NA + 301}, {NA + NB + NC + 17, NA + NB + NC + ND + 3}};
+        for (int q = 0; q < 2; q++) {
+            CHECK(gdt_cloud_rewind(cl, &err) == GDT_OK, "rewind");
+            CHECK(gdt_cloud_set_range(cl, r[q][0], r[q][1], r[q][0], &err) == GDT_OK, "%s",
+                  err.msg);
+            CHECK(read_stream(cl, 64, &s, &err) == GDT_OK, "share: %s", err.msg);
+            CHECK(s.n == r[q][1] - r[q][0] &&
+                      memcmp(s.p, ref.p + r[q][0], s.n * sizeof *s.p) == 0,
+                  "share [%" PRIu64 ", %" PRIu64 ") differs", r[q][0], r[q][1]);
+            free(s.p);
+        }
+        CHECK(gdt_cloud_rewind(cl, &err) == GDT_OK, "rewind");
+        CHECK(gdt_cloud_set_range(cl, NA + NB + 1, ref.n, 0, &err) == GDT_EINTERNAL &&
+                  strstr(err.msg, "c.pcd") != NULL,
+              "a share starting inside the PCD input: %s", err.msg);
+        CHECK(gdt_cloud_set_range(cl, 0, UINT64_MAX, 0, &err) == GDT_OK, "whole again");
+        CHECK(read_stream(cl, 4096, &s, &err) == GDT_OK && s.n == ref.n &&
+                  memcmp(s.p, ref.p, s.n * sizeof *s.p) == 0,
+              "the whole cloud after shares");
+        free(s.p);
+    }
     gdt_cloud_close(cl);
     gdt_log_init(&log, -1);
     if (open_cloud(&cl, paths, 5, 0.0, 64, &log, &err) == GDT_OK) {

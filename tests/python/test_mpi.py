@@ -130,6 +130,80 @@ def test_shared_pass2_out_of_core(mpi_bin, root, tmp_path):
     assert out.read_bytes() == ref.read_bytes()
 
 
+def vdb_without_uuid(path):
+    """index.vdb's bytes but its UUID (36 characters at byte 21, new for
+    every file written)."""
+    b = path.read_bytes()
+    return b[:21] + b[57:]
+
+
+@pytest.mark.parametrize("case", ["cell-keep-class", "las-and-pcd"])
+def test_shared_pass1_plans_what_one_process_plans(mpi_bin, root, clouds, tmp_path, case):
+    """Pass 1 read in shares by the ranks (records of a LAS file, whole PCD
+    inputs) gives the index, the plan and the filter's counts of one process
+    reading everything, and so the same bytes."""
+    if case == "cell-keep-class":
+        inputs = [clouds["a"], clouds["b"]]
+        opts = ["--tile", "64", "--cell", "3", "--keep-class", "2,3,4,5"]
+    else:
+        pcd = tmp_path / "p.pcd"
+        r = run([sys.executable, root / "scripts" / "gen_cloud.py", pcd, "--points", "9000",
+                 "--seed", "5", "-q", "--offset", "500340", "4100000"])
+        assert r.returncode == 0, r.stderr
+        inputs = [clouds["a"], pcd, clouds["b"]]
+        opts = ["--tile", "128", "--quantum", "0.01"]
+    got = {}
+    for k in (1, 2, 3):
+        d = tmp_path / f"k{k}"
+        d.mkdir()
+        args = [*inputs, "-o", d / "o.ply", "-v", "--keep-job", "--json", d / "run.json",
+                *opts]
+        r = run([mpi_bin, *args]) if k == 1 else mpirun(k, mpi_bin, args)
+        assert r.returncode == 0, (k, r.stdout + r.stderr)
+        notes = [ln for ln in r.stderr.splitlines() if " records, " in ln and " kept " in ln]
+        assert len(notes) == len(inputs), r.stderr
+        plan = [ln.split(" in ")[0] + ln.split(" s,", 1)[1] for ln in r.stderr.splitlines()
+                if "tiler pass 1:" in ln]
+        got[k] = (d, notes, plan, json.loads((d / "run.json").read_text()))
+    d1, notes1, plan1, j1 = got[1]
+    if case == "cell-keep-class":
+        assert j1["filter"]["points_kept"] < j1["filter"]["points_read"]
+    for k in (2, 3):
+        d, notes, plan, j = got[k]
+        assert (d / "o.ply").read_bytes() == (d1 / "o.ply").read_bytes(), k
+        assert notes == notes1, k
+        assert plan == plan1, k
+        for key in ("tiles", "tile", "cell", "halo", "filter", "points_read"):
+            assert j[key] == j1[key], (k, key)
+        assert (vdb_without_uuid(d / "o.ply.gdt-job" / "index.vdb") ==
+                vdb_without_uuid(d1 / "o.ply.gdt-job" / "index.vdb")), k
+
+
+def test_bad_point_in_another_ranks_share(mpi_bin, root, tmp_path):
+    """A point outside the lattice range in the last share of pass 1: rank 2
+    reads it, and the job fails with its message, once, and exit 3."""
+    laspy = pytest.importorskip("laspy")
+    import numpy as np
+    fine = gen(root, tmp_path / "fine.las", 20000, 3)
+    hdr = laspy.LasHeader(point_format=0, version="1.2")
+    hdr.scales = [1e6, 1e6, 0.01]
+    hdr.offsets = [0.0, 0.0, 0.0]
+    far = laspy.LasData(hdr)
+    n = 20000
+    xs = np.zeros(n, dtype=np.int32)
+    xs[-5] = 2_000_000_000  # 2e15 CRS units: far beyond 2^53 steps of fine.las's lattice
+    far.X = xs
+    far.Y = np.zeros(n, dtype=np.int32)
+    far.Z = np.arange(n, dtype=np.int32)
+    far.write(str(tmp_path / "far.las"))
+    out = tmp_path / "o.ply"
+    r = mpirun(3, mpi_bin, [fine, tmp_path / "far.las", "-o", out, "--tile", "64", "-q"])
+    assert r.returncode == 3, r.stdout + r.stderr
+    assert r.stderr.count("error GDT-34") == 1, r.stderr
+    assert "rank 2" in r.stderr and "far.las" in r.stderr, r.stderr
+    assert not out.exists()
+
+
 def test_bad_input_fails_the_whole_job(mpi_bin, clouds, tmp_path):
     bad = tmp_path / "bad.las"
     data = clouds["a"].read_bytes()

@@ -20,7 +20,9 @@ enum {
     TAG_PLAN = 7,     /* 0 -> r: a shared pass 2 begins */
     TAG_RECS = 8,     /* 0 -> r: a tile to merge (then TAG_RECDATA chunks) */
     TAG_RECDATA = 9,  /* 0 -> r */
-    TAG_FILES = 10    /* r -> 0: a merged tile's files */
+    TAG_FILES = 10,   /* r -> 0: a merged tile's files */
+    TAG_P1 = 11,      /* 0 -> r: the rank's share of pass 1 */
+    TAG_P1DONE = 12   /* r -> 0: what it read, or its failure */
 };
 
 /* Records per TAG_RECDATA message (32 MiB of gdt_point). */
@@ -46,6 +48,8 @@ typedef struct mr_ctx {
     uint64_t raw_n;
     uint64_t shipped, files_got;
     tr_pass2_share p2;
+    tr_pass1_share p1;      /* the shared pass 1 */
+    int p1_shared;          /* pass 1 was shared */
     /* another rank */
     int stopped;            /* STOP received */
 } mr_ctx;
@@ -66,6 +70,15 @@ int mr_owner_of(const uint64_t *pre, uint64_t n, uint64_t k, int size);
 
 /* Rank 0: a rank's failure becomes the job's (the first one stands). */
 void mr_fail(mr_ctx *m, int from, gdt_status st, int code, const char *msg);
+
+/* Rank 0: the hooks of the shared pass 1 into m->p1 (mpi_pass1.c). */
+void mr_pass1_hooks(mr_ctx *m);
+
+/* Another rank, given P1 (msg, len): reads its share and answers P1DONE;
+ * st, err: this rank's state so far (a failure is the answer).  Ends the
+ * job (gdt_comm_abort) when the answer cannot be sent. */
+void mr_pass1_answer(mr_ctx *m, const unsigned char *msg, size_t len, gdt_status st,
+                     const gdt_error *err);
 
 /* Rank 0: the hooks of the shared pass 2 into m->p2 (mpi_pass2.c). */
 void mr_pass2_hooks(mr_ctx *m);

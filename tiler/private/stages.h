@@ -105,6 +105,20 @@ typedef struct tr_slot {
 
 typedef struct tr_run tr_run;
 
+/* Pass 1 shared with other processes (the MPI scheduler): after the cloud
+ * and the tiler exist, begin() says whether pass 1 is shared and, when it
+ * is, gives this process's share [*first, *end) of the records (the others
+ * were told theirs); the share is read (gdt_tiler_pass1_part), then
+ * collect() adds the others' shares into the tiler (gdt_tiler_pass1_part_
+ * merge); it is called whatever the own share's status (own, own_err: the
+ * others' answers are always taken) and returns the first failure. */
+typedef struct tr_pass1_share {
+    gdt_status (*begin)(void *ctx, int *shared, uint64_t *first, uint64_t *end,
+                        gdt_error *err);
+    gdt_status (*collect)(void *ctx, gdt_status own, gdt_error *err);
+    void *ctx;
+} tr_pass1_share;
+
 /* Pass 2 shared with other processes (the MPI scheduler): when pass 2 is
  * to be run, begin() is called after pass 1 (the others get the tiler's
  * state), then gdt_tiler_pass2_shared with sh, then collect() (the shipped
@@ -230,7 +244,8 @@ struct tr_run {
     double t_flushed;
     gdt_progress prog;
     tr_summary s;
-    const tr_pass2_share *p2share; /* set by the caller after tr_run_init; NULL: alone */
+    const tr_pass1_share *p1share; /* set by the caller after tr_run_init; NULL: alone */
+    const tr_pass2_share *p2share; /* likewise */
 };
 
 /* 1 when a signal asked the run to stop. */
@@ -298,6 +313,14 @@ gdt_status tr_core_start_join(tr_core_start *cs, gdt_core **core, gdt_error *err
  * returns: GDT_OK; the cloud's, tiler's and core's errors; GDT_EINTERRUPTED
  * 1302. */
 gdt_status tr_run_pass1(tr_run *c, gdt_error *err);
+
+/* Another rank of an MPI job, told its share of pass 1: opens a cloud and
+ * a tiler of its own (no job directory), reads the records [first, end)
+ * (gdt_tiler_pass1_part) and returns what it read as bytes (*buf
+ * malloc'd, gdt_tiler_pass1_part_export); nothing of c changes.
+ * returns: the cloud's and tiler's errors. */
+gdt_status tr_run_pass1_share(tr_run *c, uint64_t first, uint64_t end, unsigned char **buf,
+                              size_t *len, gdt_error *err);
 
 /* After tr_run_pass1: when the journal records pass 2 done and every
  * recorded .pts/.edge file matches, adopts them (c->s.pass2_reused);

@@ -67,6 +67,13 @@ gdt_status tl_density_finish(tl_density *d, uint64_t node_budget, const size_t n
                              gdt_error *err);
 void tl_density_free(tl_density *d);
 
+/* density.c: the voxels of d as (x, y, count) triples (*v malloc'd, *n
+ * triples); and the sum of d and such triples of a histogram at shift s:
+ * the histogram of the union of the two point sets, at the shift that
+ * union would have reached (both rules are monotone). */
+gdt_status tl_density_export(const tl_density *d, uint64_t **v, size_t *n, gdt_error *err);
+gdt_status tl_density_merge(tl_density *d, int s, const uint64_t *v, size_t n, gdt_error *err);
+
 /* Sizes of every buffer, derived from the budget (or the test knobs). */
 typedef struct tl_sizes {
     size_t read_cap;        /* points per cloud read */
@@ -91,7 +98,9 @@ struct gdt_tiler {
     tl_sizes sz;
     int64_t user_cell;      /* > 0: given --cell in lattice steps */
     int state;              /* 0 new, 1 after pass 1, 2 after pass 2, 3 a shared pass 2
-                               waiting for shipped tiles, -1 failed */
+                               waiting for shipped tiles, 4 a share of pass 1 read (its
+                               bounds, counts and histograms: not yet a plan), -1 failed */
+    double pass1_t0;        /* when pass 1 began */
     double merge_t0;        /* when pass 2's --dup merge began */
     uint8_t *merge_mark;    /* ntiles marks (TL_MARK_*) while pass 2 merges; owned */
     gdt_tile_plan plan;
@@ -145,6 +154,11 @@ gdt_status tl_progress(gdt_tiler *t, int stage, uint64_t done, uint64_t total, g
 
 /* Tile index of lattice point (x, y) or UINT64_MAX if no such tile. */
 uint64_t tl_tile_of(const gdt_tiler *t, int64_t x, int64_t y);
+
+/* Pass 1 with a given --cell: the points counted into t->map by tile (at
+ * most tl_max_counted_tiles tiles, else GDT_EUSAGE 2503). */
+gdt_status tl_count_tiles(gdt_tiler *t, const gdt_point *pts, size_t n, gdt_error *err);
+size_t tl_max_counted_tiles(const gdt_tiler *t);
 
 /* Frees the resident records of pass 2 (if any). */
 void tl_free_resident(gdt_tiler *t);

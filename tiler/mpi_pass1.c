@@ -1,0 +1,146 @@
+/* mpi_pass1.c — pass 1 shared between the ranks of an MPI job.
+ *
+ * Rank 0, its cloud open: the records are cut into one share per rank
+ * (gdt_cloud_split: whole records of uncompressed LAS, whole inputs
+ * otherwise; a cloud with a compressed input is read by rank 0 alone, whose
+ * pass 1 decodes it once for pass 2 as well).  P1 tells rank r its share;
+ * each rank reads its own (rank 0 too) and answers P1DONE with its status
+ * and what it read (gdt_tiler_pass1_part_export); rank 0 takes every
+ * answer, whatever its own share gave, adds them in rank order and plans.
+ * The plan is that of one pass over the whole cloud (pass1_part.c), so the
+ * job does not depend on the number of ranks. */
+#include "private/mpi_sched.h"
+
+#include <inttypes.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Rank 0: the shares, and each other rank's to it. */
+static gdt_status p1_begin(void *ctx, int *shared, uint64_t *first, uint64_t *end,
+                           gdt_error *err)
+{
+    mr_ctx *m = ctx;
+    uint64_t *b;
+    gdt_status st = GDT_OK;
+
+    *shared = 0;
+    b = malloc(((size_t)m->size + 1) * sizeof *b);
+    if (b == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    if (!gdt_cloud_split(m->c->cloud, m->size, b)) {
+        free(b);
+        return GDT_OK;
+    }
+    for (int r = 1; r < m->size; r++) {
+        gdt_pack p;
+        memset(&p, 0, sizeof p);
+        gdt_pack_u64(&p, b[r]);
+        gdt_pack_u64(&p, b[r + 1]);
+        st = mr_send_pack(m, r, TAG_P1, &p, err);
+        if (st != GDT_OK) {
+            /* rank r would never answer, and ranks before it wait for
+             * GO: the job cannot go on */
+            gdt_error_print(err, stderr);
+            gdt_comm_abort(m->comm, (int)st);
+        }
+    }
+    *shared = 1;
+    *first = b[0];
+    *end = b[1];
+    m->p1_shared = 1;
+    free(b);
+    return GDT_OK;
+}
+
+/* Rank 0: every other rank's share into the tiler, in rank order. */
+static gdt_status p1_collect(void *ctx, gdt_status own, gdt_error *err)
+{
+    mr_ctx *m = ctx;
+    gdt_status st = own;
+    for (int r = 1; r < m->size; r++) {
+        int ready = 0, from = 0, tag = 0;
+        size_t len = 0, ml = 0, pl = 0;
+        unsigned char *buf = NULL;
+        const unsigned char *msg, *part;
+        gdt_status rst;
+        int code;
+        gdt_unpack u;
+        gdt_error e2;
+        gdt_status s2;
+        gdt_error_clear(&e2);
+        s2 = gdt_comm_wait(m->comm, r, TAG_P1DONE, NULL, &ready, &from, &tag, &len, &e2);
+        if (s2 == GDT_OK)
+            s2 = mr_recv(m, r, TAG_P1DONE, len, &buf, &e2);
+        if (s2 != GDT_OK) {
+            gdt_error_print(&e2, stderr);
+            gdt_comm_abort(m->comm, (int)s2);
+        }
+        memset(&u, 0, sizeof u);
+        u.p = buf;
+        u.n = len;
+        rst = (gdt_status)gdt_unpack_u64(&u);
+        code = (int)gdt_unpack_u64(&u);
+        msg = gdt_unpack_bytes(&u, &ml);
+        part = gdt_unpack_bytes(&u, &pl);
+        if (u.bad) {
+            if (st == GDT_OK)
+                st = mr_bad_message(r, TAG_P1DONE, err);
+        } else if (rst != GDT_OK) {
+            char text[GDT_ERROR_MSG_MAX];
+            snprintf(text, sizeof text, "%.*s", (int)(ml < sizeof text ? ml : sizeof text - 1),
+                     (const char *)msg);
+            mr_fail(m, r, rst, code, text);
+            if (st == GDT_OK) {
+                *err = m->job_err;
+                st = rst;
+            }
+        } else if (st == GDT_OK) {
+            st = gdt_tiler_pass1_part_merge(m->c->tiler, part, pl, err);
+        }
+        free(buf);
+    }
+    return st;
+}
+
+void mr_pass1_hooks(mr_ctx *m)
+{
+    m->p1.begin = p1_begin;
+    m->p1.collect = p1_collect;
+    m->p1.ctx = m;
+}
+
+void mr_pass1_answer(mr_ctx *m, const unsigned char *msg, size_t len, gdt_status st,
+                     const gdt_error *err)
+{
+    gdt_unpack u;
+    gdt_error e;
+    gdt_pack p;
+    unsigned char *part = NULL;
+    size_t pl = 0;
+    uint64_t first, end;
+
+    memset(&u, 0, sizeof u);
+    u.p = msg;
+    u.n = len;
+    first = gdt_unpack_u64(&u);
+    end = gdt_unpack_u64(&u);
+    gdt_error_clear(&e);
+    if (st != GDT_OK)
+        e = *err; /* this rank could not start: its failure is the answer */
+    else if (u.bad || first > end)
+        st = mr_bad_message(0, TAG_P1, &e);
+    else
+        st = tr_run_pass1_share(m->c, first, end, &part, &pl, &e);
+    memset(&p, 0, sizeof p);
+    gdt_pack_u64(&p, (uint64_t)st);
+    gdt_pack_u64(&p, st != GDT_OK ? (uint64_t)e.code : 0);
+    gdt_pack_bytes(&p, st != GDT_OK ? e.msg : "", st != GDT_OK ? strlen(e.msg) : 0);
+    gdt_pack_bytes(&p, part, st == GDT_OK ? pl : 0);
+    free(part);
+    gdt_error_clear(&e);
+    if (mr_send_pack(m, 0, TAG_P1DONE, &p, &e) != GDT_OK) {
+        gdt_error_print(&e, stderr);
+        gdt_comm_abort(m->comm, (int)e.status);
+    }
+}
