@@ -200,22 +200,30 @@ void mr_pass2_hooks(mr_ctx *m)
 }
 
 /* See private/mpi_sched.h. */
-void mr_wait_go(mr_ctx *m, gdt_status st, const gdt_error *err, unsigned char **go,
-                size_t *len)
+void mr_wait_go(mr_ctx *m, gdt_status *st, gdt_error *err, unsigned char **go, size_t *len)
 {
     tr_run *c = m->c;
     gdt_unpack u;
     {
         gdt_error e2, pe;
-        gdt_status s2 = GDT_OK, pst = st;
+        gdt_status s2 = GDT_OK, pst = *st;
         rn_tile *tl = NULL;
         size_t ntl = 0, want = 0;
+        int core_started = 0;
         gdt_error_clear(&e2);
         pe = *err;
         for (;;) {
             int ready = 0, from = 0, tag = 0;
             unsigned char *msg = NULL;
             s2 = gdt_comm_wait(m->comm, 0, -1, NULL, &ready, &from, &tag, len, &e2);
+            /* the OpenCL core is built once this rank's share of pass 1
+             * is read (P1 comes first when there is one): the build would
+             * take the core the share is read on */
+            if (s2 == GDT_OK && tag != TAG_P1 && !core_started) {
+                core_started = 1;
+                if (pst == GDT_OK)
+                    pst = tr_run_start_core(c, &pe);
+            }
             if (s2 == GDT_OK && tag == TAG_GO) {
                 s2 = mr_recv(m, 0, TAG_GO, *len, go, &e2);
                 break;
@@ -296,5 +304,7 @@ void mr_wait_go(mr_ctx *m, gdt_status st, const gdt_error *err, unsigned char **
             gdt_error_print(&e2, stderr);
             gdt_comm_abort(m->comm, (int)s2);
         }
+        *st = pst;
+        *err = pe;
     }
 }

@@ -532,11 +532,9 @@ static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
     gdt_unpack u;
     gdt_pack p;
 
-    if (st == GDT_OK)
-        st = tr_run_start_core(c, err);
     /* whatever happened here, GO comes (rank 0 sends it to every rank);
-     * before it, a shared pass 2 may ship this rank its tiles */
-    mr_wait_go(m, st, err, &go, &len);
+     * before it, this rank's share of pass 1 and of pass 2 */
+    mr_wait_go(m, &st, err, &go, &len);
     memset(&u, 0, sizeof u);
     u.p = go;
     u.n = len;

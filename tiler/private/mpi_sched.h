@@ -83,11 +83,12 @@ void mr_pass1_answer(mr_ctx *m, const unsigned char *msg, size_t len, gdt_status
 /* Rank 0: the hooks of the shared pass 2 into m->p2 (mpi_pass2.c). */
 void mr_pass2_hooks(mr_ctx *m);
 
-/* Another rank: waits for GO, meanwhile merging the tiles a shared pass 2
- * ships it (st, err: this rank's state so far; a failure is reported for
- * each of them); *go (malloc'd) and *len receive GO.  Ends the job
- * (gdt_comm_abort) when the messages themselves fail. */
-void mr_wait_go(mr_ctx *m, gdt_status st, const gdt_error *err, unsigned char **go,
-                size_t *len);
+/* Another rank: waits for GO, meanwhile reading its share of pass 1 (P1)
+ * and merging the tiles a shared pass 2 ships it; starts the OpenCL core
+ * (tr_run_start_core) at the first message that is not P1.  *st, *err:
+ * this rank's state, updated (a failure is reported for each request);
+ * *go (malloc'd) and *len receive GO.  Ends the job (gdt_comm_abort) when
+ * the messages themselves fail. */
+void mr_wait_go(mr_ctx *m, gdt_status *st, gdt_error *err, unsigned char **go, size_t *len);
 
 #endif
