@@ -210,6 +210,19 @@ gdt_status gdt_comm_recv(gdt_comm *c, int src, int tag, void *buf, size_t len, g
     return rc == MPI_SUCCESS ? GDT_OK : mpi_fail(err, rc, "MPI_Recv");
 }
 
+gdt_status gdt_comm_sendrecv(gdt_comm *c, int dest, const void *sbuf, size_t slen, int src,
+                             void *rbuf, size_t rlen, int tag, gdt_error *err)
+{
+    int rc;
+    (void)c;
+    if (slen > (size_t)INT_MAX || rlen > (size_t)INT_MAX)
+        return gdt_error_set(err, GDT_EINTERNAL, 7951, "MPI: a message of %zu bytes",
+                             slen > rlen ? slen : rlen);
+    rc = MPI_Sendrecv((void *)sbuf, (int)slen, MPI_BYTE, dest, tag, rbuf, (int)rlen, MPI_BYTE,
+                      src, tag, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+    return rc == MPI_SUCCESS ? GDT_OK : mpi_fail(err, rc, "MPI_Sendrecv");
+}
+
 void gdt_comm_abort(gdt_comm *c, int code)
 {
     (void)c;
@@ -252,6 +265,13 @@ gdt_status gdt_comm_probe(gdt_comm *c, int src, int tag, int *ready, int *from, 
 gdt_status gdt_comm_recv(gdt_comm *c, int src, int tag, void *buf, size_t len, gdt_error *err)
 {
     (void)c, (void)src, (void)tag, (void)buf, (void)len;
+    return gdt_error_set(err, GDT_EINTERNAL, 7951, "no MPI in this build");
+}
+
+gdt_status gdt_comm_sendrecv(gdt_comm *c, int dest, const void *sbuf, size_t slen, int src,
+                             void *rbuf, size_t rlen, int tag, gdt_error *err)
+{
+    (void)c, (void)dest, (void)sbuf, (void)slen, (void)src, (void)rbuf, (void)rlen, (void)tag;
     return gdt_error_set(err, GDT_EINTERNAL, 7951, "no MPI in this build");
 }
 

@@ -272,6 +272,22 @@ typedef struct gdt_tiler_share {
 
 gdt_status gdt_tiler_pass2_shared(gdt_tiler *t, const gdt_tiler_share *sh, gdt_error *err);
 
+/* After pass 1: the tile of lattice point (x, y), UINT64_MAX when no tile
+ * holds it. */
+uint64_t gdt_tiler_tile_of(const gdt_tiler *t, int64_t x, int64_t y);
+
+/* After pass 1: 1 when the records of pass 2 fit in half the memory
+ * budget (gdt_tiler_pass2 would hold them in memory). */
+int gdt_tiler_pass2_in_memory(const gdt_tiler *t);
+
+/* Pass 2 in shares between processes, each reading a share of the cloud
+ * and sending each tile's records to the tile's owner: on the tiler that
+ * records the job, after pass 1, prepares the tile directory (as
+ * gdt_tiler_pass2 does first); then gdt_tiler_merge_shipped for its own
+ * tiles (which records their files here), gdt_tiler_set_tile_files for
+ * the others', and gdt_tiler_pass2_finish.  returns: GDT_EUSAGE 2505, GDT_EIO 4501. */
+gdt_status gdt_tiler_pass2_open(gdt_tiler *t, gdt_error *err);
+
 /* What the --dup merge of one tile wrote. */
 typedef struct gdt_tiler_tile_files {
     uint64_t points, edge; /* records of its .pts and .edge files */

@@ -5,7 +5,8 @@
  * otherwise; a cloud with a compressed input is read by rank 0 alone, whose
  * pass 1 decodes it once for pass 2 as well).  P1 tells rank r its share;
  * each rank reads its own (rank 0 too) and answers P1DONE with its status
- * and what it read (gdt_tiler_pass1_part_export); rank 0 takes every
+ * and what it read (gdt_tiler_pass1_part_export) with its count of kept
+ * points (pass 2's ordinals start there); rank 0 takes every
  * answer, whatever its own share gave, adds them in rank order and plans.
  * The plan is that of one pass over the whole cloud (pass1_part.c), so the
  * job does not depend on the number of ranks. */
@@ -49,7 +50,8 @@ static gdt_status p1_begin(void *ctx, int *shared, uint64_t *first, uint64_t *en
     *first = b[0];
     *end = b[1];
     m->p1_shared = 1;
-    free(b);
+    free(m->p1_bounds);
+    m->p1_bounds = b; /* pass 2 reads the same shares */
     return GDT_OK;
 }
 
@@ -58,11 +60,20 @@ static gdt_status p1_collect(void *ctx, gdt_status own, gdt_error *err)
 {
     mr_ctx *m = ctx;
     gdt_status st = own;
+    /* each share's kept points: pass 2's ordinal bases (rank 0's own share
+     * is all the cloud counted so far) */
+    free(m->p1_kept);
+    m->p1_kept = calloc((size_t)m->size, sizeof *m->p1_kept);
+    if (m->p1_kept == NULL && st == GDT_OK)
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    if (m->p1_kept != NULL)
+        m->p1_kept[0] = gdt_cloud_total_counts(m->c->cloud).kept;
     for (int r = 1; r < m->size; r++) {
         int ready = 0, from = 0, tag = 0;
         size_t len = 0, ml = 0, pl = 0;
         unsigned char *buf = NULL;
         const unsigned char *msg, *part;
+        uint64_t kept;
         gdt_status rst;
         int code;
         gdt_unpack u;
@@ -82,7 +93,10 @@ static gdt_status p1_collect(void *ctx, gdt_status own, gdt_error *err)
         rst = (gdt_status)gdt_unpack_u64(&u);
         code = (int)gdt_unpack_u64(&u);
         msg = gdt_unpack_bytes(&u, &ml);
+        kept = gdt_unpack_u64(&u);
         part = gdt_unpack_bytes(&u, &pl);
+        if (m->p1_kept != NULL)
+            m->p1_kept[r] = kept;
         if (u.bad) {
             if (st == GDT_OK)
                 st = mr_bad_message(r, TAG_P1DONE, err);
@@ -99,6 +113,14 @@ static gdt_status p1_collect(void *ctx, gdt_status own, gdt_error *err)
             st = gdt_tiler_pass1_part_merge(m->c->tiler, part, pl, err);
         }
         free(buf);
+    }
+    /* the whole pass's filter counts, for a pass 2 in shares */
+    if (st == GDT_OK) {
+        size_t nin = gdt_cloud_get_info(m->c->cloud)->ninputs;
+        free(m->p1_counts);
+        m->p1_counts = calloc(nin + 1, sizeof *m->p1_counts);
+        for (size_t i = 0; m->p1_counts != NULL && i < nin; i++)
+            m->p1_counts[i] = *gdt_cloud_input_counts(m->c->cloud, i);
     }
     return st;
 }
@@ -118,7 +140,7 @@ void mr_pass1_answer(mr_ctx *m, const unsigned char *msg, size_t len, gdt_status
     gdt_pack p;
     unsigned char *part = NULL;
     size_t pl = 0;
-    uint64_t first, end;
+    uint64_t first, end, kept = 0;
 
     memset(&u, 0, sizeof u);
     u.p = msg;
@@ -131,11 +153,12 @@ void mr_pass1_answer(mr_ctx *m, const unsigned char *msg, size_t len, gdt_status
     else if (u.bad || first > end)
         st = mr_bad_message(0, TAG_P1, &e);
     else
-        st = tr_run_pass1_share(m->c, first, end, &part, &pl, &e);
+        st = tr_run_pass1_share(m->c, first, end, &part, &pl, &kept, &e);
     memset(&p, 0, sizeof p);
     gdt_pack_u64(&p, (uint64_t)st);
     gdt_pack_u64(&p, st != GDT_OK ? (uint64_t)e.code : 0);
     gdt_pack_bytes(&p, st != GDT_OK ? e.msg : "", st != GDT_OK ? strlen(e.msg) : 0);
+    gdt_pack_u64(&p, kept);
     gdt_pack_bytes(&p, part, st == GDT_OK ? pl : 0);
     free(part);
     gdt_error_clear(&e);

@@ -12,7 +12,7 @@
 #include "private/tiled_files.h"
 
 /* The pass-1 prefix sums of the tiler's tiles into m->raw_pre. */
-static gdt_status raw_prefix(mr_ctx *m, const gdt_tiler *t, gdt_error *err)
+gdt_status mr_raw_prefix(mr_ctx *m, const gdt_tiler *t, gdt_error *err)
 {
     uint64_t n = gdt_tiler_tile_count(t);
     free(m->raw_pre);
@@ -48,7 +48,7 @@ static gdt_status p2_begin(void *ctx, gdt_error *err)
     tr_run *c = m->c;
     unsigned char *state = NULL;
     size_t slen = 0;
-    gdt_status st = raw_prefix(m, c->tiler, err);
+    gdt_status st = mr_raw_prefix(m, c->tiler, err);
     if (st == GDT_OK)
         st = gdt_tiler_export(c->tiler, &state, &slen, err);
     for (int r = 1; st == GDT_OK && r < m->size; r++) {
@@ -63,6 +63,10 @@ static gdt_status p2_begin(void *ctx, gdt_error *err)
         /* the tiles it will be shipped: it takes them (and answers for
          * each) even when it cannot take the state */
         gdt_pack_u64(&p, n);
+        gdt_pack_u64(&p, 0); /* mode 0: rank 0 spills */
+        gdt_pack_u64(&p, 0);
+        gdt_pack_u64(&p, 0);
+        gdt_pack_u64(&p, 0);
         st = mr_send_pack(m, r, TAG_PLAN, &p, err);
     }
     free(state);
@@ -94,7 +98,11 @@ static gdt_status p2_ship(void *ctx, uint64_t k, const gdt_point *recs, uint64_t
 /* Rank 0: the files of every shipped tile into the tiler. */
 static gdt_status p2_collect(void *ctx, gdt_error *err)
 {
-    mr_ctx *m = ctx;
+    return mr_collect_files(ctx, err);
+}
+
+gdt_status mr_collect_files(mr_ctx *m, gdt_error *err)
+{
     gdt_status st = GDT_OK;
     while (st == GDT_OK && m->files_got < m->shipped) {
         int ready = 0, from = 0, tag = 0;
@@ -151,6 +159,35 @@ typedef struct rn_tile {
     gdt_point *recs; /* NULL: the tile's .raw file */
 } rn_tile;
 
+void mr_merge_report(mr_ctx *m, uint64_t k, gdt_point *recs, uint64_t n, gdt_status st,
+                     const gdt_error *err)
+{
+    gdt_tiler_tile_files f;
+    gdt_error e;
+    gdt_pack p;
+    memset(&f, 0, sizeof f);
+    gdt_error_clear(&e);
+    if (st == GDT_OK)
+        st = gdt_tiler_merge_shipped(m->c->tiler, k, recs, n, &f, &e);
+    else
+        e = *err;
+    memset(&p, 0, sizeof p);
+    gdt_pack_u64(&p, k);
+    gdt_pack_u64(&p, (uint64_t)st);
+    gdt_pack_u64(&p, st != GDT_OK ? (uint64_t)e.code : 0);
+    gdt_pack_bytes(&p, st != GDT_OK ? e.msg : "", st != GDT_OK ? strlen(e.msg) : 0);
+    gdt_pack_u64(&p, f.points);
+    gdt_pack_u64(&p, f.edge);
+    gdt_pack_u64(&p, f.sum[0]);
+    gdt_pack_u64(&p, f.sum[1]);
+    gdt_pack_u64(&p, f.deepest);
+    gdt_error_clear(&e);
+    if (mr_send_pack(m, 0, TAG_FILES, &p, &e) != GDT_OK) {
+        gdt_error_print(&e, stderr);
+        gdt_comm_abort(m->comm, (int)e.status);
+    }
+}
+
 /* Another rank: merges its shipped tiles and reports each one's files;
  * a failure (st, err: the rank could not take the state) is reported for
  * every tile instead. */
@@ -158,34 +195,9 @@ static void rn_merge_all(mr_ctx *m, rn_tile *tiles, size_t n, gdt_status st0,
                          const gdt_error *err0)
 {
     for (size_t i = 0; i < n; i++) {
-        gdt_tiler_tile_files f;
-        gdt_error e;
-        gdt_status st = st0;
-        gdt_pack p;
-        memset(&f, 0, sizeof f);
-        gdt_error_clear(&e);
-        if (st == GDT_OK)
-            st = gdt_tiler_merge_shipped(m->c->tiler, tiles[i].k, tiles[i].recs, tiles[i].n, &f,
-                                         &e);
-        else
-            e = *err0;
+        mr_merge_report(m, tiles[i].k, tiles[i].recs, tiles[i].n, st0, err0);
         free(tiles[i].recs);
         tiles[i].recs = NULL;
-        memset(&p, 0, sizeof p);
-        gdt_pack_u64(&p, tiles[i].k);
-        gdt_pack_u64(&p, (uint64_t)st);
-        gdt_pack_u64(&p, st != GDT_OK ? (uint64_t)e.code : 0);
-        gdt_pack_bytes(&p, st != GDT_OK ? e.msg : "", st != GDT_OK ? strlen(e.msg) : 0);
-        gdt_pack_u64(&p, f.points);
-        gdt_pack_u64(&p, f.edge);
-        gdt_pack_u64(&p, f.sum[0]);
-        gdt_pack_u64(&p, f.sum[1]);
-        gdt_pack_u64(&p, f.deepest);
-        gdt_error_clear(&e);
-        if (mr_send_pack(m, 0, TAG_FILES, &p, &e) != GDT_OK) {
-            gdt_error_print(&e, stderr);
-            gdt_comm_abort(m->comm, (int)e.status);
-        }
     }
 }
 
@@ -197,6 +209,7 @@ void mr_pass2_hooks(mr_ctx *m)
     m->p2.begin = p2_begin;
     m->p2.collect = p2_collect;
     m->p2.ctx = m;
+    mr_spill_hooks(m);
 }
 
 /* See private/mpi_sched.h. */
@@ -209,6 +222,7 @@ void mr_wait_go(mr_ctx *m, gdt_status *st, gdt_error *err, unsigned char **go, s
         gdt_status s2 = GDT_OK, pst = *st;
         rn_tile *tl = NULL;
         size_t ntl = 0, want = 0;
+        uint64_t mode = 0, sfirst = 0, send_ = 0, sbase = 0;
         int core_started = 0;
         gdt_error_clear(&e2);
         pe = *err;
@@ -216,10 +230,10 @@ void mr_wait_go(mr_ctx *m, gdt_status *st, gdt_error *err, unsigned char **go, s
             int ready = 0, from = 0, tag = 0;
             unsigned char *msg = NULL;
             s2 = gdt_comm_wait(m->comm, 0, -1, NULL, &ready, &from, &tag, len, &e2);
-            /* the OpenCL core is built once this rank's share of pass 1
-             * is read (P1 comes first when there is one): the build would
-             * take the core the share is read on */
-            if (s2 == GDT_OK && tag != TAG_P1 && !core_started) {
+            /* the OpenCL core is built once this rank's shares of pass 1
+             * and pass 2 are read (after PLAN), or at GO: the build would
+             * take the core a share is read on */
+            if (s2 == GDT_OK && tag == TAG_GO && !core_started) {
                 core_started = 1;
                 if (pst == GDT_OK)
                     pst = tr_run_start_core(c, &pe);
@@ -243,16 +257,28 @@ void mr_wait_go(mr_ctx *m, gdt_status *st, gdt_error *err, unsigned char **go, s
                 id[1] = gdt_unpack_u64(&u);
                 state = gdt_unpack_bytes(&u, &slen);
                 want = (size_t)gdt_unpack_u64(&u);
-                if (u.bad || want > (1u << 30)) {
+                mode = gdt_unpack_u64(&u);
+                sfirst = gdt_unpack_u64(&u);
+                send_ = gdt_unpack_u64(&u);
+                sbase = gdt_unpack_u64(&u);
+                if (u.bad || want > (1u << 30) || mode > 1) {
                     s2 = mr_bad_message(0, tag, &e2);
                     free(msg);
                     break;
                 }
                 if (pst == GDT_OK)
                     pst = tr_run_attach(c, id, state, slen, &pe);
+                if (mode == 1)
+                    mr_spill_answer(m, sfirst, send_, sbase, &pst, &pe);
                 tl = calloc(want + 1, sizeof *tl);
                 if (tl == NULL)
                     s2 = gdt_error_set(&e2, GDT_EINTERNAL, 7001, "out of memory");
+                /* the core is built now, while rank 0 spills or merges */
+                if (!core_started) {
+                    core_started = 1;
+                    if (pst == GDT_OK)
+                        pst = tr_run_start_core(c, &pe);
+                }
             } else if (s2 == GDT_OK && tag == TAG_RECS) {
                 uint64_t rk, rn, inl;
                 memset(&u, 0, sizeof u);

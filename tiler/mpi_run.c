@@ -665,6 +665,9 @@ gdt_status gdt_cli_tiled_mpi(const gdt_options *opts, gdt_comm *comm, gdt_error 
     }
     st = tr_run_close(&c, st);
     free(m.raw_pre);
+    free(m.p1_bounds);
+    free(m.p1_kept);
+    free(m.p1_counts);
     if (m.rank != 0)
         gdt_error_clear(err); /* rank 0 reports the job's error */
     free(m.done);

@@ -199,7 +199,7 @@ static gdt_status pass1_shared(tr_run *c, gdt_error *err)
 }
 
 gdt_status tr_run_pass1_share(tr_run *c, uint64_t first, uint64_t end, unsigned char **buf,
-                              size_t *len, gdt_error *err)
+                              size_t *len, uint64_t *kept, gdt_error *err)
 {
     gdt_cloud_opts co;
     gdt_tiler_opts to;
@@ -223,6 +223,7 @@ gdt_status tr_run_pass1_share(tr_run *c, uint64_t first, uint64_t end, unsigned 
         st = gdt_tiler_pass1_part(t, err);
     if (st == GDT_OK)
         st = gdt_tiler_pass1_part_export(t, buf, len, err);
+    *kept = st == GDT_OK ? gdt_cloud_total_counts(cloud).kept : 0;
     gdt_tiler_destroy(t);
     gdt_cloud_close(cloud);
     return st;
@@ -340,7 +341,12 @@ gdt_status tr_run_pass2(tr_run *c, gdt_error *err)
         st = gdt_job_set_stage(c->jobdb, "pass2", 0, err);
         if (st == GDT_OK)
             st = gdt_job_clear_tiles(c->jobdb, err);
-        if (st == GDT_OK && c->p2share != NULL) {
+        int whole = 0;
+        if (st == GDT_OK && c->p2share != NULL && c->p2share->spill != NULL)
+            st = c->p2share->spill(c->p2share->ctx, &whole, err);
+        if (st == GDT_OK && whole) {
+            /* pass 2 ran in shares */
+        } else if (st == GDT_OK && c->p2share != NULL) {
             const tr_pass2_share *ps = c->p2share;
             st = ps->begin(ps->ctx, err);
             if (st == GDT_OK)
@@ -388,17 +394,20 @@ gdt_status tr_run_attach(tr_run *c, const uint64_t job_id[2], const unsigned cha
     st = gdt_tiler_create(&c->tiler, &to, c->cloud, err);
     if (st == GDT_OK)
         st = gdt_tiler_import(c->tiler, state, len, err);
-    if (st == GDT_OK && c->core == NULL)
-        st = tr_core_start_join(&c->cstart, &c->core, err);
     if (st != GDT_OK)
         return st;
     if (gdt_tiler_get_plan(c->tiler) == NULL || c->base != NULL)
         return gdt_error_set(err, GDT_EINTERNAL, 7954, "a rank attached twice after pass 2");
-    snprintf(c->s.device, sizeof c->s.device, "%s", gdt_core_device_name(c->core));
     c->plan = gdt_tiler_get_plan(c->tiler);
     c->s.points_read = c->plan->points;
     if (!gdt_tiler_pass2_done(c->tiler))
         return GDT_OK; /* the state after pass 1: for the shared pass 2 */
+    /* the tile stage needs the core (built meanwhile) */
+    if (c->core == NULL)
+        st = tr_core_start_join(&c->cstart, &c->core, err);
+    if (st != GDT_OK)
+        return st;
+    snprintf(c->s.device, sizeof c->s.device, "%s", gdt_core_device_name(c->core));
     st = set_bases(c, err);
     if (st != GDT_OK)
         return st;

@@ -263,7 +263,7 @@ static gdt_status run_bucket(gdt_tiler *t, bucket *bk, unsigned level, gdt_point
  * time), as long as the records and every worker's hash table for the
  * largest tile fit in half the budget; 0 when not even one does (or the
  * .raw files are wanted, or the test knobs force the file paths). */
-static unsigned resident_workers(const gdt_tiler *t)
+unsigned tl_resident_workers(const gdt_tiler *t)
 {
     uint64_t total = 0, largest = 0, half = t->budget / 2;
     unsigned w = t->opts.threads > 1 ? (unsigned)t->opts.threads : 1;
@@ -405,7 +405,7 @@ gdt_status tl_spill(gdt_tiler *t, gdt_error *err)
         free(buf);
         return st;
     }
-    t->res_workers = resident_workers(t);
+    t->res_workers = tl_resident_workers(t);
     if (t->res_workers > 0) {
         t->stats.spill_in_memory = 1;
         st = spill_resident(t, buf, err);

@@ -448,7 +448,7 @@ gdt_status gdt_tiler_pass1(gdt_tiler *t, gdt_error *err)
 
 const gdt_tile_plan *gdt_tiler_get_plan(const gdt_tiler *t)
 {
-    return t->state >= 1 && t->state <= 3 ? &t->plan : NULL;
+    return tl_planned(t) ? &t->plan : NULL;
 }
 
 int gdt_tiler_pass2_done(const gdt_tiler *t)
@@ -458,7 +458,7 @@ int gdt_tiler_pass2_done(const gdt_tiler *t)
 
 uint64_t gdt_tiler_tile_count(const gdt_tiler *t)
 {
-    return t->state >= 1 && t->state <= 3 ? t->ntiles : 0;
+    return tl_planned(t) ? t->ntiles : 0;
 }
 
 const gdt_tiler_stats *gdt_tiler_get_stats(const gdt_tiler *t)
@@ -471,7 +471,7 @@ gdt_status gdt_tiler_tile_info(const gdt_tiler *t, uint64_t k, gdt_tile_desc *ou
 {
     const tl_tile *tl;
     int64_t h;
-    if (t->state < 1 || t->state > 3 || k >= t->ntiles)
+    if (!tl_planned(t) || k >= t->ntiles)
         return gdt_error_set(err, GDT_EUSAGE, 2505, "tile %" PRIu64 " does not exist", k);
     tl = &t->tiles[k];
     h = t->plan.halo * t->plan.cell;
@@ -495,7 +495,7 @@ int gdt_tiler_tile_path(const gdt_tiler *t, uint64_t k, const char *kind, char *
 {
     char *p;
     int rc = -1;
-    if (t->state < 1 || t->state > 3 || kind == NULL ||
+    if (!tl_planned(t) || kind == NULL ||
         (strcmp(kind, "raw") != 0 && strcmp(kind, "pts") != 0 && strcmp(kind, "edge") != 0))
         return -1;
     p = tl_tile_file(t, k, kind, 0);
@@ -621,11 +621,38 @@ gdt_status gdt_tiler_pass2_shared(gdt_tiler *t, const gdt_tiler_share *sh, gdt_e
     return st;
 }
 
+uint64_t gdt_tiler_tile_of(const gdt_tiler *t, int64_t x, int64_t y)
+{
+    return tl_planned(t) ? tl_tile_of(t, x, y) : UINT64_MAX;
+}
+
+int gdt_tiler_pass2_in_memory(const gdt_tiler *t)
+{
+    return t->state == 1 && t->ntiles > 0 && tl_resident_workers(t) > 0;
+}
+
+gdt_status gdt_tiler_pass2_open(gdt_tiler *t, gdt_error *err)
+{
+    gdt_status st;
+    if (t->state != 1 || t->job_dir == NULL)
+        return gdt_error_set(err, GDT_EUSAGE, 2505,
+                             "a pass 2 in shares needs the state after pass 1 and a job "
+                             "directory");
+    t->state = -1;
+    st = prepare_tiles_dir(t, err);
+    if (st != GDT_OK)
+        return st;
+    t->stats.spill_in_memory = 1;
+    t->merge_t0 = gdt_now();
+    t->state = 5;
+    return GDT_OK;
+}
+
 gdt_status gdt_tiler_merge_shipped(gdt_tiler *t, uint64_t k, gdt_point *recs, uint64_t n,
                                    gdt_tiler_tile_files *out, gdt_error *err)
 {
     gdt_status st;
-    if (t->state != 1 || t->job_dir == NULL || k >= t->ntiles)
+    if ((t->state != 1 && t->state != 5) || t->job_dir == NULL || k >= t->ntiles)
         return gdt_error_set(err, GDT_EUSAGE, 2505,
                              "merging a shipped tile needs the state after pass 1 and a job "
                              "directory");
@@ -644,7 +671,7 @@ gdt_status gdt_tiler_set_tile_files(gdt_tiler *t, uint64_t k, const gdt_tiler_ti
                                     gdt_error *err)
 {
     tl_tile *tl;
-    if (t->state != 3 || k >= t->ntiles)
+    if ((t->state != 3 && t->state != 5) || k >= t->ntiles)
         return gdt_error_set(err, GDT_EUSAGE, 2505, "tile %" PRIu64 ": no shared pass 2", k);
     tl = &t->tiles[k];
     if (tl_merge_marks(t, err) != GDT_OK)
@@ -667,7 +694,7 @@ gdt_status gdt_tiler_set_tile_files(gdt_tiler *t, uint64_t k, const gdt_tiler_ti
 
 gdt_status gdt_tiler_pass2_finish(gdt_tiler *t, gdt_error *err)
 {
-    if (t->state != 3)
+    if (t->state != 3 && t->state != 5)
         return gdt_error_set(err, GDT_EUSAGE, 2505, "no shared pass 2 to finish");
     for (uint64_t k = 0; k < t->ntiles; k++)
         if (t->merge_mark == NULL || !(t->merge_mark[k] & TL_MARK_MERGED))

@@ -58,6 +58,12 @@ gdt_status gdt_comm_wait(gdt_comm *c, int src, int tag, const volatile sig_atomi
  * buf (len bytes).  returns: GDT_OK; GDT_EINTERNAL 7951. */
 gdt_status gdt_comm_recv(gdt_comm *c, int src, int tag, void *buf, size_t len, gdt_error *err);
 
+/* Sends slen bytes to dest and receives rlen bytes from src, both with
+ * tag, at once (a pairwise exchange cannot deadlock).  rlen must be the
+ * length src sends.  returns: GDT_OK; GDT_EINTERNAL 7951. */
+gdt_status gdt_comm_sendrecv(gdt_comm *c, int dest, const void *sbuf, size_t slen, int src,
+                             void *rbuf, size_t rlen, int tag, gdt_error *err);
+
 /* Ends every rank of the job at once (a rank that cannot go on and cannot
  * tell the others why). */
 void gdt_comm_abort(gdt_comm *c, int code);

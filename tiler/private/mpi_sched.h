@@ -22,7 +22,9 @@ enum {
     TAG_RECDATA = 9,  /* 0 -> r */
     TAG_FILES = 10,   /* r -> 0: a merged tile's files */
     TAG_P1 = 11,      /* 0 -> r: the rank's share of pass 1 */
-    TAG_P1DONE = 12   /* r -> 0: what it read, or its failure */
+    TAG_P1DONE = 12,  /* r -> 0: what it read, or its failure */
+    TAG_SPILL = 13,   /* r <-> q: pass 2 in shares: status, then records */
+    TAG_P2FAIL = 14   /* r -> 0: why this rank's share of pass 2 failed */
 };
 
 /* Records per TAG_RECDATA message (32 MiB of gdt_point). */
@@ -50,6 +52,9 @@ typedef struct mr_ctx {
     tr_pass2_share p2;
     tr_pass1_share p1;      /* the shared pass 1 */
     int p1_shared;          /* pass 1 was shared */
+    uint64_t *p1_bounds;    /* its shares of the records (size + 1) */
+    uint64_t *p1_kept;      /* the kept points of each share (size) */
+    gdt_filter_counts *p1_counts; /* the filter's counts of the whole pass, per input */
     /* another rank */
     int stopped;            /* STOP received */
 } mr_ctx;
@@ -79,6 +84,27 @@ void mr_pass1_hooks(mr_ctx *m);
  * job (gdt_comm_abort) when the answer cannot be sent. */
 void mr_pass1_answer(mr_ctx *m, const unsigned char *msg, size_t len, gdt_status st,
                      const gdt_error *err);
+
+/* m->raw_pre / raw_n from tiler t's pass-1 counts.  returns: 7001. */
+gdt_status mr_raw_prefix(mr_ctx *m, const gdt_tiler *t, gdt_error *err);
+
+/* Rank 0: FILES of the m->shipped - m->files_got tiles still out, into the
+ * tiler (a rank's failure in them becomes the job's). */
+gdt_status mr_collect_files(mr_ctx *m, gdt_error *err);
+
+/* Another rank: the --dup merge of tile k from recs[0, n) (or its failure
+ * st, err when st is not GDT_OK) reported to rank 0 as FILES. */
+void mr_merge_report(mr_ctx *m, uint64_t k, gdt_point *recs, uint64_t n, gdt_status st,
+                     const gdt_error *err);
+
+/* Rank 0: the hook of pass 2 in shares into m->p2 (mpi_spill.c). */
+void mr_spill_hooks(mr_ctx *m);
+
+/* Another rank, after PLAN in mode 1 (and tr_run_attach): its share
+ * [first, end) of pass 2 with ordinals from base (mpi_spill.c); *st,
+ * *err: this rank's status, in and out. */
+void mr_spill_answer(mr_ctx *m, uint64_t first, uint64_t end, uint64_t base, gdt_status *st,
+                     gdt_error *err);
 
 /* Rank 0: the hooks of the shared pass 2 into m->p2 (mpi_pass2.c). */
 void mr_pass2_hooks(mr_ctx *m);

@@ -128,6 +128,10 @@ typedef struct tr_pass2_share {
     gdt_tiler_share sh;
     gdt_status (*begin)(void *ctx, gdt_error *err);
     gdt_status (*collect)(void *ctx, gdt_error *err);
+    /* tried first: pass 2 read in shares by the processes, every tile's
+     * records sent to its owner; *whole = 1 when it ran pass 2 to
+     * gdt_tiler_pass2_finish, 0 when it cannot (then the above) */
+    gdt_status (*spill)(void *ctx, int *whole, gdt_error *err);
     void *ctx;
 } tr_pass2_share;
 
@@ -317,10 +321,11 @@ gdt_status tr_run_pass1(tr_run *c, gdt_error *err);
 /* Another rank of an MPI job, told its share of pass 1: opens a cloud and
  * a tiler of its own (no job directory), reads the records [first, end)
  * (gdt_tiler_pass1_part) and returns what it read as bytes (*buf
- * malloc'd, gdt_tiler_pass1_part_export); nothing of c changes.
+ * malloc'd, gdt_tiler_pass1_part_export) and the points the filter kept
+ * (*kept); nothing of c changes.
  * returns: the cloud's and tiler's errors. */
 gdt_status tr_run_pass1_share(tr_run *c, uint64_t first, uint64_t end, unsigned char **buf,
-                              size_t *len, gdt_error *err);
+                              size_t *len, uint64_t *kept, gdt_error *err);
 
 /* After tr_run_pass1: when the journal records pass 2 done and every
  * recorded .pts/.edge file matches, adopts them (c->s.pass2_reused);
@@ -336,11 +341,11 @@ gdt_status tr_run_pass2(tr_run *c, gdt_error *err);
 /* Another rank of an MPI job, after tr_run_start_core, in place of
  * tr_run_prepare_job, tr_run_pass1 and tr_run_pass2 (which rank 0 ran):
  * takes the job's id and the tiler's state (gdt_tiler_export) from rank 0,
- * opens the cloud (headers only: the input is not read), joins the core,
- * and with the state after pass 2 sets what the tile stage needs (c->plan,
- * c->base, c->trim).  Called again, it replaces the tiler: first with the
- * state after pass 1 (a shared pass 2, gdt_tiler_merge_shipped), then
- * after pass 2.  Such a context has no journal and no lock: it never
+ * opens the cloud (headers only: the input is not read), and with the
+ * state after pass 2 joins the core (tr_run_start_core first) and sets what
+ * the tile stage needs (c->plan, c->base, c->trim).  Called again, it
+ * replaces the tiler: first with the state after pass 1 (a shared pass 2,
+ * gdt_tiler_merge_shipped), then after pass 2.  Such a context has no journal and no lock: it never
  * writes job.db.
  * returns: GDT_OK; the cloud's, tiler's and core's errors. */
 gdt_status tr_run_attach(tr_run *c, const uint64_t job_id[2], const unsigned char *state,

@@ -99,7 +99,8 @@ struct gdt_tiler {
     int64_t user_cell;      /* > 0: given --cell in lattice steps */
     int state;              /* 0 new, 1 after pass 1, 2 after pass 2, 3 a shared pass 2
                                waiting for shipped tiles, 4 a share of pass 1 read (its
-                               bounds, counts and histograms: not yet a plan), -1 failed */
+                               bounds, counts and histograms: not yet a plan), 5 a pass 2
+                               in shares (gdt_tiler_pass2_open), -1 failed */
     double pass1_t0;        /* when pass 1 began */
     double merge_t0;        /* when pass 2's --dup merge began */
     uint8_t *merge_mark;    /* ntiles marks (TL_MARK_*) while pass 2 merges; owned */
@@ -159,6 +160,16 @@ uint64_t tl_tile_of(const gdt_tiler *t, int64_t x, int64_t y);
  * most tl_max_counted_tiles tiles, else GDT_EUSAGE 2503). */
 gdt_status tl_count_tiles(gdt_tiler *t, const gdt_point *pts, size_t n, gdt_error *err);
 size_t tl_max_counted_tiles(const gdt_tiler *t);
+
+/* 1 when t has a plan and tile table (after pass 1). */
+static inline int tl_planned(const gdt_tiler *t)
+{
+    return t->state == 1 || t->state == 2 || t->state == 3 || t->state == 5;
+}
+
+/* spill.c: the --dup merge workers of a pass 2 in memory, 0 when the
+ * records do not fit in half the budget. */
+unsigned tl_resident_workers(const gdt_tiler *t);
 
 /* Frees the resident records of pass 2 (if any). */
 void tl_free_resident(gdt_tiler *t);
