@@ -288,6 +288,18 @@ int gdt_tiler_pass2_in_memory(const gdt_tiler *t);
  * the others', and gdt_tiler_pass2_finish.  returns: GDT_EUSAGE 2505, GDT_EIO 4501. */
 gdt_status gdt_tiler_pass2_open(gdt_tiler *t, gdt_error *err);
 
+/* Pass 2 out of core in shares: each process, after pass 1 (or
+ * gdt_tiler_pass2_open on the recording one) and with its cloud set to its
+ * share, spills it into .raw files of its own, suffix ".p<part>"
+ * (gdt_tiler_spill_part); once every share is spilled, the owner of tile k
+ * joins the shares' files 0 .. parts - 1 in that order into the tile's .raw
+ * file (gdt_tiler_join_parts; a missing file holds none of the tile's
+ * points) and merges it (gdt_tiler_merge_shipped with recs NULL).
+ * returns: the spill's errors; join: GDT_EINPUT 3501 (not pass 1's count),
+ * GDT_EIO 4502/4503. */
+gdt_status gdt_tiler_spill_part(gdt_tiler *t, int part, gdt_error *err);
+gdt_status gdt_tiler_join_parts(gdt_tiler *t, uint64_t k, int parts, gdt_error *err);
+
 /* What the --dup merge of one tile wrote. */
 typedef struct gdt_tiler_tile_files {
     uint64_t points, edge; /* records of its .pts and .edge files */

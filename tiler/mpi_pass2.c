@@ -261,15 +261,15 @@ void mr_wait_go(mr_ctx *m, gdt_status *st, gdt_error *err, unsigned char **go, s
                 sfirst = gdt_unpack_u64(&u);
                 send_ = gdt_unpack_u64(&u);
                 sbase = gdt_unpack_u64(&u);
-                if (u.bad || want > (1u << 30) || mode > 1) {
+                if (u.bad || want > (1u << 30) || mode > 2) {
                     s2 = mr_bad_message(0, tag, &e2);
                     free(msg);
                     break;
                 }
                 if (pst == GDT_OK)
                     pst = tr_run_attach(c, id, state, slen, &pe);
-                if (mode == 1)
-                    mr_spill_answer(m, sfirst, send_, sbase, &pst, &pe);
+                if (mode >= 1)
+                    mr_spill_answer(m, sfirst, send_, sbase, mode == 2, &pst, &pe);
                 tl = calloc(want + 1, sizeof *tl);
                 if (tl == NULL)
                     s2 = gdt_error_set(&e2, GDT_EINTERNAL, 7001, "out of memory");

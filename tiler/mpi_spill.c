@@ -3,11 +3,15 @@
  * owner runs the --dup merge of its tiles.
  *
  * Used when pass 1 was shared (its shares' kept counts give each share's
- * first ordinal, so every point has the ordinal a single process gives it)
- * and the records fit in memory (gdt_tiler_pass2_in_memory); otherwise rank
- * 0 spills alone (mpi_pass2.c).
+ * first ordinal, so every point has the ordinal a single process gives it);
+ * otherwise rank 0 spills alone (mpi_pass2.c).  When the records do not fit
+ * in memory (gdt_tiler_pass2_in_memory), each rank spills its share into
+ * .raw files of its own in the shared job directory and each owner joins
+ * its tiles' files in rank order (pass2_part.c) before the merge; the
+ * exchange below then carries the statuses only.
  *
- * Protocol, after PLAN (mode 1: the share and its first ordinal):
+ * Protocol, after PLAN (mode 1 in memory, 2 in files: the share and its
+ * first ordinal):
  *   every rank reads its share, keeping for each other rank the points of
  *   that rank's tiles (in input order);
  *   header exchange: each pair of ranks swaps (status, code, points for the
@@ -210,8 +214,8 @@ done:
  * *err, this rank's status, become the job's (*st GDT_OK: o holds the own
  * tiles' records); *failed is the first failing rank, -1 when none.  Ends
  * the job when the messages fail. */
-static void sp_run(mr_ctx *m, uint64_t first, uint64_t end, uint64_t base, gdt_status *st,
-                   gdt_error *err, sp_own *o, int *failed)
+static void sp_run(mr_ctx *m, uint64_t first, uint64_t end, uint64_t base, int files,
+                   gdt_status *st, gdt_error *err, sp_own *o, int *failed)
 {
     const int size = m->size, rank = m->rank;
     const int rounds = size + (size & 1) - 1;
@@ -230,8 +234,14 @@ static void sp_run(mr_ctx *m, uint64_t first, uint64_t end, uint64_t base, gdt_s
         gdt_error_set(&e2, GDT_EINTERNAL, 7001, "out of memory");
         goto abort;
     }
-    if (*st == GDT_OK)
+    if (*st == GDT_OK && files) {
+        /* out of core: into this rank's own .raw files */
+        *st = gdt_cloud_set_range(m->c->cloud, first, end, base, err);
+        if (*st == GDT_OK)
+            *st = gdt_tiler_spill_part(m->c->tiler, rank, err);
+    } else if (*st == GDT_OK) {
         *st = sp_read(m, first, end, base, bins, err);
+    }
     /* headers: every rank's status, and the points each sends this one */
     hdr[3 * rank] = (uint64_t)*st;
     hdr[3 * rank + 1] = *st != GDT_OK ? (uint64_t)err->code : 0;
@@ -271,6 +281,16 @@ static void sp_run(mr_ctx *m, uint64_t first, uint64_t end, uint64_t base, gdt_s
         }
         goto out;
     }
+    /* own tiles: a contiguous run of tile order */
+    o->ka = o->kb = 0;
+    for (uint64_t k = 0; k < m->raw_n; k++)
+        if (sp_owner(m, k) == rank) {
+            if (o->kb == o->ka)
+                o->ka = k;
+            o->kb = k + 1;
+        }
+    if (files)
+        goto out; /* the owners join the files */
     /* data: the owner lays each rank's points out in rank order */
     pos = calloc((size_t)size + 1, sizeof *pos);
     if (pos == NULL) {
@@ -308,14 +328,6 @@ static void sp_run(mr_ctx *m, uint64_t first, uint64_t end, uint64_t base, gdt_s
     }
     if (s2 != GDT_OK)
         goto abort;
-    /* own tiles: a contiguous run of tile order */
-    o->ka = o->kb = 0;
-    for (uint64_t k = 0; k < m->raw_n; k++)
-        if (sp_owner(m, k) == rank) {
-            if (o->kb == o->ka)
-                o->ka = k;
-            o->kb = k + 1;
-        }
     *st = sp_group(m, all, total, o, err);
     goto out;
 abort:
@@ -357,14 +369,15 @@ static gdt_status p2_spill(void *ctx, int *whole, gdt_error *err)
     sp_own own;
     int failed = -1;
     size_t nin;
+    int files;
     gdt_status st;
 
     *whole = 0;
     if (!m->p1_shared || m->p1_bounds == NULL || m->p1_kept == NULL || m->p1_counts == NULL ||
-        m->size < 2 ||
-        !gdt_tiler_pass2_in_memory(c->tiler))
+        m->size < 2)
         return GDT_OK;
     *whole = 1;
+    files = !gdt_tiler_pass2_in_memory(c->tiler);
     st = mr_raw_prefix(m, c->tiler, err);
     if (st == GDT_OK)
         st = gdt_tiler_export(c->tiler, &state, &slen, err);
@@ -382,7 +395,7 @@ static gdt_status p2_spill(void *ctx, int *whole, gdt_error *err)
         gdt_pack_u64(&p, c->job_id[1]);
         gdt_pack_bytes(&p, state, slen);
         gdt_pack_u64(&p, 0); /* no tiles shipped */
-        gdt_pack_u64(&p, 1); /* mode 1: the rank reads its share */
+        gdt_pack_u64(&p, files ? 2 : 1); /* the rank reads its share: 1 in memory, 2 files */
         gdt_pack_u64(&p, m->p1_bounds[r]);
         gdt_pack_u64(&p, m->p1_bounds[r + 1]);
         gdt_pack_u64(&p, sp_base(m, r));
@@ -393,7 +406,7 @@ static gdt_status p2_spill(void *ctx, int *whole, gdt_error *err)
         }
     }
     free(state);
-    sp_run(m, m->p1_bounds[0], m->p1_bounds[1], 0, &st, err, &own, &failed);
+    sp_run(m, m->p1_bounds[0], m->p1_bounds[1], 0, files, &st, err, &own, &failed);
     /* the cloud counted this share: the whole pass's counts are pass 1's */
     nin = gdt_cloud_get_info(c->cloud)->ninputs;
     if (gdt_cloud_set_range(c->cloud, 0, UINT64_MAX, 0, NULL) == GDT_OK && m->p1_counts != NULL)
@@ -430,8 +443,11 @@ static gdt_status p2_spill(void *ctx, int *whole, gdt_error *err)
         gdt_tiler_tile_files f;
         uint64_t j = k - own.ka;
         /* the merge itself marks the tile's files in this tiler */
-        st = gdt_tiler_merge_shipped(c->tiler, k, own.recs + own.off[j],
-                                     own.off[j + 1] - own.off[j], &f, err);
+        if (files)
+            st = gdt_tiler_join_parts(c->tiler, k, m->size, err);
+        if (st == GDT_OK)
+            st = gdt_tiler_merge_shipped(c->tiler, k, files ? NULL : own.recs + own.off[j],
+                                         files ? 0 : own.off[j + 1] - own.off[j], &f, err);
     }
     sp_own_free(&own);
     m->shipped = 0;
@@ -452,8 +468,9 @@ static gdt_status p2_spill(void *ctx, int *whole, gdt_error *err)
     if (st == GDT_OK)
         st = gdt_tiler_pass2_finish(c->tiler, err);
     if (st == GDT_OK)
-        gdt_log_note(&c->log, "tiler pass 2: %" PRIu64 " points in shares of %d ranks",
-                     gdt_tiler_get_plan(c->tiler)->points, m->size);
+        gdt_log_note(&c->log, "tiler pass 2: %" PRIu64 " points in shares of %d ranks (%s)",
+                     gdt_tiler_get_plan(c->tiler)->points, m->size,
+                     files ? "each rank's .raw files" : "in memory");
     return st;
 }
 
@@ -462,8 +479,8 @@ void mr_spill_hooks(mr_ctx *m)
     m->p2.spill = p2_spill;
 }
 
-void mr_spill_answer(mr_ctx *m, uint64_t first, uint64_t end, uint64_t base, gdt_status *pst,
-                     gdt_error *pe)
+void mr_spill_answer(mr_ctx *m, uint64_t first, uint64_t end, uint64_t base, int files,
+                     gdt_status *pst, gdt_error *pe)
 {
     sp_own own;
     int failed = -1;
@@ -471,7 +488,7 @@ void mr_spill_answer(mr_ctx *m, uint64_t first, uint64_t end, uint64_t base, gdt
 
     if (st == GDT_OK)
         st = mr_raw_prefix(m, m->c->tiler, pe);
-    sp_run(m, first, end, base, &st, pe, &own, &failed);
+    sp_run(m, first, end, base, files, &st, pe, &own, &failed);
     if (failed >= 0) {
         if (failed == m->rank) {
             gdt_pack p;
@@ -490,7 +507,16 @@ void mr_spill_answer(mr_ctx *m, uint64_t first, uint64_t end, uint64_t base, gdt
     }
     for (uint64_t k = own.ka; k < own.kb; k++) {
         uint64_t j = k - own.ka;
-        mr_merge_report(m, k, own.recs + own.off[j], own.off[j + 1] - own.off[j], st, pe);
+        if (files) {
+            gdt_error e;
+            gdt_status js = st;
+            gdt_error_clear(&e);
+            if (js == GDT_OK)
+                js = gdt_tiler_join_parts(m->c->tiler, k, m->size, &e);
+            mr_merge_report(m, k, NULL, 0, js, js != GDT_OK && st == GDT_OK ? &e : pe);
+        } else {
+            mr_merge_report(m, k, own.recs + own.off[j], own.off[j + 1] - own.off[j], st, pe);
+        }
     }
     sp_own_free(&own);
     *pst = st;

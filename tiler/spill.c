@@ -155,7 +155,8 @@ static gdt_status run_level(gdt_tiler *t, spill_src *s, uint64_t src_recs, uint6
             fin = raw_final ? tl_tile_file(t, a + d, "raw", 0) : NULL;
         } else {
             uint64_t ga = a + d * group, gb = ga + group < b ? ga + group : b;
-            tmp = tl_path("%s/bucket_%u_%" PRIu64 ".tmp", t->tiles_dir, level, ga);
+            tmp = tl_path("%s/bucket_%u_%" PRIu64 ".tmp%s", t->tiles_dir, level, ga,
+                          t->spill_part);
             children->v[d].a = ga;
             children->v[d].b = gb;
         }
@@ -412,6 +413,23 @@ gdt_status tl_spill(gdt_tiler *t, gdt_error *err)
         free(buf);
         return st;
     }
+    st = run_level(t, &s, t->plan.points, 0, t->ntiles, 0, buf, &children, err);
+    for (size_t i = 0; i < children.n && st == GDT_OK; i++)
+        st = run_bucket(t, &children.v[i], 1, buf, err);
+    buckets_free(&children);
+    free(buf);
+    return st;
+}
+
+gdt_status tl_spill_files(gdt_tiler *t, gdt_error *err)
+{
+    spill_src s = {t->cloud, NULL};
+    bucket_list children = {0};
+    gdt_point *buf = malloc(t->sz.read_cap * sizeof *buf);
+    gdt_status st;
+
+    if (buf == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     st = run_level(t, &s, t->plan.points, 0, t->ntiles, 0, buf, &children, err);
     for (size_t i = 0; i < children.n && st == GDT_OK; i++)
         st = run_bucket(t, &children.v[i], 1, buf, err);

@@ -81,8 +81,9 @@ char *tl_tile_file(const gdt_tiler *t, uint64_t k, const char *kind, int tmp)
 {
     if (t->tiles_dir == NULL || k >= t->ntiles)
         return NULL;
-    return tl_path("%s/tile_%" PRId64 "_%" PRId64 ".%s%s", t->tiles_dir, t->tiles[k].i,
-                   t->tiles[k].j, kind, tmp ? ".tmp" : "");
+    return tl_path("%s/tile_%" PRId64 "_%" PRId64 ".%s%s%s", t->tiles_dir, t->tiles[k].i,
+                   t->tiles[k].j, kind, tmp ? ".tmp" : "",
+                   strcmp(kind, "raw") == 0 ? t->spill_part : "");
 }
 
 gdt_status tl_progress(gdt_tiler *t, int stage, uint64_t done, uint64_t total, gdt_error *err)
@@ -508,6 +509,18 @@ int gdt_tiler_tile_path(const gdt_tiler *t, uint64_t k, const char *kind, char *
 }
 
 /* Removes what an earlier (possibly interrupted) pass 2 left in tiles/. */
+/* A file of a share of pass 2: "....tmp.p<digits>" (pass2_part.c). */
+static int is_share_file(const char *nm)
+{
+    const char *p = strstr(nm, ".tmp.p");
+    if (p == NULL || p[6] == '\0')
+        return 0;
+    for (p += 6; *p != '\0'; p++)
+        if (*p < '0' || *p > '9')
+            return 0;
+    return 1;
+}
+
 static gdt_status prepare_tiles_dir(gdt_tiler *t, gdt_error *err)
 {
     DIR *d;
@@ -528,7 +541,7 @@ static gdt_status prepare_tiles_dir(gdt_tiler *t, gdt_error *err)
         int kind = (len > 4 && strcmp(nm + len - 4, ".raw") == 0) ||
                    (len > 4 && strcmp(nm + len - 4, ".pts") == 0) ||
                    (len > 5 && strcmp(nm + len - 5, ".edge") == 0) ||
-                   (len > 4 && strcmp(nm + len - 4, ".tmp") == 0);
+                   (len > 4 && strcmp(nm + len - 4, ".tmp") == 0) || is_share_file(nm);
         if (ours && kind && unlinkat(dirfd(d), nm, 0) != 0 && errno != ENOENT) {
             int en = errno;
             closedir(d);

@@ -654,6 +654,26 @@ static void test_pass1_shares(const gdt_point *in, size_t n)
                 CHECK(da.i == db.i && da.j == db.j && da.raw_points == db.raw_points,
                       "case %d: tile %" PRIu64 " differs", q, k);
             }
+            /* pass 2 in shares through files: each share spilled with its
+             * first ordinal, then every tile's shares joined, is the .raw
+             * file of one pass 2 (the shares spilled from one tiler here) */
+            st = gdt_tiler_pass2(tw, &err);
+            if (st == GDT_OK)
+                st = gdt_tiler_pass2_open(ts[0], &err);
+            for (int r = NSH - 1; st == GDT_OK && r >= 0; r--) {
+                st = gdt_cloud_set_range(cs[0], bounds[r], bounds[r + 1], bounds[r], &err);
+                if (st == GDT_OK)
+                    st = gdt_tiler_spill_part(ts[0], r, &err);
+            }
+            for (uint64_t k = 0; st == GDT_OK && k < a->tiles; k++) {
+                char ra[4096], rb[4096];
+                st = gdt_tiler_join_parts(ts[0], k, NSH, &err);
+                gdt_tiler_tile_path(tw, k, "raw", ra, sizeof ra);
+                gdt_tiler_tile_path(ts[0], k, "raw", rb, sizeof rb);
+                CHECK(st != GDT_OK || files_equal(ra, rb), "case %d: %s and %s differ", q, ra,
+                      rb);
+            }
+            CHECK(st == GDT_OK, "case %d: pass 2 in shares: %s", q, err.msg);
         }
         finish(tw, cw);
         for (int r = 0; r < NSH; r++)

@@ -116,7 +116,8 @@ def test_any_rank_count_writes_the_same_bytes(mpi_bin, clouds, tmp_path, case):
 
 def test_shared_pass2_out_of_core(mpi_bin, root, tmp_path):
     """A budget too small to hold the points: pass 2 spills to .raw files on
-    the shared job directory, and each tile's owner merges it from there."""
+    the shared job directory (each rank its share, or rank 0 alone for a
+    LAZ input), and each tile's owner merges it from there."""
     c = gen(root, tmp_path / "c.las", 300000, 8)
     args = ["--tile", "128", "--mem-budget", "16M"]
     ref = tmp_path / "ref.ply"
@@ -126,8 +127,16 @@ def test_shared_pass2_out_of_core(mpi_bin, root, tmp_path):
     out = tmp_path / "o.ply"
     r = mpirun(3, mpi_bin, [c, "-o", out, *args, "-v"])
     assert r.returncode == 0, r.stdout + r.stderr
-    assert "bucket levels" in r.stderr
+    # every rank spilled its share into .raw files of its own, joined by the owners
+    assert "in shares of 3 ranks (each rank's .raw files)" in r.stderr, r.stderr
     assert out.read_bytes() == ref.read_bytes()
+    # a LAZ input: pass 1 stays with rank 0 (it decodes once), which spills alone
+    laz = write_laz(c, tmp_path / "c.laz", chunk=50000)
+    out2 = tmp_path / "o2.ply"
+    r = mpirun(2, mpi_bin, [laz, "-o", out2, *args, "-v"])
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "bucket levels" in r.stderr and "in shares" not in r.stderr, r.stderr
+    assert out2.read_bytes() == ref.read_bytes()
 
 
 def vdb_without_uuid(path):

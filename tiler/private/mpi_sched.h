@@ -100,11 +100,11 @@ void mr_merge_report(mr_ctx *m, uint64_t k, gdt_point *recs, uint64_t n, gdt_sta
 /* Rank 0: the hook of pass 2 in shares into m->p2 (mpi_spill.c). */
 void mr_spill_hooks(mr_ctx *m);
 
-/* Another rank, after PLAN in mode 1 (and tr_run_attach): its share
- * [first, end) of pass 2 with ordinals from base (mpi_spill.c); *st,
- * *err: this rank's status, in and out. */
-void mr_spill_answer(mr_ctx *m, uint64_t first, uint64_t end, uint64_t base, gdt_status *st,
-                     gdt_error *err);
+/* Another rank, after PLAN in mode 1 or 2 (and tr_run_attach): its share
+ * [first, end) of pass 2 with ordinals from base, in memory or (files) in
+ * .raw files (mpi_spill.c); *st, *err: this rank's status, in and out. */
+void mr_spill_answer(mr_ctx *m, uint64_t first, uint64_t end, uint64_t base, int files,
+                     gdt_status *st, gdt_error *err);
 
 /* Rank 0: the hooks of the shared pass 2 into m->p2 (mpi_pass2.c). */
 void mr_pass2_hooks(mr_ctx *m);

@@ -102,6 +102,8 @@ struct gdt_tiler {
                                bounds, counts and histograms: not yet a plan), 5 a pass 2
                                in shares (gdt_tiler_pass2_open), -1 failed */
     double pass1_t0;        /* when pass 1 began */
+    char spill_part[24];    /* "" or ".p<R>": the suffix of the .raw and bucket files a
+                               share of pass 2 writes (gdt_tiler_spill_part) */
     double merge_t0;        /* when pass 2's --dup merge began */
     uint8_t *merge_mark;    /* ntiles marks (TL_MARK_*) while pass 2 merges; owned */
     gdt_tile_plan plan;
@@ -166,6 +168,10 @@ static inline int tl_planned(const gdt_tiler *t)
 {
     return t->state == 1 || t->state == 2 || t->state == 3 || t->state == 5;
 }
+
+/* spill.c: the spill to .raw files (and buckets) of what the cloud gives,
+ * whatever the budget; counts in tiles[].written. */
+gdt_status tl_spill_files(gdt_tiler *t, gdt_error *err);
 
 /* spill.c: the --dup merge workers of a pass 2 in memory, 0 when the
  * records do not fit in half the budget. */

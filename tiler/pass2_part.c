@@ -1,0 +1,131 @@
+/* pass2_part.c — pass 2 out of core in shares between processes: each
+ * spills its share of the cloud into .raw files of its own (suffix
+ * ".p<R>"), and the owner of a tile joins the shares' files, in share
+ * order, into the tile's .raw file before the --dup merge.  Shares are
+ * consecutive runs of input order, so the joined file is the one a single
+ * process spills: the same records in the same order.
+ */
+#define _GNU_SOURCE 1 /* copy_file_range */
+#include "private/tiler_impl.h"
+#include "private/tiler_io.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <inttypes.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+gdt_status gdt_tiler_spill_part(gdt_tiler *t, int part, gdt_error *err)
+{
+    gdt_status st;
+    if ((t->state != 1 && t->state != 5) || t->job_dir == NULL || part < 0)
+        return gdt_error_set(err, GDT_EUSAGE, 2505,
+                             "a share of pass 2 needs the state after pass 1 and a job "
+                             "directory");
+    snprintf(t->spill_part, sizeof t->spill_part, ".p%d", part);
+    for (uint64_t k = 0; k < t->ntiles; k++)
+        t->tiles[k].written = 0;
+    st = tl_spill_files(t, err);
+    t->spill_part[0] = '\0';
+    return st;
+}
+
+/* Appends the whole of file src (fd in) to out; *bytes grows by its size. */
+static gdt_status append_file(int out, const char *dst, int in, const char *src, uint64_t *bytes,
+                              gdt_error *err)
+{
+    unsigned char buf[1 << 16];
+    int copy = 1;
+    for (;;) {
+        ssize_t n;
+        if (copy) {
+            n = copy_file_range(in, NULL, out, NULL, (size_t)1 << 30, 0);
+            if (n < 0 && (errno == EXDEV || errno == ENOSYS || errno == EINVAL ||
+                          errno == EOPNOTSUPP)) {
+                copy = 0; /* another file system, an old kernel: copy through memory */
+                continue;
+            }
+        } else {
+            n = read(in, buf, sizeof buf);
+            if (n > 0) {
+                ssize_t w = 0;
+                while (w < n) {
+                    ssize_t q = write(out, buf + w, (size_t)(n - w));
+                    if (q < 0 && errno == EINTR)
+                        continue;
+                    if (q <= 0)
+                        return gdt_error_set(err, GDT_EIO, 4503, "cannot write %s: %s", dst,
+                                             q < 0 ? strerror(errno) : "no space written");
+                    w += q;
+                }
+            }
+        }
+        if (n < 0 && errno == EINTR)
+            continue;
+        if (n < 0)
+            return gdt_error_set(err, GDT_EIO, 4503, "cannot copy %s to %s: %s", src, dst,
+                                 strerror(errno));
+        if (n == 0)
+            return GDT_OK;
+        *bytes += (uint64_t)n;
+    }
+}
+
+gdt_status gdt_tiler_join_parts(gdt_tiler *t, uint64_t k, int parts, gdt_error *err)
+{
+    char *dst = NULL, *src = NULL;
+    uint64_t bytes = 0;
+    int out = -1;
+    gdt_status st = GDT_OK;
+
+    if ((t->state != 1 && t->state != 5) || t->job_dir == NULL || k >= t->ntiles)
+        return gdt_error_set(err, GDT_EUSAGE, 2505, "no share of pass 2 to join (tile %" PRIu64
+                             ")", k);
+    dst = tl_tile_file(t, k, "raw", !t->opts.keep_spill);
+    if (dst == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    out = open(dst, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
+    if (out < 0) {
+        st = gdt_error_set(err, GDT_EIO, 4502, "cannot create %s: %s", dst, strerror(errno));
+        goto done;
+    }
+    for (int r = 0; r < parts && st == GDT_OK; r++) {
+        int in;
+        free(src);
+        src = tl_path("%s.p%d", dst, r);
+        if (src == NULL) {
+            st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+            break;
+        }
+        in = open(src, O_RDONLY | O_CLOEXEC);
+        if (in < 0 && errno == ENOENT)
+            continue; /* that share had no point in this tile */
+        if (in < 0) {
+            st = gdt_error_set(err, GDT_EIO, 4502, "cannot open %s: %s", src, strerror(errno));
+            break;
+        }
+        st = append_file(out, dst, in, src, &bytes, err);
+        close(in);
+        if (st == GDT_OK)
+            unlink(src);
+    }
+    if (st == GDT_OK && close(out) != 0)
+        st = gdt_error_set(err, GDT_EIO, 4503, "cannot write %s: %s", dst, strerror(errno));
+    out = -1;
+    if (st == GDT_OK && bytes != t->tiles[k].count * TL_REC)
+        st = gdt_error_set(err, GDT_EINPUT, 3501,
+                           "the input changed between the two passes: tile (%" PRId64
+                           ", %" PRId64 ") received %" PRIu64 " points, pass 1 counted %" PRIu64,
+                           t->tiles[k].i, t->tiles[k].j, bytes / TL_REC, t->tiles[k].count);
+    if (st == GDT_OK)
+        t->tiles[k].written = t->tiles[k].count;
+done:
+    if (out >= 0)
+        close(out);
+    free(src);
+    free(dst);
+    return st;
+}
