@@ -386,10 +386,25 @@ static gdt_status spill_resident(gdt_tiler *t, gdt_point *buf, gdt_error *err)
     return st;
 }
 
-gdt_status tl_spill(gdt_tiler *t, gdt_error *err)
+gdt_status tl_spill_files(gdt_tiler *t, gdt_error *err)
 {
     spill_src s = {t->cloud, NULL};
     bucket_list children = {0};
+    gdt_point *buf = malloc(t->sz.read_cap * sizeof *buf);
+    gdt_status st;
+
+    if (buf == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    st = run_level(t, &s, t->plan.points, 0, t->ntiles, 0, buf, &children, err);
+    for (size_t i = 0; i < children.n && st == GDT_OK; i++)
+        st = run_bucket(t, &children.v[i], 1, buf, err);
+    buckets_free(&children);
+    free(buf);
+    return st;
+}
+
+gdt_status tl_spill(gdt_tiler *t, gdt_error *err)
+{
     gdt_point *buf;
     gdt_status st;
 
@@ -413,27 +428,6 @@ gdt_status tl_spill(gdt_tiler *t, gdt_error *err)
         free(buf);
         return st;
     }
-    st = run_level(t, &s, t->plan.points, 0, t->ntiles, 0, buf, &children, err);
-    for (size_t i = 0; i < children.n && st == GDT_OK; i++)
-        st = run_bucket(t, &children.v[i], 1, buf, err);
-    buckets_free(&children);
     free(buf);
-    return st;
-}
-
-gdt_status tl_spill_files(gdt_tiler *t, gdt_error *err)
-{
-    spill_src s = {t->cloud, NULL};
-    bucket_list children = {0};
-    gdt_point *buf = malloc(t->sz.read_cap * sizeof *buf);
-    gdt_status st;
-
-    if (buf == NULL)
-        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-    st = run_level(t, &s, t->plan.points, 0, t->ntiles, 0, buf, &children, err);
-    for (size_t i = 0; i < children.n && st == GDT_OK; i++)
-        st = run_bucket(t, &children.v[i], 1, buf, err);
-    buckets_free(&children);
-    free(buf);
-    return st;
+    return tl_spill_files(t, err);
 }
