@@ -1,6 +1,7 @@
 /* Message helpers of the MPI scheduler (private/mpi_sched.h). */
 #include "private/mpi_sched.h"
 
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -20,6 +21,22 @@ gdt_status mr_recv(mr_ctx *m, int from, int tag, size_t len, unsigned char **buf
     if (*buf == NULL)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     return gdt_comm_recv(m->comm, from, tag, *buf, len, err);
+}
+
+void mr_wait_recv(mr_ctx *m, int from, int tag, unsigned char **buf, size_t *len)
+{
+    int ready = 0, got_from = 0, got_tag = 0;
+    gdt_error e;
+    gdt_status st;
+    gdt_error_clear(&e);
+    *buf = NULL;
+    st = gdt_comm_wait(m->comm, from, tag, NULL, &ready, &got_from, &got_tag, len, &e);
+    if (st == GDT_OK)
+        st = mr_recv(m, from, tag, *len, buf, &e);
+    if (st != GDT_OK) {
+        gdt_error_print(&e, stderr);
+        gdt_comm_abort(m->comm, (int)st);
+    }
 }
 
 gdt_status mr_bad_message(int from, int tag, gdt_error *err)

@@ -69,7 +69,6 @@ static gdt_status p1_collect(void *ctx, gdt_status own, gdt_error *err)
     if (m->p1_kept != NULL)
         m->p1_kept[0] = gdt_cloud_total_counts(m->c->cloud).kept;
     for (int r = 1; r < m->size; r++) {
-        int ready = 0, from = 0, tag = 0;
         size_t len = 0, ml = 0, pl = 0;
         unsigned char *buf = NULL;
         const unsigned char *msg, *part;
@@ -77,16 +76,7 @@ static gdt_status p1_collect(void *ctx, gdt_status own, gdt_error *err)
         gdt_status rst;
         int code;
         gdt_unpack u;
-        gdt_error e2;
-        gdt_status s2;
-        gdt_error_clear(&e2);
-        s2 = gdt_comm_wait(m->comm, r, TAG_P1DONE, NULL, &ready, &from, &tag, &len, &e2);
-        if (s2 == GDT_OK)
-            s2 = mr_recv(m, r, TAG_P1DONE, len, &buf, &e2);
-        if (s2 != GDT_OK) {
-            gdt_error_print(&e2, stderr);
-            gdt_comm_abort(m->comm, (int)s2);
-        }
+        mr_wait_recv(m, r, TAG_P1DONE, &buf, &len);
         memset(&u, 0, sizeof u);
         u.p = buf;
         u.n = len;

@@ -2,8 +2,9 @@
  * private/mpi_run.h): a scheduler over the stages of private/stages.h.
  *
  * Protocol (tags below; every message is a gdt_pack of u64 fields):
- *   rank 0: tr_run_init .. tr_run_output_start, exactly as a single
- *     process (the job's lock, journal, pass 1, pass 2, mesh writer);
+ *   rank 0: tr_run_init .. tr_run_output_start, as a single process
+ *     (the job's lock, journal, pass 1, pass 2, mesh writer), the passes
+ *     shared through the hooks of mpi_pass1.c, mpi_spill.c, mpi_pass2.c;
  *     then GO to every other rank: the run's status so far, and when it is
  *     GDT_OK the job's id, the tiler's state and the rank's tiles with
  *     their journal records.
@@ -21,9 +22,10 @@
  * 0 recorded stays in the journal, and a rerun with any number of ranks
  * resumes from it.  The output does not depend on the number of ranks:
  * every tile's file is the same whoever computes it, and rank 0 writes the
- * mesh from the files in tile order.  The shared pass 2 (PLAN, RECS,
- * RECDATA, FILES) is in mpi_pass2.c; private/mpi_sched.h holds what the
- * files share. */
+ * mesh from the files in tile order.  The shared passes (P1, P1DONE;
+ * PLAN, SPILL, P2FAIL, RECS, RECDATA, FILES) are in mpi_pass1.c,
+ * mpi_spill.c and mpi_pass2.c; private/mpi_sched.h holds what the files
+ * share. */
 #include "private/mpi_run.h"
 
 #include <inttypes.h>

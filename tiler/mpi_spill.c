@@ -414,22 +414,22 @@ static gdt_status p2_spill(void *ctx, int *whole, gdt_error *err)
             gdt_cloud_add_counts(c->cloud, i, &m->p1_counts[i]);
     if (failed > 0) {
         /* another rank failed (st says so): it says why */
-        int ready = 0, from = 0, tag = 0;
         size_t len = 0;
         unsigned char *buf = NULL;
         char text[GDT_ERROR_MSG_MAX];
-        gdt_error e2;
-        gdt_status s2;
-        gdt_error_clear(&e2);
-        s2 = gdt_comm_wait(m->comm, failed, TAG_P2FAIL, NULL, &ready, &from, &tag, &len, &e2);
-        if (s2 == GDT_OK)
-            s2 = mr_recv(m, failed, TAG_P2FAIL, len, &buf, &e2);
-        if (s2 != GDT_OK) {
-            gdt_error_print(&e2, stderr);
-            gdt_comm_abort(m->comm, (int)s2);
-        }
-        snprintf(text, sizeof text, "%.*s", (int)(len < sizeof text ? len : sizeof text - 1),
-                 (const char *)buf);
+        gdt_unpack u;
+        const unsigned char *msg;
+        size_t ml = 0;
+        mr_wait_recv(m, failed, TAG_P2FAIL, &buf, &len);
+        memset(&u, 0, sizeof u);
+        u.p = buf;
+        u.n = len;
+        msg = gdt_unpack_bytes(&u, &ml); /* as gdt_pack_bytes wrote it */
+        if (u.bad)
+            snprintf(text, sizeof text, "failed in pass 2 (its message did not parse)");
+        else
+            snprintf(text, sizeof text, "%.*s",
+                     (int)(ml < sizeof text ? ml : sizeof text - 1), (const char *)msg);
         free(buf);
         mr_fail(m, failed, st, err->code, text);
         *err = m->job_err;

@@ -51,16 +51,9 @@ static gdt_status append_file(int out, const char *dst, int in, const char *src,
         } else {
             n = read(in, buf, sizeof buf);
             if (n > 0) {
-                ssize_t w = 0;
-                while (w < n) {
-                    ssize_t q = write(out, buf + w, (size_t)(n - w));
-                    if (q < 0 && errno == EINTR)
-                        continue;
-                    if (q <= 0)
-                        return gdt_error_set(err, GDT_EIO, 4503, "cannot write %s: %s", dst,
-                                             q < 0 ? strerror(errno) : "no space written");
-                    w += q;
-                }
+                gdt_status st = tl_write_all(out, buf, (size_t)n, dst, err);
+                if (st != GDT_OK)
+                    return st;
             }
         }
         if (n < 0 && errno == EINTR)

@@ -59,8 +59,8 @@ gdt_status tl_wfile_init_buf(tl_wfile *w, const char *tmp_path, const char *fina
     return wfile_init(w, tmp_path, final_path, buf, cap, durable, err);
 }
 
-static gdt_status write_all(int fd, const unsigned char *p, size_t len, const char *path,
-                            gdt_error *err)
+gdt_status tl_write_all(int fd, const unsigned char *p, size_t len, const char *path,
+                        gdt_error *err)
 {
     while (len > 0) {
         ssize_t w = write(fd, p, len);
@@ -96,7 +96,7 @@ gdt_status tl_wfile_flush(tl_wfile *w, gdt_error *err)
     }
     if (w->hashed)
         gdt_hash_wide_update(&w->hash, w->buf, w->len * TL_REC);
-    st = write_all(w->fd, w->buf, w->len * TL_REC, w->tmp_path, err);
+    st = tl_write_all(w->fd, w->buf, w->len * TL_REC, w->tmp_path, err);
     w->len = 0;
     return st;
 }

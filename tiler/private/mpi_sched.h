@@ -66,6 +66,11 @@ gdt_status mr_send_pack(mr_ctx *m, int dest, int tag, gdt_pack *p, gdt_error *er
 gdt_status mr_recv(mr_ctx *m, int from, int tag, size_t len, unsigned char **buf,
                    gdt_error *err);
 
+/* Waits (without spinning) for the message with tag from rank from and
+ * receives it (*buf malloc'd, *len); ends the job (gdt_comm_abort) when
+ * the messages fail: the protocol cannot go on without it. */
+void mr_wait_recv(mr_ctx *m, int from, int tag, unsigned char **buf, size_t *len);
+
 /* GDT_EINTERNAL 7952: a message that does not parse. */
 gdt_status mr_bad_message(int from, int tag, gdt_error *err);
 

@@ -154,6 +154,11 @@ gdt_status tl_file_sum(const char *path, uint64_t seed, uint64_t *size, uint64_t
 /* fsync of a directory (after renames); GDT_EIO 4505. */
 gdt_status tl_sync_dir(const char *dir, gdt_error *err);
 
+/* Writes all len bytes of p to fd (retrying short writes and EINTR).
+ * returns: GDT_EIO 4503 naming path. */
+gdt_status tl_write_all(int fd, const unsigned char *p, size_t len, const char *path,
+                        gdt_error *err);
+
 /* malloc'd "%s/%s" style path; NULL when out of memory. */
 char *tl_path(const char *fmt, ...)
 #if defined(__GNUC__)
