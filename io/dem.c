@@ -49,6 +49,7 @@ struct gdt_dem {
     uint64_t tick;
     int64_t last_block;    /* the slot of the last block used, a fast path */
     size_t last_slot;
+    int cells_aligned;     /* cells is page-aligned memory of its own (posix_memalign) */
     uint32_t *xfer;        /* one block read back during gdt_dem_finish */
     gdt_dem_stats stats;
 };
@@ -163,14 +164,16 @@ static gdt_status scratch_io(gdt_dem *w, int writing, int64_t b, uint32_t *buf, 
  * or reloaded), so it is faulted in once per slot; 2 MiB pages where the
  * kernel offers them on request (transparent huge pages in "madvise"
  * mode) make that 512 times fewer faults.  Released with free(). */
-static uint32_t *cells_alloc(size_t bytes)
+static uint32_t *cells_alloc(size_t bytes, int *aligned)
 {
     enum { HUGE = 2u << 20 };
     void *p = NULL;
+    *aligned = 0;
     if (bytes < HUGE)
         return malloc(bytes);
     if (posix_memalign(&p, HUGE, bytes) != 0)
         return NULL;
+    *aligned = 1;
 #ifdef MADV_HUGEPAGE
     (void)madvise(p, bytes, MADV_HUGEPAGE); /* advice only: no huge pages is fine */
 #endif
@@ -227,7 +230,7 @@ gdt_status gdt_dem_create(gdt_dem **out, const gdt_dem_geo *geo, const char *pat
         w->preview = dup_str(opts->preview);
         w->preview_tmp = gdt_outfile_temp(opts->preview);
     }
-    w->cells = cells_alloc(w->nslots * BLOCK_BYTES);
+    w->cells = cells_alloc(w->nslots * BLOCK_BYTES, &w->cells_aligned);
     w->slot_block = malloc(w->nslots * sizeof *w->slot_block);
     w->slot_tick = calloc(w->nslots, sizeof *w->slot_tick);
     w->hkey = malloc(hcap * sizeof *w->hkey);
@@ -365,12 +368,13 @@ static gdt_status next_block(void *ctx, int64_t bx, int64_t by, float *buf, int 
     gdt_dem *w = ctx;
     int64_t b = by * w->bcols + bx;
     const uint32_t *src;
-    size_t s;
-    int any = 0;
+    size_t s = 0;
+    int any = 0, cached = 0;
     float nd = (float)w->nodata;
 
     if (map_find(w, b, &s)) {
         src = w->cells + s * BLOCK_CELLS;
+        cached = 1;
     } else if (is_spilled(w, b)) {
         gdt_status st = scratch_io(w, 0, b, w->xfer, err);
         if (st != GDT_OK)
@@ -392,6 +396,12 @@ static gdt_status next_block(void *ctx, int64_t bx, int64_t by, float *buf, int 
     *empty = !any;
     if (any)
         w->stats.blocks_written++;
+#ifdef MADV_DONTNEED
+    /* each block is asked for once: its memory goes back now, so that an
+     * in-memory intermediate grows as the cache shrinks */
+    if (cached && w->cells_aligned)
+        (void)madvise(w->cells + s * BLOCK_CELLS, BLOCK_BYTES, MADV_DONTNEED);
+#endif
     return GDT_OK;
 }
 
@@ -454,26 +464,42 @@ gdt_status gdt_dem_finish(gdt_dem *w, gdt_dem_stats *stats, gdt_error *err)
     uint64_t gdal_cache = w->mem_budget / 2;
     int fd;
 
+    /* The intermediate raster in memory when the cache holds every block
+     * (it never spilled): it grows as the cache gives its blocks back, by
+     * a third more for the overviews; else a GeoTIFF in the scratch
+     * directory. */
+    const int in_memory = w->nblocks <= (int64_t)w->nslots;
+    void *mem_ds = NULL;
+
     w->xfer = malloc(BLOCK_BYTES);
-    w->tiles_path = with_suffix(w->scratch_dir, "/gdt-dem-tiles-%ld-XXXXXX", (long)getpid());
-    if (w->xfer == NULL || w->tiles_path == NULL) {
+    if (w->xfer == NULL) {
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         goto done;
     }
-    fd = mkstemp(w->tiles_path);
-    if (fd < 0) {
-        st = gdt_error_set(err, GDT_EIO, 4650, "%s: cannot create a scratch file in %s: %s",
-                           w->path, w->scratch_dir, strerror(errno));
-        free(w->tiles_path);
-        w->tiles_path = NULL;
-        goto done;
+    if (!in_memory) {
+        w->tiles_path = with_suffix(w->scratch_dir, "/gdt-dem-tiles-%ld-XXXXXX",
+                                    (long)getpid());
+        if (w->tiles_path == NULL) {
+            st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+            goto done;
+        }
+        fd = mkstemp(w->tiles_path);
+        if (fd < 0) {
+            st = gdt_error_set(err, GDT_EIO, 4650, "%s: cannot create a scratch file in %s: %s",
+                               w->path, w->scratch_dir, strerror(errno));
+            free(w->tiles_path);
+            w->tiles_path = NULL;
+            goto done;
+        }
+        close(fd);
     }
-    close(fd);
     st = gdt_dem_gdal_tiles(&w->geo, w->nodata, w->epsg, w->wkt, w->tiles_path, gdal_cache,
-                            next_block, w, err);
+                            next_block, w, &mem_ds, err);
     free_cache(w);
     if (st == GDT_OK)
-        st = gdt_dem_gdal_cog(w->tiles_path, w->tmp_path, w->path, gdal_cache, err);
+        st = gdt_dem_gdal_cog(w->tiles_path, mem_ds, w->tmp_path, w->path, gdal_cache, err);
+    else
+        gdt_dem_gdal_discard(mem_ds);
     remove_tiles(w);
     if (st == GDT_OK)
         st = publish(w->tmp_path, w->path, err);

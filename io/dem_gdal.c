@@ -181,8 +181,10 @@ static gdt_status block_overviews(GDALRasterBandH band, int levels, const float 
 
 gdt_status gdt_dem_gdal_tiles(const gdt_dem_geo *geo, double nodata, int epsg, const char *wkt,
                               const char *tiles_path, uint64_t gdal_cache, gdt_dem_block_fn fn,
-                              void *ctx, gdt_error *err)
+                              void *ctx, void **mem_ds, gdt_error *err)
 {
+    const int in_memory = tiles_path == NULL;
+    const char *name = in_memory ? "the in-memory DEM" : tiles_path;
     gdal_scope scope;
     GDALDriverH drv;
     GDALDatasetH ds = NULL;
@@ -217,22 +219,28 @@ gdt_status gdt_dem_gdal_tiles(const gdt_dem_geo *geo, double nodata, int epsg, c
             goto done;
         }
     }
-    drv = GDALGetDriverByName("GTiff");
+    if (mem_ds != NULL)
+        *mem_ds = NULL;
+    drv = GDALGetDriverByName(in_memory ? "MEM" : "GTiff");
     if (drv == NULL) {
-        st = gdal_fail(err, tiles_path, "find its GTiff driver");
+        st = gdal_fail(err, name, in_memory ? "find its MEM driver" : "find its GTiff driver");
         goto done;
     }
-    co = CSLSetNameValue(co, "TILED", "YES");
-    co = CSLSetNameValue(co, "BLOCKXSIZE", "512");
-    co = CSLSetNameValue(co, "BLOCKYSIZE", "512");
-    /* uncompressed: it is read once, by the COG step, and compressing it
-     * too cost as much as the final compression (empty blocks stay sparse) */
-    co = CSLSetNameValue(co, "COMPRESS", "NONE");
-    co = CSLSetNameValue(co, "BIGTIFF", "YES");
-    co = CSLSetNameValue(co, "SPARSE_OK", "TRUE");
-    ds = GDALCreate(drv, tiles_path, (int)geo->ncols, (int)geo->nrows, 1, GDT_Float32, co);
+    if (!in_memory) {
+        co = CSLSetNameValue(co, "TILED", "YES");
+        co = CSLSetNameValue(co, "BLOCKXSIZE", "512");
+        co = CSLSetNameValue(co, "BLOCKYSIZE", "512");
+        /* uncompressed: it is read once, by the COG step, and compressing
+         * it too cost as much as the final compression (empty blocks stay
+         * sparse) */
+        co = CSLSetNameValue(co, "COMPRESS", "NONE");
+        co = CSLSetNameValue(co, "BIGTIFF", "YES");
+        co = CSLSetNameValue(co, "SPARSE_OK", "TRUE");
+    }
+    ds = GDALCreate(drv, in_memory ? "" : tiles_path, (int)geo->ncols, (int)geo->nrows, 1,
+                    GDT_Float32, co);
     if (ds == NULL) {
-        st = gdal_fail(err, tiles_path, "create the intermediate GeoTIFF");
+        st = gdal_fail(err, name, "create the intermediate raster");
         goto done;
     }
     gt[0] = geo->west;
@@ -244,8 +252,10 @@ gdt_status gdt_dem_gdal_tiles(const gdt_dem_geo *geo, double nodata, int epsg, c
     band = GDALGetRasterBand(ds, 1);
     if (GDALSetGeoTransform(ds, gt) != CE_None ||
         (srs != NULL && GDALSetSpatialRef(ds, srs) != CE_None) ||
-        GDALSetRasterNoDataValue(band, nodata) != CE_None) {
-        st = gdal_fail(err, tiles_path, "set the georeferencing");
+        GDALSetRasterNoDataValue(band, nodata) != CE_None ||
+        /* what GDAL reads back from the GeoTIFF's raster type key */
+        (in_memory && GDALSetMetadataItem(ds, "AREA_OR_POINT", "Area", NULL) != CE_None)) {
+        st = gdal_fail(err, name, "set the georeferencing");
         goto done;
     }
     buf = malloc((size_t)GDT_DEM_BLOCK * GDT_DEM_BLOCK * sizeof *buf);
@@ -271,9 +281,21 @@ gdt_status gdt_dem_gdal_tiles(const gdt_dem_geo *geo, double nodata, int epsg, c
         }
         /* "NONE": the levels are created empty; block_overviews fills them */
         if (GDALBuildOverviews(ds, "NONE", levels, factors, 0, NULL, NULL, NULL) != CE_None) {
-            st = gdal_fail(err, tiles_path, "create the overviews of the intermediate GeoTIFF");
+            st = gdal_fail(err, name, "create the overviews of the intermediate raster");
             goto done;
         }
+    }
+    /* a MEM raster starts as zeros: cells never written must read nodata,
+     * as the sparse GeoTIFF's missing blocks do (the full resolution gets
+     * its empty blocks below, block by block, as the cache lets them go) */
+    if (in_memory) {
+        for (int k = 1; k <= levels && st == GDT_OK; k++) {
+            GDALRasterBandH b = GDALGetOverview(band, k - 1);
+            if (b == NULL || GDALFillRaster(b, nodata, 0.0) != CE_None)
+                st = gdal_fail(err, name, "fill the intermediate raster with nodata");
+        }
+        if (st != GDT_OK)
+            goto done;
     }
     ndf = (float)nodata;
     memcpy(&nd_bits, &ndf, sizeof nd_bits);
@@ -284,23 +306,28 @@ gdt_status gdt_dem_gdal_tiles(const gdt_dem_geo *geo, double nodata, int epsg, c
             int w = (int)(geo->ncols - x < GDT_DEM_BLOCK ? geo->ncols - x : GDT_DEM_BLOCK);
             int h = (int)(geo->nrows - y < GDT_DEM_BLOCK ? geo->nrows - y : GDT_DEM_BLOCK);
             st = fn(ctx, bx, by, buf, &empty, err);
-            if (st != GDT_OK || empty)
+            if (st != GDT_OK || (empty && !in_memory))
                 continue;
+            if (empty)
+                for (size_t i = 0; i < (size_t)GDT_DEM_BLOCK * GDT_DEM_BLOCK; i++)
+                    buf[i] = ndf;
             if (GDALRasterIO(band, GF_Write, (int)x, (int)y, w, h, buf, w, h, GDT_Float32, 0,
                              (int)(GDT_DEM_BLOCK * sizeof *buf)) != CE_None)
-                st = gdal_fail(err, tiles_path, "write a block of the intermediate GeoTIFF");
-            else if (levels > 0)
+                st = gdal_fail(err, name, "write a block of the intermediate raster");
+            else if (levels > 0 && !empty)
                 st = block_overviews(band, levels, buf, w, h, bx, by, nd_bits, ndf, geo, &ow,
-                                     tiles_path, err);
+                                     name, err);
         }
 done:
-    if (ds != NULL) {
+    if (ds != NULL && in_memory && st == GDT_OK && mem_ds != NULL) {
+        *mem_ds = ds; /* for gdt_dem_gdal_cog */
+    } else if (ds != NULL) {
         GDALFlushCache(ds);
         if (st == GDT_OK && CPLGetLastErrorType() >= CE_Failure)
-            st = gdal_fail(err, tiles_path, "write the intermediate GeoTIFF");
+            st = gdal_fail(err, name, "write the intermediate GeoTIFF");
         GDALClose(ds);
         if (st == GDT_OK && CPLGetLastErrorType() >= CE_Failure)
-            st = gdal_fail(err, tiles_path, "complete the intermediate GeoTIFF");
+            st = gdal_fail(err, name, "complete the intermediate GeoTIFF");
     }
     free(buf);
     for (int q = 0; q < 2; q++) {
@@ -315,8 +342,14 @@ done:
     return st;
 }
 
-gdt_status gdt_dem_gdal_cog(const char *tiles_path, const char *tmp_path, const char *path,
-                            uint64_t gdal_cache, gdt_error *err)
+void gdt_dem_gdal_discard(void *mem_ds)
+{
+    if (mem_ds != NULL)
+        GDALClose((GDALDatasetH)mem_ds);
+}
+
+gdt_status gdt_dem_gdal_cog(const char *tiles_path, void *mem_ds, const char *tmp_path,
+                            const char *path, uint64_t gdal_cache, gdt_error *err)
 {
     gdal_scope scope;
     GDALDriverH drv;
@@ -327,10 +360,12 @@ gdt_status gdt_dem_gdal_cog(const char *tiles_path, const char *tmp_path, const 
     scope_enter(&scope, gdal_cache);
     drv = GDALGetDriverByName("COG");
     if (drv == NULL) {
+        gdt_dem_gdal_discard(mem_ds);
         st = gdal_fail(err, path, "find its COG driver (GDAL 3.1 or later is needed)");
         goto done;
     }
-    src = GDALOpen(tiles_path, GA_ReadOnly);
+    src = mem_ds != NULL ? (GDALDatasetH)mem_ds : GDALOpen(tiles_path, GA_ReadOnly);
+    mem_ds = NULL; /* src now */
     if (src == NULL) {
         st = gdal_fail(err, path, "open the intermediate GeoTIFF");
         goto done;

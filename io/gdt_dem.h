@@ -18,12 +18,15 @@
  *     the scratch file a cell is the bits of its float32 value plus one, so
  *     all-zero bytes (a hole of the sparse file) decode as "not written";
  *   - gdt_dem_finish writes every block exactly once, in row-major block
- *     order, to an intermediate tiled GeoTIFF in scratch_dir (blocks that
- *     are all nodata are left out: sparse) with its overview levels, each
+ *     order, to an intermediate raster with its overview levels, each
  *     block's part of every level computed from the block as it is written
- *     (dem_gdal.c), frees the cache, and lets GDAL's COG driver (at most
- *     mem_budget / 2 of GDAL block cache) copy it, overviews included, to
- *     PATH.tmp-PID beside PATH; that file is fsync'd and
+ *     (dem_gdal.c): when the cache holds every block, an in-memory raster
+ *     of GDAL's MEM driver that grows as the cache gives each block back;
+ *     else a tiled GeoTIFF in scratch_dir (blocks that are all nodata are
+ *     left out: sparse).  It frees the cache, and lets GDAL's COG driver
+ *     (at most mem_budget / 2 of GDAL block cache) copy the intermediate,
+ *     overviews included, to PATH.tmp-PID beside PATH (the same bytes from
+ *     either intermediate); that file is fsync'd and
  *     renamed over PATH, so a file at PATH is complete; the scratch files
  *     are removed whatever happens;
  *   - with a preview path, a shaded-relief PNG of the DEM (GDAL's

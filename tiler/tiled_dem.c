@@ -60,7 +60,7 @@ struct tr_dem {
     int pending;   /* helpers still working on job gen */
     int stop;
     int helpers;   /* started helper threads */
-    const gdt_point *pts;
+    const gdt_raster_vertex *pts;
     size_t npts, m;
     uint64_t base;
     const int32_t *tri;
@@ -113,7 +113,7 @@ static gdt_status batch_put(void *ctx, int64_t row, int64_t col, int64_t n, cons
 }
 
 /* Rasterises faces [lo, hi) of tri through batch b. */
-static gdt_status raster_range(tr_dem *d, td_batch *b, const gdt_point *pts, size_t n,
+static gdt_status raster_range(tr_dem *d, td_batch *b, const gdt_raster_vertex *pts, size_t n,
                                uint64_t base, const int32_t *tri, size_t lo, size_t hi,
                                gdt_error *err)
 {
@@ -129,9 +129,7 @@ static gdt_status raster_range(tr_dem *d, td_batch *b, const gdt_point *pts, siz
                                    (int)tri[3 * f + (size_t)i], base, base + n - 1);
                 break;
             }
-            v[i].x = pts[k].x;
-            v[i].y = pts[k].y;
-            v[i].z = pts[k].z;
+            v[i] = pts[k];
         }
         if (st == GDT_OK)
             st = gdt_raster_triangle(&d->grid, NULL, v, batch_put, b, err);
@@ -272,7 +270,7 @@ gdt_status tr_dem_create(tr_dem **out, const gdt_options *opts, const gdt_cloud_
     return GDT_OK;
 }
 
-gdt_status tr_dem_tile_faces(tr_dem *d, const gdt_point *pts, size_t n, uint64_t base,
+gdt_status tr_dem_tile_faces(tr_dem *d, const gdt_raster_vertex *pts, size_t n, uint64_t base,
                              const int32_t *tri, size_t m, gdt_error *err)
 {
     gdt_status st;

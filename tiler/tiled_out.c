@@ -43,7 +43,8 @@ struct tr_out {
     unsigned char *raw;   /* 12 TR_CHUNK */
     unsigned char *rbuf;  /* TL_REC TR_CHUNK: the .pts reads, one buffer for every file */
     uint8_t *drop;        /* TR_CHUNK marks: faces trimmed */
-    gdt_point *tile_pts;  /* with a DEM: the points of the tile whose faces are copied */
+    gdt_raster_vertex *tile_pts; /* with a DEM: the points of the tile whose faces are
+                                  * copied (24 bytes a point, not the 32 of a record) */
     size_t cap_tile_pts;
     unsigned char *mdem;  /* with a DEM: MD_RECORD TR_CHUNK bytes of merge.dem */
 };
@@ -191,11 +192,16 @@ static gdt_status load_tile_points(tr_out *o, const gdt_tile_desc *d, gdt_error 
         st = tl_rfile_open_buf(&rf, path, d->points, o->rbuf, TR_CHUNK, err);
     while (st == GDT_OK && n < d->points) {
         size_t m = 0;
-        st = tl_rfile_read(&rf, o->tile_pts + n, (size_t)d->points - n < TR_CHUNK
-                                                     ? (size_t)d->points - n : TR_CHUNK,
+        st = tl_rfile_read(&rf, o->pts, (size_t)d->points - n < TR_CHUNK
+                                            ? (size_t)d->points - n : TR_CHUNK,
                            &m, err);
         if (st == GDT_OK && m == 0)
             st = gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
+        for (size_t i = 0; i < m; i++) {
+            o->tile_pts[n + i].x = o->pts[i].x;
+            o->tile_pts[n + i].y = o->pts[i].y;
+            o->tile_pts[n + i].z = o->pts[i].z;
+        }
         n += m;
     }
     tl_rfile_close(&rf);

@@ -14,28 +14,38 @@
 
 /* Fills buf (GDT_DEM_BLOCK x GDT_DEM_BLOCK float32, row-major, stride
  * GDT_DEM_BLOCK) with block (bx, by); *empty = 1 when every cell is
- * nodata (buf is then not used). */
+ * nodata (buf is then not used).  Each block is asked for once. */
 typedef gdt_status (*gdt_dem_block_fn)(void *ctx, int64_t bx, int64_t by, float *buf,
                                        int *empty, gdt_error *err);
 
-/* Writes the intermediate tiled GeoTIFF tiles_path (512 x 512 tiles,
- * uncompressed, BIGTIFF, sparse: empty blocks are not written, with its
- * own overview levels, see dem_gdal.c): georeferencing, CRS (epsg, else wkt,
- * else none), nodata; then each block once, asked from fn in row-major
- * block order.  gdal_cache bounds GDAL's block cache (bytes).
+/* The intermediate raster the COG is copied from: the full resolution
+ * (512 x 512 blocks) with its own overview levels (see dem_gdal.c),
+ * georeferencing, CRS (epsg, else wkt, else none) and nodata, each block
+ * asked from fn once, in row-major block order.  Either a tiled GeoTIFF
+ * at tiles_path (uncompressed, BIGTIFF, sparse: empty blocks are not
+ * written), or, with tiles_path NULL, a dataset of GDAL's MEM driver (the
+ * whole raster and its overviews in memory; empty blocks are filled with
+ * nodata), returned in *mem_ds for gdt_dem_gdal_cog.  Both give the COG
+ * the same cells and the same georeferencing.  gdal_cache bounds GDAL's
+ * block cache (bytes).
  * returns: GDT_OK; fn's errors; GDT_EINPUT 3650 (the CRS is unknown to
- * GDAL); GDT_EIO 4652. */
+ * GDAL); GDT_EIO 4652; GDT_EINTERNAL 7001. */
 gdt_status gdt_dem_gdal_tiles(const gdt_dem_geo *geo, double nodata, int epsg, const char *wkt,
                               const char *tiles_path, uint64_t gdal_cache, gdt_dem_block_fn fn,
-                              void *ctx, gdt_error *err);
+                              void *ctx, void **mem_ds, gdt_error *err);
 
-/* Copies tiles_path to the COG tmp_path (DEFLATE level 1, floating-point
- * predictor, BIGTIFF=IF_SAFER, 512 x 512 tiles, the overviews of tiles_path,
- * or GDAL's averaged ones when it has none)
- * and fsyncs it; the caller renames it.  path names the output in
- * messages.  returns: GDT_OK; GDT_EIO 4652, 4653. */
-gdt_status gdt_dem_gdal_cog(const char *tiles_path, const char *tmp_path, const char *path,
-                            uint64_t gdal_cache, gdt_error *err);
+/* Copies the intermediate (mem_ds when not NULL, which it closes, else the
+ * file tiles_path) to the COG tmp_path (DEFLATE level 1, floating-point
+ * predictor, BIGTIFF=IF_SAFER, 512 x 512 tiles, the intermediate's
+ * overviews, or GDAL's averaged ones when it has none) and fsyncs it; the
+ * caller renames it.  path names the output in messages.
+ * returns: GDT_OK; GDT_EIO 4652, 4653. */
+gdt_status gdt_dem_gdal_cog(const char *tiles_path, void *mem_ds, const char *tmp_path,
+                            const char *path, uint64_t gdal_cache, gdt_error *err);
+
+/* Closes an intermediate of gdt_dem_gdal_tiles that was not copied; NULL
+ * is accepted. */
+void gdt_dem_gdal_discard(void *mem_ds);
 
 /* Writes the hillshade of the GeoTIFF dem_path, averaged down to at most
  * GDT_DEM_PREVIEW_MAX pixels on its long side, as the PNG tmp_path, and
