@@ -49,6 +49,8 @@ typedef struct cloud_input {
     gdt_cloud_input_map map;
     gdt_filter_counts counts; /* this pass so far */
     gdt_las_census *census;   /* this pass so far; opts.census only */
+    uint64_t *starts;         /* a chunked (LAZ) input: the records it can start at */
+    uint64_t nstarts;         /* (gdt_source_starts); 0 for other inputs */
 } cloud_input;
 
 struct gdt_cloud {
@@ -532,6 +534,13 @@ gdt_status gdt_cloud_open(gdt_cloud **out, const char *const *paths, size_t npat
         if (st != GDT_OK)
             goto fail;
         st = copy_info(ci, gdt_source_get_info(src), err);
+        if (st == GDT_OK && (ci->nstarts = gdt_source_starts(src, NULL, 0)) > 0) {
+            ci->starts = malloc(ci->nstarts * sizeof *ci->starts);
+            if (ci->starts == NULL)
+                st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+            else
+                gdt_source_starts(src, ci->starts, ci->nstarts);
+        }
         gdt_source_close(src);
         src = NULL;
         if (st != GDT_OK)
@@ -832,6 +841,44 @@ static int input_seekable(const cloud_input *ci)
     return ci->info.format == GDT_FORMAT_LAS && !ci->info.compressed;
 }
 
+/* 1 when input ci can be read from record r on, and up to it: its ends,
+ * any record of uncompressed LAS, the chunk starts of LAZ. */
+static int input_cuts_at(const cloud_input *ci, uint64_t r)
+{
+    uint64_t lo = 0, hi = ci->nstarts;
+    if (r == 0 || r >= ci->info.point_count || input_seekable(ci))
+        return 1;
+    while (lo < hi) { /* the first start >= r */
+        uint64_t mid = lo + (hi - lo) / 2;
+        if (ci->starts[mid] < r)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo < ci->nstarts && ci->starts[lo] == r;
+}
+
+/* The record nearest to r (0 <= r <= its count) where input ci can be
+ * cut (the upper one of two as near). */
+static uint64_t input_cut_near(const cloud_input *ci, uint64_t r)
+{
+    uint64_t n = ci->info.point_count, below = 0, above = n, lo = 0, hi = ci->nstarts;
+    if (input_seekable(ci))
+        return r;
+    while (lo < hi) { /* the first start > r */
+        uint64_t mid = lo + (hi - lo) / 2;
+        if (ci->starts[mid] <= r)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    if (lo > 0)
+        below = ci->starts[lo - 1];
+    if (lo < ci->nstarts)
+        above = ci->starts[lo];
+    return r - below < above - r ? below : above;
+}
+
 /* The records [*lo, *hi) of input i in the share; 0 when there are none. */
 static int share_of(const gdt_cloud *c, size_t i, uint64_t *lo, uint64_t *hi)
 {
@@ -855,13 +902,13 @@ gdt_status gdt_cloud_set_range(gdt_cloud *cloud, uint64_t first, uint64_t end,
                              "the cloud is empty the wrong way round", first, end);
     for (size_t i = 0; i < cloud->nin; i++) {
         uint64_t b = input_base(cloud, i), e = b + cloud->in[i].info.point_count;
-        if (input_seekable(&cloud->in[i]))
-            continue;
-        if ((first > b && first < e) || (end > b && end < e))
+        if ((first > b && first < e && !input_cuts_at(&cloud->in[i], first - b)) ||
+            (end > b && end < e && !input_cuts_at(&cloud->in[i], end - b)))
             return gdt_error_set(err, GDT_EINTERNAL, 7403,
-                                 "%s: a share of the cloud cannot start or end inside it "
-                                 "(it is read from its first record)",
-                                 cloud->in[i].path);
+                                 "%s: a share of the cloud cannot start or end there "
+                                 "(it is read from its first record%s)",
+                                 cloud->in[i].path,
+                                 cloud->in[i].nstarts > 0 ? " or a chunk's" : "");
     }
     cloud->ranged = !(first == 0 && end == UINT64_MAX);
     cloud->r_first = first;
@@ -876,7 +923,7 @@ int gdt_cloud_split(const gdt_cloud *cloud, int n, uint64_t *bounds)
     uint64_t total = input_base(cloud, cloud->nin);
     int ok = 1;
     for (size_t i = 0; i < cloud->nin; i++)
-        ok &= !cloud->in[i].info.compressed;
+        ok &= !cloud->in[i].info.compressed || cloud->in[i].nstarts > 1;
     bounds[0] = 0;
     for (int j = 1; j < n; j++) {
         /* floor(total * j / n) without overflow */
@@ -886,10 +933,8 @@ int gdt_cloud_split(const gdt_cloud *cloud, int n, uint64_t *bounds)
         size_t i = 0;
         while (i < cloud->nin && b + cloud->in[i].info.point_count <= t)
             b += cloud->in[i++].info.point_count;
-        if (i < cloud->nin && t > b && !input_seekable(&cloud->in[i])) {
-            uint64_t e = b + cloud->in[i].info.point_count;
-            t = t - b < e - t ? b : e;
-        }
+        if (i < cloud->nin && t > b)
+            t = b + input_cut_near(&cloud->in[i], t - b);
         bounds[j] = t > bounds[j - 1] ? t : bounds[j - 1];
     }
     bounds[n] = total;
@@ -933,8 +978,8 @@ gdt_status gdt_cloud_read(gdt_cloud *cloud, gdt_point *buf, size_t cap, size_t *
             cloud->cur_end = ci->info.point_count;
             if (st == GDT_OK && cloud->ranged) {
                 /* a share never replays: src is open */
-                if (lo > 0)
-                    st = gdt_source_seek(cloud->src, lo, &cloud->failed);
+                if (lo > 0 || hi < ci->info.point_count)
+                    st = gdt_source_seek(cloud->src, lo, hi, &cloud->failed);
                 cloud->cur_read = lo;
                 cloud->cur_end = hi;
             }
@@ -1047,6 +1092,7 @@ void gdt_cloud_close(gdt_cloud *cloud)
         free(cloud->in[i].wkt);
         free(cloud->in[i].desc);
         free(cloud->in[i].census);
+        free(cloud->in[i].starts);
     }
     free(cloud->in);
     free(cloud->crs_desc);

@@ -120,14 +120,24 @@ gdt_status gdt_source_read(gdt_source *src, gdt_src_point *buf, size_t cap, size
                            gdt_error *err);
 
 /* 1 when gdt_source_seek can start src at any record: an uncompressed LAS
- * file (fixed-size records).  LAZ (chunks) and PCD (text lines, or one
- * compressed block) are read from their first record only. */
+ * file (fixed-size records).  LAZ starts at its chunks (gdt_source_starts);
+ * PCD (text lines, or one compressed block) from its first record only. */
 int gdt_source_can_seek(const gdt_source *src);
 
+/* The records where a chunked source (LAZ with a chunk table) can start:
+ * the first record of each chunk, ascending (out[0] = 0), up to cap of
+ * them; returns their number, 0 for a source that starts at any record
+ * (gdt_source_can_seek) or only at its first. */
+uint64_t gdt_source_starts(const gdt_source *src, uint64_t *out, uint64_t cap);
+
 /* Makes record rec (0 <= rec <= point count) the next one read, before the
- * first read only.  returns: GDT_EINTERNAL 7102 (the format cannot, or rec is
- * out of range, or points were read already). */
-gdt_status gdt_source_seek(gdt_source *src, uint64_t rec, gdt_error *err);
+ * first read only, and says that no record at or after end is wanted (a
+ * LAZ source then decodes no chunk past the one holding end - 1; the
+ * caller stops reading there).  rec is any record of a source that can
+ * seek, or one of gdt_source_starts.  returns: GDT_EINTERNAL 7102 (the
+ * format cannot, or rec is out of range or not a start, or points were
+ * read already). */
+gdt_status gdt_source_seek(gdt_source *src, uint64_t rec, uint64_t end, gdt_error *err);
 
 /* Closes the file and frees everything; src may be NULL. */
 void gdt_source_close(gdt_source *src);

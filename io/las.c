@@ -604,20 +604,34 @@ static void las_close(gdt_source *src)
     src->impl = NULL;
 }
 
-/* Uncompressed records only (gdt_source_can_seek), before the first read. */
-static gdt_status las_seek(gdt_source *src, uint64_t rec, gdt_error *err)
+/* Before the first read: uncompressed records from any record; LAZ from
+ * the first record of a chunk, decoding only the chunks up to end. */
+static gdt_status las_seek(gdt_source *src, uint64_t rec, uint64_t end, gdt_error *err)
 {
     las_impl *im = src->impl;
-    if (im->laz != NULL || im->next_point != 0 || im->buf_len != 0)
+    if (im->next_point != 0 || im->buf_len != 0 || im->lrec_left != 0)
         return gdt_error_set(err, GDT_EINTERNAL, 7102,
                              "%s: seeking to point record %" PRIu64 " after reading", src->path,
                              rec);
+    if (im->laz != NULL) {
+        gdt_status st = gdt_laz_stream_seek(im->laz, rec, end, err);
+        if (st != GDT_OK)
+            return st;
+        im->next_point = rec;
+        return GDT_OK;
+    }
     im->next_point = rec;
     im->file_pos = im->points_start + rec * im->record_length;
     return GDT_OK;
 }
 
-static const gdt_source_vtable las_vtable = {las_read, las_close, las_seek};
+static uint64_t las_starts(const gdt_source *src, uint64_t *out, uint64_t cap)
+{
+    const las_impl *im = src->impl;
+    return im->laz != NULL ? gdt_laz_stream_starts(im->laz, out, cap) : 0;
+}
+
+static const gdt_source_vtable las_vtable = {las_read, las_close, las_seek, las_starts};
 
 /* LAZ: the records come from a LAZ stream over [offset to points,
  * points_end).  The LASzip VLR is required: without it the point data

@@ -1010,7 +1010,7 @@ fail:
     return st;
 }
 
-static const gdt_source_vtable pcd_vtable = {pcd_read, pcd_close, NULL};
+static const gdt_source_vtable pcd_vtable = {pcd_read, pcd_close, NULL, NULL};
 
 gdt_status gdt_pcd_open(gdt_source *src, gdt_error *err)
 {

@@ -168,13 +168,19 @@ int gdt_source_can_seek(const gdt_source *src)
     return src->vt->seek != NULL && !src->info.compressed && src->info.format == GDT_FORMAT_LAS;
 }
 
-gdt_status gdt_source_seek(gdt_source *src, uint64_t rec, gdt_error *err)
+uint64_t gdt_source_starts(const gdt_source *src, uint64_t *out, uint64_t cap)
 {
-    if (!gdt_source_can_seek(src) || rec > src->info.point_count)
+    return src->vt != NULL && src->vt->starts != NULL ? src->vt->starts(src, out, cap) : 0;
+}
+
+gdt_status gdt_source_seek(gdt_source *src, uint64_t rec, uint64_t end, gdt_error *err)
+{
+    if (src->vt->seek == NULL || rec > src->info.point_count ||
+        (!gdt_source_can_seek(src) && src->vt->starts == NULL))
         return gdt_error_set(err, GDT_EINTERNAL, 7102,
                              "%s: cannot start reading at point record %" PRIu64, src->path,
                              rec);
-    return src->vt->seek(src, rec, err);
+    return src->vt->seek(src, rec, end, err);
 }
 
 void gdt_source_close(gdt_source *src)

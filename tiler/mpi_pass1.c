@@ -1,9 +1,10 @@
 /* mpi_pass1.c — pass 1 shared between the ranks of an MPI job.
  *
  * Rank 0, its cloud open: the records are cut into one share per rank
- * (gdt_cloud_split: whole records of uncompressed LAS, whole inputs
- * otherwise; a cloud with a compressed input is read by rank 0 alone, whose
- * pass 1 decodes it once for pass 2 as well).  P1 tells rank r its share;
+ * (gdt_cloud_split: whole records of uncompressed LAS, whole chunks of
+ * LAZ, whole inputs otherwise; a cloud with a LAZ input that cannot be cut
+ * is read by rank 0 alone, whose pass 1 decodes it once for pass 2 as
+ * well).  P1 tells rank r its share;
  * each rank reads its own (rank 0 too) and answers P1DONE with its status
  * and what it read (gdt_tiler_pass1_part_export) with its count of kept
  * points (pass 2's ordinals start there); rank 0 takes every

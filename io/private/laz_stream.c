@@ -73,6 +73,10 @@ struct gdt_laz_stream {
     pthread_cond_t cv_work; /* a slot became free, or stop */
     pthread_cond_t cv_done; /* a slot became READY, FAILED or BIG */
     uint64_t next_claim;
+    /* gdt_laz_stream_seek: chunks end_chunk .. are never decoded, and the
+     * stream ends after record end_rec (the first record of end_chunk);
+     * nchunks and point_count without a seek */
+    uint64_t end_chunk, end_rec;
     int stop; /* close: workers return */
     int halt; /* a chunk failed: no more claims (the consumer stops there) */
 };
@@ -199,7 +203,7 @@ static void *lz_worker_main(void *arg)
     gdt_laz_stream *s = w->s;
 
     pthread_mutex_lock(&s->mu);
-    while (!s->stop && !s->halt && s->next_claim < s->nchunks) {
+    while (!s->stop && !s->halt && s->next_claim < s->end_chunk) {
         uint64_t k = s->next_claim;
         lz_slot *sl = &s->slots[k % s->nslots];
         if (sl->state != SLOT_FREE) {
@@ -249,11 +253,11 @@ static gdt_status lz_start_workers(gdt_laz_stream *s, gdt_error *err)
     unsigned want;
 
     s->started = 1;
-    if (s->p.threads <= 1 || !s->tab.present || s->nchunks < 2)
+    if (s->p.threads <= 1 || !s->tab.present || s->end_chunk - s->chunk < 2)
         return GDT_OK;
     want = (unsigned)s->p.threads;
-    if (want > s->nchunks)
-        want = (unsigned)s->nchunks;
+    if (want > s->end_chunk - s->chunk)
+        want = (unsigned)(s->end_chunk - s->chunk);
     {
         /* the slots' memory: 2 W times the largest chunk a slot takes */
         uint64_t largest = 0, per = GDT_LAZ_STREAM_SLOT_MAX / s->p.record_length;
@@ -373,7 +377,7 @@ gdt_status gdt_laz_stream_next(gdt_laz_stream *s, const unsigned char **recs, si
         return s->failed;
     }
     lz_release(s);
-    if (s->delivered == s->p.point_count) {
+    if (s->delivered >= s->end_rec) {
         lz_stop_workers(s);
         return GDT_OK;
     }
@@ -471,6 +475,8 @@ gdt_status gdt_laz_stream_open(gdt_laz_stream **out, const unsigned char *vlr, s
         goto fail;
     }
     s->next_start = p->points_start + 8;
+    s->end_chunk = s->nchunks;
+    s->end_rec = p->point_count;
     st = lz_check_table(s, err);
     if (st != GDT_OK)
         goto fail;
@@ -493,6 +499,58 @@ gdt_status gdt_laz_stream_open(gdt_laz_stream **out, const unsigned char *vlr, s
 fail:
     gdt_laz_stream_close(s);
     return st;
+}
+
+uint64_t gdt_laz_stream_starts(const gdt_laz_stream *s, uint64_t *out, uint64_t cap)
+{
+    uint64_t first = 0;
+    if (!s->tab.present)
+        return 0;
+    for (uint64_t k = 0; k < s->nchunks && k < cap; k++) {
+        out[k] = first;
+        first += s->tab.count[k];
+    }
+    return s->nchunks;
+}
+
+gdt_status gdt_laz_stream_seek(gdt_laz_stream *s, uint64_t first, uint64_t end, gdt_error *err)
+{
+    uint64_t k = 0, rec = 0;
+
+    if (s->started || s->delivered != 0)
+        return gdt_error_set(err, GDT_EINTERNAL, 7102,
+                             "%s: seeking to point record %" PRIu64 " after reading",
+                             s->p.path, first);
+    if (end > s->p.point_count)
+        end = s->p.point_count;
+    if (first > end)
+        first = end;
+    if (!s->tab.present) {
+        if (first != 0)
+            return gdt_error_set(err, GDT_EINTERNAL, 7102,
+                                 "%s: LAZ without a chunk table cannot start at point record "
+                                 "%" PRIu64, s->p.path, first);
+        return GDT_OK; /* read from the start; the reader stops at end */
+    }
+    while (k < s->nchunks && rec + s->tab.count[k] <= first)
+        rec += s->tab.count[k++];
+    if (rec != first && first != end)
+        return gdt_error_set(err, GDT_EINTERNAL, 7102,
+                             "%s: point record %" PRIu64 " does not start a LAZ chunk",
+                             s->p.path, first);
+    s->chunk = k;
+    s->next_claim = k;
+    s->delivered = first;
+    /* the chunks that hold [first, end) */
+    s->end_chunk = k;
+    s->end_rec = rec;
+    while (s->end_chunk < s->nchunks && s->end_rec < end)
+        s->end_rec += s->tab.count[s->end_chunk++];
+    if (first == end) {
+        s->end_chunk = s->chunk;
+        s->end_rec = s->delivered;
+    }
+    return GDT_OK;
 }
 
 void gdt_laz_stream_close(gdt_laz_stream *s)

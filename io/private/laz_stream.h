@@ -96,6 +96,21 @@ gdt_status gdt_laz_stream_open(gdt_laz_stream **out, const unsigned char *vlr, s
 gdt_status gdt_laz_stream_next(gdt_laz_stream *s, const unsigned char **recs, size_t *n,
                                gdt_error *err);
 
+/* The records where reading can start: the first record of every chunk
+ * of the table, ascending (out[0] = 0), up to cap of them; returns their
+ * number (0 without a table: the stream starts at record 0 only). */
+uint64_t gdt_laz_stream_starts(const gdt_laz_stream *s, uint64_t *out, uint64_t cap);
+
+/* Before the first read: the stream gives the records [first, end') of
+ * the file, first one of gdt_laz_stream_starts (or end, or 0) and end'
+ * the end of the chunk holding record end - 1 (end > point count: the
+ * last record); chunks outside them are never decoded.
+ * Without a table only first = 0 is possible, and every chunk up to the
+ * one holding record end - 1 is decoded (the caller stops reading there).
+ * returns: GDT_EINTERNAL 7102 (after a read; first not a chunk's first
+ * record; no table and first > 0). */
+gdt_status gdt_laz_stream_seek(gdt_laz_stream *s, uint64_t first, uint64_t end, gdt_error *err);
+
 /* Stops and joins the workers and frees everything; s may be NULL. */
 void gdt_laz_stream_close(gdt_laz_stream *s);
 

@@ -12,7 +12,9 @@ typedef struct gdt_source_vtable {
     void (*close)(gdt_source *src);
     /* Same contract as gdt_source_seek, 0 <= rec <= point count checked;
      * NULL where the format cannot start at a record. */
-    gdt_status (*seek)(gdt_source *src, uint64_t rec, gdt_error *err);
+    gdt_status (*seek)(gdt_source *src, uint64_t rec, uint64_t end, gdt_error *err);
+    /* Same contract as gdt_source_starts; NULL: none. */
+    uint64_t (*starts)(const gdt_source *src, uint64_t *out, uint64_t cap);
 } gdt_source_vtable;
 
 struct gdt_source {

@@ -117,7 +117,8 @@ def test_any_rank_count_writes_the_same_bytes(mpi_bin, clouds, tmp_path, case):
 def test_shared_pass2_out_of_core(mpi_bin, root, tmp_path):
     """A budget too small to hold the points: pass 2 spills to .raw files on
     the shared job directory (each rank its share, or rank 0 alone for a
-    LAZ input), and each tile's owner merges it from there."""
+    LAZ input that cannot be cut at chunks), and each tile's owner merges it
+    from there."""
     c = gen(root, tmp_path / "c.las", 300000, 8)
     args = ["--tile", "128", "--mem-budget", "16M"]
     ref = tmp_path / "ref.ply"
@@ -130,13 +131,22 @@ def test_shared_pass2_out_of_core(mpi_bin, root, tmp_path):
     # every rank spilled its share into .raw files of its own, joined by the owners
     assert "in shares of 3 ranks (each rank's .raw files)" in r.stderr, r.stderr
     assert out.read_bytes() == ref.read_bytes()
-    # a LAZ input: pass 1 stays with rank 0 (it decodes once), which spills alone
+    # a LAZ input of 6 chunks: each rank decodes whole chunks of its share,
+    # in both passes, and spills them into its own files
     laz = write_laz(c, tmp_path / "c.laz", chunk=50000)
     out2 = tmp_path / "o2.ply"
     r = mpirun(2, mpi_bin, [laz, "-o", out2, *args, "-v"])
     assert r.returncode == 0, r.stdout + r.stderr
-    assert "bucket levels" in r.stderr and "in shares" not in r.stderr, r.stderr
+    assert "in shares of 2 ranks (each rank's .raw files)" in r.stderr, r.stderr
     assert out2.read_bytes() == ref.read_bytes()
+    # one chunk cannot be cut: pass 1 stays with rank 0 (it decodes once,
+    # for pass 2 too), which spills alone
+    one = write_laz(c, tmp_path / "one.laz", chunk=400000)
+    out3 = tmp_path / "o3.ply"
+    r = mpirun(2, mpi_bin, [one, "-o", out3, *args, "-v"])
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "bucket levels" in r.stderr and "in shares" not in r.stderr, r.stderr
+    assert out3.read_bytes() == ref.read_bytes()
 
 
 def vdb_without_uuid(path):
@@ -146,14 +156,18 @@ def vdb_without_uuid(path):
     return b[:21] + b[57:]
 
 
-@pytest.mark.parametrize("case", ["cell-keep-class", "las-and-pcd"])
+@pytest.mark.parametrize("case", ["cell-keep-class", "las-and-pcd", "laz-chunks-keep-class"])
 def test_shared_pass1_plans_what_one_process_plans(mpi_bin, root, clouds, tmp_path, case):
-    """Pass 1 read in shares by the ranks (records of a LAS file, whole PCD
-    inputs) gives the index, the plan and the filter's counts of one process
-    reading everything, and so the same bytes."""
+    """Pass 1 read in shares by the ranks (records of a LAS file, whole
+    chunks of a LAZ file, whole PCD inputs) gives the index, the plan and
+    the filter's counts of one process reading everything, and so the same
+    bytes."""
     if case == "cell-keep-class":
         inputs = [clouds["a"], clouds["b"]]
         opts = ["--tile", "64", "--cell", "3", "--keep-class", "2,3,4,5"]
+    elif case == "laz-chunks-keep-class":
+        inputs = [clouds["laz"], clouds["b"]]  # 30000 points in chunks of 7000, then LAS
+        opts = ["--tile", "64", "--keep-class", "2,3,4,5"]
     else:
         pcd = tmp_path / "p.pcd"
         r = run([sys.executable, root / "scripts" / "gen_cloud.py", pcd, "--points", "9000",
@@ -175,7 +189,7 @@ def test_shared_pass1_plans_what_one_process_plans(mpi_bin, root, clouds, tmp_pa
                 if "tiler pass 1:" in ln]
         got[k] = (d, notes, plan, json.loads((d / "run.json").read_text()))
     d1, notes1, plan1, j1 = got[1]
-    if case == "cell-keep-class":
+    if "keep-class" in case:
         assert j1["filter"]["points_kept"] < j1["filter"]["points_read"]
     for k in (2, 3):
         d, notes, plan, j = got[k]

@@ -1,7 +1,8 @@
 /* src_read — benchmark and test tool: streams every point of one input
  * through gdt_source, as a run's passes do, and prints what it read.
  *
- *   src_read [--threads N] [--need xyz|attrs|class|flags|all] [--repeat K] FILE
+ *   src_read [--threads N] [--need xyz|attrs|class|flags|all] [--repeat K]
+ *            [--range FIRST END] [--starts] FILE
  *
  * Prints one line per repeat:
  *   points=N seconds=S checksum=HEX
@@ -11,6 +12,10 @@
  * readers that hand on different points or a different order disagree.
  * --need: xyz is GDT_SRC_NEED_XYZ alone, attrs (the default) adds class and
  * flags, as a run with filters reads.
+ * --range: only the records [FIRST, END), through gdt_source_seek (FIRST
+ * any record of uncompressed LAS, a chunk start of LAZ).
+ * --starts: prints the records a chunked source can start at, one line
+ * "starts=N" then the numbers, and reads nothing.
  * Exit status: the gdt_status of the first failure (3 bad input, 4 I/O, ...).
  */
 #include <inttypes.h>
@@ -51,8 +56,9 @@ static int parse_need(const char *s, unsigned *need)
     return 0;
 }
 
-/* Reads the whole file once; returns a gdt_status. */
-static int read_once(const char *path, const gdt_source_opts *opts, gdt_src_point *buf)
+/* Reads the file (or the records [first, end)) once; returns a gdt_status. */
+static int read_once(const char *path, const gdt_source_opts *opts, gdt_src_point *buf,
+                     int ranged, uint64_t first, uint64_t end)
 {
     gdt_error err;
     gdt_source *src = NULL;
@@ -63,11 +69,17 @@ static int read_once(const char *path, const gdt_source_opts *opts, gdt_src_poin
 
     gdt_error_clear(&err);
     st = gdt_source_open(&src, path, opts, &err);
+    if (st == GDT_OK && ranged)
+        st = gdt_source_seek(src, first, end, &err);
     for (;;) {
-        size_t n = 0;
+        size_t n = 0, want = READ_CHUNK;
         if (st != GDT_OK)
             break;
-        st = gdt_source_read(src, buf, READ_CHUNK, &n, &err);
+        if (ranged && want > end - first - count)
+            want = (size_t)(end - first - count);
+        if (want == 0)
+            break;
+        st = gdt_source_read(src, buf, want, &n, &err);
         if (st != GDT_OK || n == 0)
             break;
         for (size_t i = 0; i < n; i++) {
@@ -93,6 +105,35 @@ static int read_once(const char *path, const gdt_source_opts *opts, gdt_src_poin
     return 0;
 }
 
+/* Prints the records the source can start at; returns a gdt_status. */
+static int print_starts(const char *path, const gdt_source_opts *opts)
+{
+    gdt_error err;
+    gdt_source *src = NULL;
+    gdt_status st;
+    uint64_t n, *v;
+
+    gdt_error_clear(&err);
+    st = gdt_source_open(&src, path, opts, &err);
+    if (st != GDT_OK) {
+        gdt_error_print(&err, stderr);
+        return (int)st;
+    }
+    n = gdt_source_starts(src, NULL, 0);
+    v = malloc((n + 1) * sizeof *v);
+    if (v == NULL) {
+        gdt_source_close(src);
+        return 7;
+    }
+    gdt_source_starts(src, v, n);
+    printf("starts=%" PRIu64 "\n", n);
+    for (uint64_t i = 0; i < n; i++)
+        printf("%" PRIu64 "\n", v[i]);
+    free(v);
+    gdt_source_close(src);
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
     gdt_source_opts opts;
@@ -100,7 +141,8 @@ int main(int argc, char **argv)
     gdt_src_point *buf;
     const char *path = NULL;
     long repeat = 1;
-    int rc = 0;
+    int rc = 0, ranged = 0, starts = 0;
+    uint64_t first = 0, end = 0;
 
     memset(&opts, 0, sizeof opts);
     opts.need = GDT_SRC_NEED_XYZ | GDT_SRC_NEED_ATTRS;
@@ -115,17 +157,23 @@ int main(int argc, char **argv)
             }
         } else if (strcmp(argv[i], "--repeat") == 0 && i + 1 < argc) {
             repeat = atol(argv[++i]);
+        } else if (strcmp(argv[i], "--range") == 0 && i + 2 < argc) {
+            first = strtoull(argv[++i], NULL, 10);
+            end = strtoull(argv[++i], NULL, 10);
+            ranged = 1;
+        } else if (strcmp(argv[i], "--starts") == 0) {
+            starts = 1;
         } else if (argv[i][0] == '-' || path != NULL) {
             fprintf(stderr, "usage: src_read [--threads N] [--need xyz|class|flags|attrs] "
-                            "[--repeat K] FILE\n");
+                            "[--repeat K] [--range FIRST END] [--starts] FILE\n");
             return 2;
         } else {
             path = argv[i];
         }
     }
-    if (path == NULL || repeat < 1 || opts.threads < 1) {
+    if (path == NULL || repeat < 1 || opts.threads < 1 || (ranged && end < first)) {
         fprintf(stderr, "usage: src_read [--threads N] [--need xyz|class|flags|attrs] "
-                        "[--repeat K] FILE\n");
+                        "[--repeat K] [--range FIRST END] [--starts] FILE\n");
         return 2;
     }
     gdt_log_init(&log, 0);
@@ -133,8 +181,10 @@ int main(int argc, char **argv)
     buf = malloc(READ_CHUNK * sizeof *buf);
     if (buf == NULL)
         return 7;
-    for (long r = 0; r < repeat && rc == 0; r++)
-        rc = read_once(path, &opts, buf);
+    if (starts)
+        rc = print_starts(path, &opts);
+    for (long r = 0; r < repeat && rc == 0 && !starts; r++)
+        rc = read_once(path, &opts, buf, ranged, first, end);
     free(buf);
     return rc;
 }
