@@ -107,12 +107,12 @@ __kernel void p5_check(__global const int *tri, __global const int *opp,
             if (u < t && (all_active || inact[u] == round))
                 continue; /* the other side tests it */
             tested++;
-            int i1 = i == 2 ? 0 : i + 1, i2 = i == 0 ? 2 : i - 1;
-            int d = tri[3 * u + j];
             int flip = 0, undecided = 1;
 #if defined(GDT_X_HAVE_F64)
+            int d = tri[3 * u + j];
             if (!tfake && !gcd_is_fake(d, nreal)) {
                 /* edge a-b of the counter-clockwise (a, b, c) and (b, a, d) */
+                int i1 = i == 2 ? 0 : i + 1, i2 = i == 0 ? 2 : i - 1;
                 long ax = px[i1], ay = py[i1], bx = px[i2], by = py[i2];
                 long cx2 = px[i], cy2 = py[i], dx = pos[2 * d], dy = pos[2 * d + 1];
                 int s = gdt_x_incircle_filter_d(ax - dx, ay - dy, bx - dx, by - dy, cx2 - dx,

@@ -14,6 +14,28 @@ set(GDT_GCD_LSAN "LSAN_OPTIONS=suppressions=${GDT_GCD_LSAN_SUPP}:print_suppressi
 gdt_add_test_exe(gcd_kcompile ${CMAKE_CURRENT_SOURCE_DIR}/tools/gcd_kcompile.c)
 add_test(NAME kernels_compile COMMAND gcd_kcompile --kernel-dir ${GDT_KERNEL_DIR})
 set_tests_properties(kernels_compile PROPERTIES LABELS "gcd" SKIP_RETURN_CODE 77)
+
+# Portability to GPUs, without one: clang compiles every kernel for NVIDIA
+# PTX, AMD GCN/RDNA and SPIR, with and without fp64, warnings as errors
+# (scripts/check_kernels_portable.sh); planted kernels that a CPU device
+# accepts but a GPU target does not must fail it, each for the target named.
+find_program(GDT_CLANG NAMES clang clang-16 clang-15 clang-14)
+if(GDT_CLANG)
+  set(GDT_PORTABLE ${CMAKE_SOURCE_DIR}/scripts/check_kernels_portable.sh --clang ${GDT_CLANG})
+  add_test(NAME kernels_portable COMMAND ${GDT_PORTABLE} -q ${GDT_KERNEL_DIR})
+  add_test(NAME kernels_portable_planted_int128
+           COMMAND ${GDT_PORTABLE} -q ${CMAKE_CURRENT_SOURCE_DIR}/kernels_planted/int128)
+  add_test(NAME kernels_portable_planted_subgroup
+           COMMAND ${GDT_PORTABLE} -q ${CMAKE_CURRENT_SOURCE_DIR}/kernels_planted/subgroup)
+  set_tests_properties(kernels_portable_planted_int128 PROPERTIES
+                       PASS_REGULAR_EXPRESSION "FAIL planted.cl \\[spir64, fp64\\]")
+  set_tests_properties(kernels_portable_planted_subgroup PROPERTIES
+                       PASS_REGULAR_EXPRESSION "FAIL planted.cl \\[nvidia-ptx, fp64\\]")
+  set_tests_properties(kernels_portable kernels_portable_planted_int128
+                       kernels_portable_planted_subgroup PROPERTIES LABELS "gcd;nosanitize")
+else()
+  message(STATUS "clang not found: the kernel portability check (kernels_portable) is not built")
+endif()
 file(GLOB GDT_GCD_KERNEL_FILES CONFIGURE_DEPENDS ${GDT_KERNEL_DIR}/*.cl ${GDT_KERNEL_DIR}/*.clh)
 set(GDT_KCOMPILE_STAMP ${CMAKE_CURRENT_BINARY_DIR}/kernels_compiled.stamp)
 set(GDT_KCOMPILE_SCRIPT ${CMAKE_CURRENT_BINARY_DIR}/gcd_kcompile_step.cmake)
