@@ -835,10 +835,12 @@ static uint64_t input_base(const gdt_cloud *c, size_t i)
     return b;
 }
 
-/* 1 when input i can start at any record. */
+/* 1 when input i can start at any record (fixed-size records: uncompressed
+ * LAS, PCD binary; gdt_source_can_seek). */
 static int input_seekable(const cloud_input *ci)
 {
-    return ci->info.format == GDT_FORMAT_LAS && !ci->info.compressed;
+    return (ci->info.format == GDT_FORMAT_LAS && !ci->info.compressed) ||
+           (ci->info.format == GDT_FORMAT_PCD && strcmp(ci->info.encoding, "binary") == 0);
 }
 
 /* 1 when input ci can be read from record r on, and up to it: its ends,

@@ -196,8 +196,8 @@ const gdt_point_filter *gdt_cloud_filter(const gdt_cloud *cloud);
  * the share).  Set after gdt_cloud_open or gdt_cloud_rewind, or else the
  * cloud starts again (gdt_cloud_rewind); it holds over rewinds until set
  * again (0, UINT64_MAX, 0: the whole cloud).  Boundaries inside an input are allowed only where it can
- * start at a record: anywhere in uncompressed LAS, at the first record of
- * a chunk of LAZ (gdt_cloud_split puts them only there).  A share keeps
+ * start at a record: anywhere in uncompressed LAS and PCD binary, at the
+ * first record of a chunk of LAZ (gdt_cloud_split puts them only there).  A share keeps
  * no replay and gives no per-input notes: the caller sums the shares'
  * counts (gdt_cloud_add_counts) and reports them (gdt_cloud_report_counts).
  * Empty inputs belong to no share.  returns: GDT_EINTERNAL 7403 (first >
@@ -208,7 +208,7 @@ gdt_status gdt_cloud_set_range(gdt_cloud *cloud, uint64_t first, uint64_t end,
 /* Cuts the cloud's records into n >= 1 shares balanced by count:
  * bounds[0 .. n], bounds[0] = 0, bounds[n] = every record, nondecreasing;
  * a boundary inside an input only where it can start (any record of
- * uncompressed LAS, the nearest chunk start of LAZ), elsewhere at the
+ * uncompressed LAS or PCD binary, the nearest chunk start of LAZ), elsewhere at the
  * nearer end of the input.  Depends on the headers, the LAZ chunk tables
  * and n only.  returns 1, or 0 when the cloud is better read by one
  * process (a compressed input with fewer than two chunks in a table: its

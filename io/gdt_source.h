@@ -119,9 +119,10 @@ const char *gdt_source_path(const gdt_source *src);
 gdt_status gdt_source_read(gdt_source *src, gdt_src_point *buf, size_t cap, size_t *n,
                            gdt_error *err);
 
-/* 1 when gdt_source_seek can start src at any record: an uncompressed LAS
- * file (fixed-size records).  LAZ starts at its chunks (gdt_source_starts);
- * PCD (text lines, or one compressed block) from its first record only. */
+/* 1 when gdt_source_seek can start src at any record: fixed-size records
+ * (uncompressed LAS, PCD DATA binary).  LAZ starts at its chunks
+ * (gdt_source_starts); PCD ascii (text lines) and binary_compressed (one
+ * compressed block) from their first record only. */
 int gdt_source_can_seek(const gdt_source *src);
 
 /* The records where a chunked source (LAZ with a chunk table) can start:
@@ -132,8 +133,9 @@ uint64_t gdt_source_starts(const gdt_source *src, uint64_t *out, uint64_t cap);
 
 /* Makes record rec (0 <= rec <= point count) the next one read, before the
  * first read only, and says that no record at or after end is wanted (a
- * LAZ source then decodes no chunk past the one holding end - 1; the
- * caller stops reading there).  rec is any record of a source that can
+ * LAZ source then decodes no chunk past the one holding end - 1, and the
+ * caller stops reading there; a PCD binary source stops at end itself,
+ * since the records it skips for invalid coordinates are not points).  rec is any record of a source that can
  * seek, or one of gdt_source_starts.  returns: GDT_EINTERNAL 7102 (the
  * format cannot, or rec is out of range or not a start, or points were
  * read already). */

@@ -95,6 +95,8 @@ typedef struct pcd_reader {
     pcd_coord xyz[3];
     uint64_t npoints;  /* POINTS (== WIDTH * HEIGHT) */
     uint64_t next;     /* index of the next point record to decode */
+    uint64_t first, end; /* the records read: [0, npoints), or a binary
+                            file's range (pcd_seek) */
     uint64_t data_off; /* file offset of the first data byte */
     uint64_t file_size;
     /* ascii and binary read buffer: buf[pos .. len) not consumed yet */
@@ -753,7 +755,7 @@ static gdt_status pcd_binary_point(pcd_reader *r, double p[3], gdt_error *err)
 {
     const uint8_t *rec;
     if (r->pos == r->len) {
-        uint64_t left = (r->npoints - r->next) * r->record_size;
+        uint64_t left = (r->end - r->next) * r->record_size;
         size_t want = (r->cap / r->record_size) * r->record_size;
         if ((uint64_t)want > left)
             want = (size_t)left;
@@ -950,13 +952,19 @@ static gdt_status pcd_finish(pcd_reader *r, gdt_error *err)
         st = pcd_ascii_finish(r, err);
     else if (r->enc == PCD_COMPRESSED)
         st = pcd_compressed_finish(r, err);
+    /* (binary: its size was checked at open; a range has nothing after it) */
     if (st != GDT_OK)
         return st;
-    if (r->skipped > 0)
+    if (r->skipped > 0 && r->first == 0 && r->end == r->npoints)
         gdt_log_warn(r->log, 3250,
                      "%s: skipped %" PRIu64 " of %" PRIu64 " points whose x, y or z is NaN or "
                      "infinite (invalid points)",
                      r->path, r->skipped, r->npoints);
+    else if (r->skipped > 0)
+        gdt_log_warn(r->log, 3250,
+                     "%s: skipped %" PRIu64 " of the %" PRIu64 " points %" PRIu64 "..%" PRIu64
+                     " whose x, y or z is NaN or infinite (invalid points)",
+                     r->path, r->skipped, r->end - r->first, r->first, r->end - 1);
     r->finished = 1;
     return GDT_OK;
 }
@@ -971,7 +979,7 @@ static gdt_status pcd_read(gdt_source *src, gdt_src_point *buf, size_t cap, size
     if (r->failed != GDT_OK)
         return gdt_error_set(err, r->failed, gdt_error_code_in_class(r->failed, 299),
                              "%s: PCD reading already failed", r->path);
-    while (*n < cap && r->next < r->npoints) {
+    while (*n < cap && r->next < r->end) {
         double p[3];
         st = r->enc == PCD_ASCII    ? pcd_ascii_point(r, p, err)
              : r->enc == PCD_BINARY ? pcd_binary_point(r, p, err)
@@ -998,7 +1006,7 @@ static gdt_status pcd_read(gdt_source *src, gdt_src_point *buf, size_t cap, size
         buf[*n].cls = buf[*n].ret = buf[*n].nret = buf[*n].flags = 0;
         (*n)++;
     }
-    if (r->next == r->npoints && !r->finished) {
+    if (r->next == r->end && !r->finished) {
         st = pcd_finish(r, err);
         if (st != GDT_OK)
             goto fail;
@@ -1010,7 +1018,31 @@ fail:
     return st;
 }
 
-static const gdt_source_vtable pcd_vtable = {pcd_read, pcd_close, NULL, NULL};
+/* binary only (gdt_source_can_seek), before the first read: fixed-size
+ * records from data_off on, read from rec up to end (the reader stops
+ * there, so records with invalid coordinates it skips do not move the
+ * range). */
+static gdt_status pcd_seek(gdt_source *src, uint64_t rec, uint64_t end, gdt_error *err)
+{
+    pcd_reader *r = src->impl;
+    if (r->enc != PCD_BINARY || r->next != 0 || r->len != 0)
+        return gdt_error_set(err, GDT_EINTERNAL, 7102,
+                             "%s: PCD data cannot start at point record %" PRIu64 " (%s)",
+                             r->path, rec,
+                             r->enc != PCD_BINARY ? "only DATA binary can" : "after reading");
+    if (end > r->npoints)
+        end = r->npoints;
+    if (rec > end)
+        rec = end;
+    if (fseeko(r->f, (off_t)(r->data_off + rec * r->record_size), SEEK_SET) != 0)
+        return gdt_error_set(err, GDT_EIO, 4201, "%s: cannot seek: %s", r->path,
+                             strerror(errno));
+    r->first = r->next = rec;
+    r->end = end;
+    return GDT_OK;
+}
+
+static const gdt_source_vtable pcd_vtable = {pcd_read, pcd_close, pcd_seek, NULL};
 
 gdt_status gdt_pcd_open(gdt_source *src, gdt_error *err)
 {
@@ -1091,6 +1123,7 @@ gdt_status gdt_pcd_open(gdt_source *src, gdt_error *err)
              : r->enc == PCD_BINARY ? "binary"
                                     : "binary_compressed");
     in->point_count = r->npoints;
+    r->end = r->npoints;
     in->has_bounds = 0;
     in->has_lattice = 0;
     in->xy_is_float32 = (r->xyz[0].type == 'F' && r->xyz[0].size == 4) ||

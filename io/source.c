@@ -165,7 +165,9 @@ gdt_status gdt_source_read(gdt_source *src, gdt_src_point *buf, size_t cap, size
 
 int gdt_source_can_seek(const gdt_source *src)
 {
-    return src->vt->seek != NULL && !src->info.compressed && src->info.format == GDT_FORMAT_LAS;
+    return src->vt->seek != NULL && !src->info.compressed &&
+           (src->info.format == GDT_FORMAT_LAS ||
+            (src->info.format == GDT_FORMAT_PCD && strcmp(src->info.encoding, "binary") == 0));
 }
 
 uint64_t gdt_source_starts(const gdt_source *src, uint64_t *out, uint64_t cap)

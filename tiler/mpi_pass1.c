@@ -1,8 +1,8 @@
 /* mpi_pass1.c — pass 1 shared between the ranks of an MPI job.
  *
  * Rank 0, its cloud open: the records are cut into one share per rank
- * (gdt_cloud_split: whole records of uncompressed LAS, whole chunks of
- * LAZ, whole inputs otherwise; a cloud with a LAZ input that cannot be cut
+ * (gdt_cloud_split: whole records of uncompressed LAS and PCD binary,
+ * whole chunks of LAZ, whole inputs otherwise; a cloud with a LAZ input that cannot be cut
  * is read by rank 0 alone, whose pass 1 decodes it once for pass 2 as
  * well).  P1 tells rank r its share;
  * each rank reads its own (rank 0 too) and answers P1DONE with its status

@@ -156,10 +156,30 @@ def vdb_without_uuid(path):
     return b[:21] + b[57:]
 
 
-@pytest.mark.parametrize("case", ["cell-keep-class", "las-and-pcd", "laz-chunks-keep-class"])
+def write_binary_pcd(las_path, out, nan_every=0):
+    """The points of a LAS file as a PCD DATA binary file (x y z, F8), with
+    the x of every nan_every-th record NaN (records the reader skips)."""
+    import numpy as np
+    las = laspy_mod().read(str(las_path))
+    xyz = np.stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)], axis=1)
+    if nan_every:
+        xyz[3::nan_every, 0] = np.nan
+    n = len(xyz)
+    head = ("VERSION 0.7\nFIELDS x y z\nSIZE 8 8 8\nTYPE F F F\nCOUNT 1 1 1\n"
+            f"WIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA binary\n")
+    out.write_bytes(head.encode() + xyz.astype("<f8").tobytes())
+    return out
+
+
+def laspy_mod():
+    return pytest.importorskip("laspy")
+
+
+@pytest.mark.parametrize("case", ["cell-keep-class", "las-and-pcd", "laz-chunks-keep-class",
+                                  "pcd-binary-records"])
 def test_shared_pass1_plans_what_one_process_plans(mpi_bin, root, clouds, tmp_path, case):
-    """Pass 1 read in shares by the ranks (records of a LAS file, whole
-    chunks of a LAZ file, whole PCD inputs) gives the index, the plan and
+    """Pass 1 read in shares by the ranks (records of a LAS file or a binary
+    PCD file, whole chunks of a LAZ file, whole other inputs) gives the index, the plan and
     the filter's counts of one process reading everything, and so the same
     bytes."""
     if case == "cell-keep-class":
@@ -168,6 +188,10 @@ def test_shared_pass1_plans_what_one_process_plans(mpi_bin, root, clouds, tmp_pa
     elif case == "laz-chunks-keep-class":
         inputs = [clouds["laz"], clouds["b"]]  # 30000 points in chunks of 7000, then LAS
         opts = ["--tile", "64", "--keep-class", "2,3,4,5"]
+    elif case == "pcd-binary-records":
+        # cut inside at records; NaN records skipped, so shares count records
+        inputs = [write_binary_pcd(clouds["a"], tmp_path / "a.pcd", nan_every=41), clouds["b"]]
+        opts = ["--tile", "64", "--quantum", "0.01"]
     else:
         pcd = tmp_path / "p.pcd"
         r = run([sys.executable, root / "scripts" / "gen_cloud.py", pcd, "--points", "9000",
