@@ -1,0 +1,77 @@
+"""scripts/gpu_check.sh, the one command for a GPU machine, run here on the
+OpenCL CPU device (--cpu): the bundle it carries (the core driver with its
+libraries, the C library too, the kernels) works from its own folder, with
+this machine's C library or its own, prints the table, and a failing check
+fails it; without an NVIDIA driver it says so in one line (exit 3)."""
+import os
+import pathlib
+import shutil
+import subprocess
+
+import pytest
+
+
+def has_nvidia_opencl():
+    r = subprocess.run(["ldconfig", "-p"], capture_output=True, text=True)
+    return "libnvidia-opencl.so.1" in r.stdout
+
+
+@pytest.fixture(scope="module")
+def bundle(root, tmp_path_factory, tools_dir):
+    if not (tools_dir / "gcd_run").exists():
+        pytest.fail("gcd_run not built (set GDT_BUILD_DIR)")
+    d = tmp_path_factory.mktemp("gpu-bundle") / "b"
+    r = subprocess.run([root / "scripts" / "gpu_check.sh", "--make-bundle", d, "--build-dir",
+                        tools_dir.parent], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    # the bundle stands alone: moved away from the source tree, it still runs
+    moved = d.parent / "moved"
+    shutil.move(str(d), str(moved))
+    return moved
+
+
+def run(bundle, *args, timeout=600):
+    env = {k: v for k, v in os.environ.items() if k != "GDT_KERNEL_DIR"}
+    return subprocess.run([bundle / "gpu_check.sh", *args], capture_output=True, text=True,
+                          env=env, timeout=timeout)
+
+
+@pytest.mark.parametrize("libc", [[], ["--own-libc"]])
+def test_cpu_run_prints_the_table(bundle, libc):
+    r = run(bundle, "--cpu", "--sizes", "8K", "--perf-sizes", "20K 30K", *libc)
+    if r.returncode == 77 or "no OpenCL" in r.stdout + r.stderr:
+        pytest.skip("no OpenCL CPU device")
+    assert r.returncode == 0, r.stdout + r.stderr
+    lines = r.stdout.splitlines()
+    assert lines[0].startswith("gpu_check: ") and "glibc" in lines[0], lines[0]
+    assert ("the bundle's glibc" in lines[0]) == bool(libc), lines[0]
+    rows = [ln.split() for ln in lines if ln.split()[:1] in (["uniform"], ["lidar"], ["grid"])]
+    assert [(k, n, res) for k, n, res, *_ in rows] == [
+        ("uniform", "8000", "equal"), ("lidar", "8000", "equal"), ("grid", "8000", "equal")]
+    perf = [ln.split() for ln in lines if ln.split()[:1] in (["20000"], ["30000"])]
+    assert len(perf) == 2 and all(len(p) == 11 for p in perf), r.stdout
+    for p in perf:
+        phases = [float(v) for v in p[2:9]]
+        assert float(p[9]) > 0 and sum(phases) <= float(p[9]) * 1.01 + 1e-3, p
+
+
+def test_a_failing_run_fails_the_check(bundle):
+    r = run(bundle, "--cpu", "--sizes", "8K", "--perf-sizes", "20K", "--timeout", "0.01")
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert "FAILED" in r.stdout
+
+
+def test_without_an_nvidia_driver_it_says_so(bundle):
+    if has_nvidia_opencl():
+        pytest.skip("this machine has an NVIDIA OpenCL driver")
+    r = run(bundle)
+    assert r.returncode == 3
+    assert r.stdout.strip().splitlines() == [
+        "gpu_check: no NVIDIA OpenCL driver (libnvidia-opencl.so.1) on this machine; "
+        "nothing run"]
+
+
+def test_outside_a_bundle_it_refuses(root):
+    r = subprocess.run([root / "scripts" / "gpu_check.sh", "--cpu"], capture_output=True,
+                       text=True)
+    assert r.returncode == 2 and "run from a bundle" in r.stderr
