@@ -109,6 +109,17 @@ uint64_t gdt_ocl_max_alloc(const gdt_ocl *ocl);
 /* The kernel directory programs are read from (owned by ocl). */
 const char *gdt_ocl_kernel_dir(const gdt_ocl *ocl);
 
+/* What the kernels need of a device, checked at gdt_ocl_create from its
+ * CL_DEVICE_PROFILE, CL_DEVICE_OPENCL_C_VERSION and CL_DEVICE_EXTENSIONS
+ * strings: OpenCL C 1.2 or later, and 64-bit integers (the full profile, or
+ * cles_khr_int64 in the embedded one).  Double precision is not needed
+ * (without cl_khr_fp64 the kernels take their integer path), nor are 64-bit
+ * atomics (the kernels use none).  Writes the missing ones, separated by
+ * "; ", to out (NUL-terminated, truncated to cap; "" when none) and
+ * returns their number. */
+int gdt_ocl_caps_missing(const char *profile, const char *c_version, const char *extensions,
+                         char *out, size_t cap);
+
 /* Lists every platform and device, one line each ("P:D  N  type  name"),
  * into buf (NUL-terminated, truncated to len).  Needs no context. */
 gdt_status gdt_ocl_list_devices(char *buf, size_t len, gdt_error *err);

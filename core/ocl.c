@@ -443,6 +443,39 @@ static gdt_status select_device(const dev_entry *devs, size_t n, const char *spe
     return GDT_OK;
 }
 
+/* Appends what to the list out (cap bytes, "; " between items). */
+static void caps_add(char *out, size_t cap, const char *what)
+{
+    size_t len = strlen(out);
+    if (len + 1 < cap)
+        snprintf(out + len, cap - len, "%s%s", len > 0 ? "; " : "", what);
+}
+
+int gdt_ocl_caps_missing(const char *profile, const char *c_version, const char *extensions,
+                         char *out, size_t cap)
+{
+    int major = 0, minor = 0, missing = 0;
+    char what[160];
+
+    if (cap > 0)
+        out[0] = '\0';
+    /* "OpenCL C <major>.<minor> <vendor-specific information>" */
+    if (c_version == NULL || sscanf(c_version, "OpenCL C %d.%d", &major, &minor) != 2 ||
+        major < 1 || (major == 1 && minor < 2)) {
+        snprintf(what, sizeof what, "OpenCL C 1.2 (the device offers \"%.100s\")",
+                 c_version != NULL ? c_version : "");
+        caps_add(out, cap, what);
+        missing++;
+    }
+    if (profile == NULL || strcmp(profile, "FULL_PROFILE") != 0) {
+        if (extensions == NULL || strstr(extensions, "cles_khr_int64") == NULL) {
+            caps_add(out, cap, "64-bit integers (an embedded profile without cles_khr_int64)");
+            missing++;
+        }
+    }
+    return missing;
+}
+
 static void dev_string(cl_device_id d, cl_device_info what, char *buf, size_t len)
 {
     size_t got = 0;
@@ -543,6 +576,17 @@ gdt_status gdt_ocl_create(gdt_ocl **out, const gdt_ocl_opts *opts, gdt_error *er
     snprintf(ocl->name, sizeof ocl->name, "%.*s / %.*s", (int)(OCL_NAME_MAX / 2 - 2), pname,
              (int)(OCL_NAME_MAX / 2 - 2), dname);
     dev_string(ocl->device, CL_DEVICE_EXTENSIONS, ext, sizeof ext);
+    {
+        char prof[64], cver[128], missing[512];
+        dev_string(ocl->device, CL_DEVICE_PROFILE, prof, sizeof prof);
+        dev_string(ocl->device, CL_DEVICE_OPENCL_C_VERSION, cver, sizeof cver);
+        if (gdt_ocl_caps_missing(prof, cver, ext, missing, sizeof missing) > 0) {
+            st = gdt_error_set(err, GDT_EDEVICE, 5107,
+                               "OpenCL device %s cannot run the core: it lacks %s", ocl->name,
+                               missing);
+            goto fail;
+        }
+    }
     ocl->fp64 = strstr(ext, "cl_khr_fp64") != NULL && !opts->force_no_fp64;
     clGetDeviceInfo(ocl->device, CL_DEVICE_MAX_COMPUTE_UNITS, sizeof cu, &cu, NULL);
     clGetDeviceInfo(ocl->device, CL_DEVICE_MAX_MEM_ALLOC_SIZE, sizeof maxalloc, &maxalloc, NULL);

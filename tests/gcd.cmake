@@ -103,6 +103,9 @@ set_tests_properties(gcd_kernels PROPERTIES LABELS "gcd" SKIP_RETURN_CODE 77)
 
 # The OpenCL CPU device's big buffers get the huge-page advice only
 # with GDT_THP=1.
+# what the core needs of a device, from the strings devices report (no device)
+gdt_add_test_exe(test_ocl_caps ${CMAKE_CURRENT_SOURCE_DIR}/c/test_ocl_caps.c)
+add_test(NAME ocl_caps COMMAND test_ocl_caps)
 gdt_add_test_exe(test_ocl_pages ${CMAKE_CURRENT_SOURCE_DIR}/c/test_ocl_pages.c)
 add_test(NAME ocl_pages COMMAND test_ocl_pages)
 add_test(NAME ocl_pages_thp_kept COMMAND test_ocl_pages)
