@@ -7,11 +7,23 @@ repository; tests that need them skip with a message where it is absent.
 import os
 import pathlib
 import subprocess
+import tempfile
 
 import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 DATA = pathlib.Path(os.environ.get("GDT_TEST_DATA_DIR", ROOT.parent / "shared" / "data"))
+
+# One PoCL kernel cache per pytest worker: PoCL 3 builds a kernel's
+# work-group variants into its cache as they are first run, and processes
+# that do so at the same time in one cache have been seen to crash
+# (pocl/pocl#430, #1480).  The programs run by one worker share its cache;
+# tests of the cache location itself remove this variable.
+if "POCL_CACHE_DIR" not in os.environ:
+    _worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
+    _cache = pathlib.Path(tempfile.gettempdir()) / f"gdt-test-pocl-{os.getuid()}-{_worker}"
+    _cache.mkdir(parents=True, exist_ok=True)
+    os.environ["POCL_CACHE_DIR"] = str(_cache)
 
 
 def build_dir() -> pathlib.Path:
