@@ -844,7 +844,7 @@ static int input_seekable(const cloud_input *ci)
 }
 
 /* 1 when input ci can be read from record r on, and up to it: its ends,
- * any record of uncompressed LAS, the chunk starts of LAZ. */
+ * any record of uncompressed LAS and PCD binary, the chunk starts of LAZ. */
 static int input_cuts_at(const cloud_input *ci, uint64_t r)
 {
     uint64_t lo = 0, hi = ci->nstarts;
