@@ -2,13 +2,14 @@
 """bench_mpi.py — strong scaling of one gdt-tile job over K MPI ranks.
 
   bench_mpi.py [--build-dir DIR] [--points 10M] [--ranks 1,2] [--tile N]
-               [--repeat K] [--kind lidar] [--seed S] [--workdir DIR] [--keep]
-               [--target 1.8] [--json FILE]
+               [--repeat K] [--kind lidar] [--seed S] [--format las|laz]
+               [--workdir DIR] [--keep] [--target 1.8] [--json FILE]
 
 One LiDAR-like LAS cloud of --points records (scripts/gen_cloud.py; not timed,
 reused from --workdir) is triangulated by
     mpirun -np K --bind-to core gdt-tile CLOUD.las --tile T --threads 1 -o OUT.ply
-for every K of --ranks, one core per rank: --threads 1 and the OpenCL runtime
+for every K of --ranks (--format laz: the same cloud compressed by laspy's
+lazrs writer, chunks of 50000 points, written once beside it), one core per rank: --threads 1 and the OpenCL runtime
 (PoCL) held to one thread (POCL_MAX_PTHREAD_COUNT=1), each rank bound to a
 core of its own (K = 1 too, so that it runs on one core as the others do;
 under one rank gdt-tile runs as a plain process).  Each K runs --repeat
@@ -61,6 +62,8 @@ def main(argv=None):
     ap.add_argument("--repeat", type=be.positive_int, default=2, help="rounds, best counts (2)")
     ap.add_argument("--kind", default="lidar", help="gen_cloud.py --kind (lidar)")
     ap.add_argument("--seed", type=int, default=1, help="gen_cloud.py --seed (1)")
+    ap.add_argument("--format", choices=("las", "laz"), default="las",
+                    help="the cloud as LAS or LAZ (las)")
     ap.add_argument("--workdir", default=None, help="keep and reuse the generated cloud here")
     ap.add_argument("--tmpdir", default=None, help="parent of the temporary folder")
     ap.add_argument("--keep", action="store_true", help="keep outputs and temporary files")
@@ -83,7 +86,19 @@ def main(argv=None):
         work = pathlib.Path(a.workdir) if a.workdir else tmp
         work.mkdir(parents=True, exist_ok=True)
         las = be.ensure_cloud(work, a.points, a)
-        with open(las, "rb") as f:  # the LAS in the page cache
+        if a.format == "laz":
+            laz = las.with_suffix(".laz")
+            if not laz.exists():
+                import laspy  # noqa: E402  (only for --format laz)
+                print(f"bench_mpi: compressing {las.name} to {laz.name} ...", file=sys.stderr,
+                      flush=True)
+                part = laz.with_suffix(".laz.part")
+                with open(part, "wb") as f:  # a path would choose by its suffix
+                    laspy.read(str(las)).write(f, do_compress=True,
+                                               laz_backend=laspy.LazBackend.Lazrs)
+                part.rename(laz)
+            las = laz
+        with open(las, "rb") as f:  # the input in the page cache
             while f.read(1 << 24):
                 pass
         env_keep = {k: v for k, v in os.environ.items()
@@ -136,7 +151,7 @@ def main(argv=None):
                          "walls_s": res[k]["walls"]})
         print()
         print(f"gdt-tile under mpirun: {be.size_label(a.points)} points ({a.kind}, seed "
-              f"{a.seed}), --tile {a.tile}, --threads 1, PoCL 1 thread, one core per rank, "
+              f"{a.seed}, {a.format.upper()}), --tile {a.tile}, --threads 1, PoCL 1 thread, one core per rank, "
               f"best of {a.repeat}; the PLY is the same bytes for every K")
         head = f"{'K':>3} {'wall s':>8} {'speed-up':>9} " + " ".join(
             f"{s + ' s':>9}" for s in STAGES) + f" {'balance':>8}"
