@@ -23,7 +23,8 @@
 #   - per-phase times (best of 2) of lidar points at --perf-sizes (default
 #     1M 4M 16M 64M);
 #   - the device's name and memory;
-# as one table, within about 8 minutes on an H100/H200-class machine.
+# as one table.  The sizes are meant to finish within 8 minutes on an
+# H100/H200-class machine; each gcd_run is cut at --timeout (420 s).
 # --cpu runs the same on this machine's OpenCL CPU device (PoCL), sizes
 # scaled down unless given (default 20K 50K, perf 50K 200K), which is how
 # the script itself is tested.  Exit: 0 every check passed; 1 a check
@@ -195,7 +196,7 @@ else
   mem="memory unknown (no nvidia-smi)"
 fi
 echo "gpu_check: ${devname:-unknown device}, $mem; $LIBC_NOTE"
-echo "exactness (gcd_run --check --reference), seconds (the core's first run includes building the kernels)"
+echo "exactness (gcd_run --check --reference), seconds (one run each: the first may include compiling kernel variants)"
 printf '%-8s %10s  %-9s %9s %9s\n' kind points result core reference
 printf '%s\n' "${rows[@]}"
 echo "phases, lidar points, best of 2, seconds"

@@ -482,6 +482,48 @@ def test_same_bytes_twice_any_budget_and_both_modes(gdt_bin, runner, tmp_path):
         assert o[0] == outs[0][0] and o[1] == outs[0][1]
 
 
+def test_empty_blocks_read_nodata_from_either_intermediate(gdt_bin, runner, tmp_path):
+    """Two clusters at opposite corners of a 3000 x 3000-cell raster with its
+    long edges trimmed: most 512 x 512 blocks hold no value.  The intermediate
+    the COG is copied from is a sparse GeoTIFF when the cache cannot hold every
+    block (16M) and an in-memory raster when it can (4G), where empty blocks and
+    overview cells must be filled with nodata: the same GeoTIFF bytes, every
+    empty block nodata, and overview level 1 nodata exactly where its
+    footprint has no value."""
+    rng = np.random.default_rng(5)
+    pts = []
+    for cx, cy in ((3.0, 3.0), (57.0, 57.0)):
+        for x, y in rng.uniform(-2.0, 2.0, size=(300, 2)):
+            pts.append((round(cx + x, 2), round(cy + y, 2), round(float(rng.uniform(0, 9)), 2)))
+    pts += [(0.0, 0.0, 1.0), (60.0, 60.0, 2.0)]  # the raster spans 60 m
+    cloud = write_pcd(tmp_path / "c.pcd", pts)
+    outs = []
+    for budget in ("16M", "4G"):
+        d = tmp_path / budget
+        d.mkdir()
+        _, tif, summary = run_dem(runner, gdt_bin, cloud, d,
+                                  extra=("--quantum", "0.01", "--dem-res", "0.02",
+                                         "--max-edge", "3", "--mem-budget", budget))
+        outs.append((tif, summary["dem"]))
+    (tif16, s16), (tif4g, s4g) = outs
+    # the intermediate is in memory exactly when the cache can hold every block
+    assert s16["blocks"] == 36 and s16["cache_blocks"] < 36 and s4g["cache_blocks"] >= 36
+    assert tif16.read_bytes() == tif4g.read_bytes()
+    nd = np.float32(-9999.0)
+    cells, _ = raster(tif4g, tmp_path)
+    valid = cells != nd
+    assert 0 < valid.sum() < cells.size
+    blocks_with_values = {(r // 512, c // 512) for r, c in np.argwhere(valid)}
+    assert 2 <= len(blocks_with_values) <= 8, blocks_with_values  # the two corners
+    ovr = overview(tif4g, tmp_path, 1, nd)
+    h, w = (cells.shape[0] + 1) // 2, (cells.shape[1] + 1) // 2
+    pad = np.zeros((2 * h, 2 * w), dtype=bool)
+    pad[:cells.shape[0], :cells.shape[1]] = valid
+    any_valid = pad.reshape(h, 2, w, 2).any(axis=(1, 3))
+    assert ovr.shape == (h, w)
+    assert np.array_equal(ovr != nd, any_valid)
+
+
 # ---- the tiled run ------------------------------------------------------------
 
 @pytest.mark.parametrize("kind,tile_args", [
