@@ -27,8 +27,8 @@ gdt_require(GEOGRAPHICLIB_FOUND libgeographiclib-dev "GeographicLib")
 pkg_check_modules(GDAL QUIET IMPORTED_TARGET gdal)
 gdt_require(GDAL_FOUND libgdal-dev "GDAL")
 
-# PCL (PCD input): only the io component.
-find_package(PCL QUIET COMPONENTS common io)
+# PCL: PCD input (io) and the ground filter (segmentation).
+find_package(PCL QUIET COMPONENTS common io segmentation)
 gdt_require(PCL_FOUND libpcl-dev "PCL (Point Cloud Library)")
 
 # OpenVDB (tile index); Debian ships its Find module in a versioned folder.

@@ -28,7 +28,9 @@ typedef enum opt_id {
     OPT_THREADS, OPT_MEM, OPT_QUANTUM, OPT_DUP, OPT_CHECK, OPT_JSON, OPT_QUIET, OPT_VERBOSE,
     OPT_INFO, OPT_REFERENCE, OPT_SINGLE, OPT_KEEP_JOB, OPT_HELP, OPT_VERSION,
     OPT_KEEP_CLASS, OPT_DROP_CLASS, OPT_RETURNS, OPT_KEEP_WITHHELD, OPT_MAX_EDGE,
-    OPT_CONCAVITY, OPT_DEM, OPT_DEM_RES, OPT_DEM_NODATA, OPT_PREVIEW
+    OPT_CONCAVITY, OPT_DEM, OPT_DEM_RES, OPT_DEM_NODATA, OPT_PREVIEW, OPT_GROUND,
+    OPT_PMF_MAX_WINDOW, OPT_PMF_SLOPE, OPT_PMF_INITIAL, OPT_PMF_MAX_DISTANCE, OPT_PMF_CELL,
+    OPT_PMF_EXPONENTIAL
 } opt_id;
 
 /* The option table: every option once, with its argument, default and help. */
@@ -74,6 +76,22 @@ static const opt_spec OPTIONS[] = {
      "single (one-return pulses)"},
     {OPT_KEEP_WITHHELD, "--keep-withheld", NULL, NULL, NULL,
      "keep LAS points flagged withheld (dropped by default: the LAS spec deletes them)"},
+    {OPT_GROUND, "--ground", NULL, "pmf", NULL,
+     "classify ground with PCL's progressive morphological filter (approximate, on a global "
+     "grid, tile by tile with a halo: the classes of a whole-cloud run) and triangulate the "
+     "ground points only; replaces LAS classes (not with --keep-class)"},
+    {OPT_PMF_MAX_WINDOW, "--pmf-max-window", NULL, "W", "33",
+     "--ground pmf: largest window, CRS units (windows of 3, 5, 9, 17, ... cells up to it)"},
+    {OPT_PMF_SLOPE, "--pmf-slope", NULL, "S", "1.0",
+     "--ground pmf: terrain slope; the height threshold grows by S times the window's growth"},
+    {OPT_PMF_INITIAL, "--pmf-initial-distance", NULL, "D", "0.15",
+     "--ground pmf: height threshold of the first window, CRS units"},
+    {OPT_PMF_MAX_DISTANCE, "--pmf-max-distance", NULL, "D", "2.5",
+     "--ground pmf: largest height threshold, CRS units"},
+    {OPT_PMF_CELL, "--pmf-cell", NULL, "C", "1.0",
+     "--ground pmf: cell size of the filter's grid, CRS units"},
+    {OPT_PMF_EXPONENTIAL, "--pmf-exponential", NULL, "true|false", "true",
+     "--ground pmf: windows grow exponentially (3, 5, 9, 17, ...) or linearly (5, 9, 13, ...)"},
     {OPT_MAX_EDGE, "--max-edge", NULL, "L", NULL,
      "drop every triangle with an edge longer than L (horizontal, CRS units)"},
     {OPT_CONCAVITY, "--concavity", NULL, "L", NULL,
@@ -350,6 +368,38 @@ static gdt_status apply(gdt_options *opts, const opt_spec *o, const char *val, g
         break;
     case OPT_RETURNS: st = gdt_filter_parse_returns(&opts->filter, val, err); break;
     case OPT_KEEP_WITHHELD: opts->filter.keep_withheld = 1; break;
+    case OPT_GROUND:
+        if (strcmp(val, "pmf") != 0)
+            st = gdt_error_set(err, GDT_EUSAGE, 2701, "--ground: '%s' is not a ground filter "
+                               "(pmf)", val);
+        opts->ground = 1;
+        break;
+    case OPT_PMF_MAX_WINDOW:
+    case OPT_PMF_SLOPE:
+    case OPT_PMF_INITIAL:
+    case OPT_PMF_MAX_DISTANCE:
+    case OPT_PMF_CELL: {
+        double *dst = o->id == OPT_PMF_MAX_WINDOW   ? &opts->pmf.max_window
+                      : o->id == OPT_PMF_SLOPE      ? &opts->pmf.slope
+                      : o->id == OPT_PMF_INITIAL    ? &opts->pmf.initial_distance
+                      : o->id == OPT_PMF_MAX_DISTANCE ? &opts->pmf.max_distance
+                                                    : &opts->pmf.cell;
+        st = parse_finite_double(o->lng, val, dst, err);
+        if (opts->pmf_set == NULL)
+            opts->pmf_set = o->lng;
+        break;
+    }
+    case OPT_PMF_EXPONENTIAL:
+        if (strcmp(val, "true") == 0 || strcmp(val, "on") == 0 || strcmp(val, "1") == 0)
+            opts->pmf.exponential = 1;
+        else if (strcmp(val, "false") == 0 || strcmp(val, "off") == 0 || strcmp(val, "0") == 0)
+            opts->pmf.exponential = 0;
+        else
+            st = gdt_error_set(err, GDT_EUSAGE, 2701,
+                               "--pmf-exponential: '%s' is not true or false", val);
+        if (opts->pmf_set == NULL)
+            opts->pmf_set = o->lng;
+        break;
     case OPT_MAX_EDGE: st = parse_positive_double(o->lng, val, &opts->trim.max_edge, err); break;
     case OPT_CONCAVITY:
         st = parse_positive_double(o->lng, val, &opts->trim.concavity, err);
@@ -368,6 +418,7 @@ gdt_status gdt_cli_parse(gdt_options *opts, int argc, char **argv, gdt_error *er
     opts->quantum = 0.001;
     opts->dup = GDT_DUP_FIRST;
     opts->dem_nodata = -9999.0;
+    gdt_pmf_defaults(&opts->pmf);
     opts->inputs = calloc((size_t)(argc > 0 ? argc : 1), sizeof *opts->inputs);
     if (opts->inputs == NULL)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
@@ -424,6 +475,8 @@ gdt_status gdt_cli_parse(gdt_options *opts, int argc, char **argv, gdt_error *er
         return gdt_error_set(err, GDT_EUSAGE, 2008, "no input given (see --help)");
     if (opts->output == NULL)
         opts->output = "out.ply";
+    if (opts->ground || opts->pmf_set != NULL)
+        return gdt_pmf_check(&opts->pmf, err);
     return GDT_OK;
 }
 
@@ -500,6 +553,19 @@ static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
                              "--check validates a whole triangulation, not a trimmed one: "
                              "check the untrimmed mesh, and the trimming with "
                              "scripts/validate_mesh.py TRIMMED.ply --trimmed-from FULL.ply");
+    if (opts->pmf_set != NULL && !opts->ground)
+        return gdt_error_set(err, GDT_EUSAGE, 2703, "%s needs --ground pmf", opts->pmf_set);
+    if (opts->ground && opts->filter.class_mode > 0)
+        return gdt_error_set(err, GDT_EUSAGE, 2703,
+                             "--ground pmf classifies the points itself: not with --keep-class "
+                             "(--drop-class, for example of noise, is allowed)");
+    if (opts->ground && opts->mode == GDT_MODE_RESUME)
+        return gdt_error_set(err, GDT_EUSAGE, 2703,
+                             "--resume DIR classifies ground as its job recorded (no --ground)");
+    if (opts->ground && (opts->mode != GDT_MODE_RUN || opts->single_tile))
+        return gdt_error_set(err, GDT_EUSAGE, 2703,
+                             "--ground runs in the tiled pipeline (not with --info, --reference "
+                             "or --single-tile)");
     if (opts->dem == NULL && (opts->dem_res_set || opts->dem_nodata_set || opts->preview))
         return gdt_error_set(err, GDT_EUSAGE, 2605, "%s needs --dem OUT.tif",
                              opts->preview != NULL ? "--preview"

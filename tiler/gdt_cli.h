@@ -12,6 +12,7 @@
 #include <stdint.h>
 
 #include "gdt_cloud.h"
+#include "gdt_ground.h"
 #include "gdt_error.h"
 #include "gdt_filter.h"
 #include "gdt_trim.h"
@@ -51,6 +52,9 @@ typedef struct gdt_options {
     gdt_dup_policy dup;      /* --dup */
     gdt_point_filter filter; /* --keep-class, --drop-class, --returns, --keep-withheld */
     gdt_trim_rule trim;      /* --max-edge, --concavity (0 = off); sx, sy unused here */
+    int ground;              /* --ground pmf: triangulate the ground points only */
+    gdt_pmf_params pmf;      /* --pmf-* (defaults: gdt_pmf_defaults) */
+    const char *pmf_set;     /* the first --pmf-* option given, NULL if none */
     int check;               /* --check */
     const char *json;        /* --json FILE */
     const char *dem;         /* --dem OUT.tif, NULL: no DEM */

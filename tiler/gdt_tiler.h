@@ -53,7 +53,11 @@
  *   tile_<i>_<j>.pts   the tile's points after the --dup merge, sorted by
  *                      ordinal (the lowest ordinal of each (x, y) group)
  *   tile_<i>_<j>.edge  the subset of .pts within h of the tile's border
- *                      (the only points any other tile's halo can hold)
+ *                      (the only points any other tile's halo can hold);
+ *                      within max(h, opts.edge_min) until a subset replaces
+ *                      the files (gdt_tiler_take_subsets)
+ *   tile_<i>_<j>.gpts, .gedge  a subset of the tile's points and its edge
+ *                      (gdt_tiler_write_subset), until taken
  * <i>, <j> are the decimal tile indices (may be negative).  Each kept file
  * is written to a temporary name, fsync'd and renamed.  Intermediate files
  * (*.tmp: buckets, merge partitions and runs) are removed when done, and
@@ -133,6 +137,12 @@ typedef struct gdt_tiler_opts {
     void *progress_ctx;
     int threads;           /* host threads for the --dup merge (0 or 1: one);
                               the files do not depend on it */
+    int64_t edge_min;      /* lattice steps: .edge files hold the points within
+                              max(h, edge_min) of the border (a reach wider than
+                              the halo, gdt_tiler_load_reach); 0: h */
+    int subsets;           /* a subset replaces every tile's points after pass 2
+                              (gdt_tiler_take_subsets): a recorded .pts file may
+                              then be empty */
     uint64_t file_id[2];   /* the job's id: seeds the checksums of the .pts and
                               .edge files (gdt_job_file_seed), so that a file of
                               another job never verifies */
@@ -401,6 +411,34 @@ gdt_status gdt_tiler_load_tile(gdt_tiler *t, uint64_t k, gdt_point_buf *pts,
 gdt_status gdt_tiler_load_tile_local(gdt_tiler *t, uint64_t k, int64_t x0, int64_t y0,
                                      gdt_ipt *xy, double *z, size_t *n, gdt_point_buf *halo,
                                      gdt_error *err);
+
+/* A subset of every tile's points replaces them after pass 2 (the ground
+ * filter of gdt_ground.h, which needs each tile's points and those of the
+ * cloud within its reach):
+ *  - gdt_tiler_load_reach: tile k's points into own (sorted by ordinal) and
+ *    every other point within reach of the tile (reach <= max(h,
+ *    opts.edge_min)) into around (sorted by ordinal); refuses (2506) more
+ *    than max_points in all.  Reads only: calls for different tiles with
+ *    different buffers may run concurrently.
+ *  - gdt_tiler_write_subset: writes the points own[i] with keep[i] != 0
+ *    (own: the n points load_reach gave, in that order) as tile k's .gpts
+ *    file and their edge (within h) as its .gedge file, each synced and
+ *    renamed, with the sums of a .pts and an .edge file; *out describes
+ *    them.  Calls for different tiles may run concurrently.
+ *  - gdt_tiler_take_subsets: once every tile has its subset (files[k],
+ *    k < tiles, as write_subset described them), renames them over the
+ *    .pts and .edge files and takes their counts and sums; the tiler then
+ *    behaves as after a pass 2 of the subset (a tile may hold no point).
+ * returns: GDT_EUSAGE 2505 (not after pass 2; reach too wide), 2506;
+ *   GDT_EIO 4502..4505; GDT_EINTERNAL 7001. */
+gdt_status gdt_tiler_load_reach(const gdt_tiler *t, uint64_t k, int64_t reach,
+                                uint64_t max_points, gdt_point_buf *own, gdt_point_buf *around,
+                                gdt_error *err);
+gdt_status gdt_tiler_write_subset(const gdt_tiler *t, uint64_t k, const gdt_point *own,
+                                  size_t n, const uint8_t *keep, gdt_tiler_tile_files *out,
+                                  gdt_error *err);
+gdt_status gdt_tiler_take_subsets(gdt_tiler *t, const gdt_tiler_tile_files *files,
+                                  gdt_error *err);
 
 const gdt_tiler_stats *gdt_tiler_get_stats(const gdt_tiler *t);
 

@@ -46,7 +46,7 @@ static gdt_status too_large(const gdt_tiler *t, uint64_t k, uint64_t n, gdt_erro
 }
 
 /* Appends the points of tile u's .edge file inside [bx0, bx1) x [by0, by1). */
-static gdt_status add_neighbour(gdt_tiler *t, uint64_t k, uint64_t u, int64_t bx0, int64_t bx1,
+static gdt_status add_neighbour(const gdt_tiler *t, uint64_t k, uint64_t u, int64_t bx0, int64_t bx1,
                                 int64_t by0, int64_t by1, uint64_t limit, gdt_point_buf *halo,
                                 uint64_t tile_n, gdt_error *err)
 {
@@ -88,7 +88,7 @@ static gdt_status add_neighbour(gdt_tiler *t, uint64_t k, uint64_t u, int64_t bx
  * records or, when pts is NULL, into xy[0..points) as (x - x0, y - y0) and
  * z[0..points) (when z is not NULL), through a small chunk, so that the
  * records are never held whole.  *n receives their count. */
-static gdt_status load_own(gdt_tiler *t, uint64_t k, gdt_point_buf *pts, gdt_ipt *xy,
+static gdt_status load_own(const gdt_tiler *t, uint64_t k, gdt_point_buf *pts, gdt_ipt *xy,
                            double *z, int64_t x0, int64_t y0, size_t *n, gdt_error *err)
 {
     const tl_tile *tl = &t->tiles[k];
@@ -131,13 +131,12 @@ static gdt_status load_own(gdt_tiler *t, uint64_t k, gdt_point_buf *pts, gdt_ipt
 
 /* Both loaders: the own points (see load_own; *nown their count), then the
  * halo. */
-static gdt_status load(gdt_tiler *t, uint64_t k, gdt_point_buf *pts, gdt_ipt *xy, double *z,
-                       int64_t x0, int64_t y0, size_t *nown, gdt_point_buf *halo,
-                       gdt_error *err)
+static gdt_status load(const gdt_tiler *t, uint64_t k, gdt_point_buf *pts, gdt_ipt *xy,
+                       double *z, int64_t x0, int64_t y0, size_t *nown, gdt_point_buf *halo,
+                       int64_t h, uint64_t limit, gdt_error *err)
 {
-    const int64_t T = t->plan.span, h = t->plan.halo * t->plan.cell;
-    const uint64_t limit = t->budget / 2 / sizeof(gdt_point);
-    tl_tile *tl;
+    const int64_t T = t->plan.span;
+    const tl_tile *tl;
     int64_t bx0, bx1, by0, by1, i0, i1, j0, j1;
     size_t n = 0;
     gdt_status st;
@@ -197,7 +196,8 @@ gdt_status gdt_tiler_load_tile(gdt_tiler *t, uint64_t k, gdt_point_buf *pts,
     size_t n = 0;
     gdt_status st;
     pts->n = 0;
-    st = load(t, k, pts, NULL, NULL, 0, 0, &n, halo, err);
+    st = load(t, k, pts, NULL, NULL, 0, 0, &n, halo, t->plan.halo * t->plan.cell,
+              t->budget / 2 / sizeof(gdt_point), err);
     pts->n = n;
     return st;
 }
@@ -206,5 +206,24 @@ gdt_status gdt_tiler_load_tile_local(gdt_tiler *t, uint64_t k, int64_t x0, int64
                                      gdt_ipt *xy, double *z, size_t *n, gdt_point_buf *halo,
                                      gdt_error *err)
 {
-    return load(t, k, NULL, xy, z, x0, y0, n, halo, err);
+    return load(t, k, NULL, xy, z, x0, y0, n, halo, t->plan.halo * t->plan.cell,
+                t->budget / 2 / sizeof(gdt_point), err);
+}
+
+gdt_status gdt_tiler_load_reach(const gdt_tiler *t, uint64_t k, int64_t reach,
+                                uint64_t max_points, gdt_point_buf *own, gdt_point_buf *around,
+                                gdt_error *err)
+{
+    size_t n = 0;
+    gdt_status st;
+    own->n = 0;
+    around->n = 0;
+    if (t->state != 2 || reach < 0 || reach > tl_edge_width(t))
+        return gdt_error_set(err, GDT_EUSAGE, 2505,
+                             "tile %" PRIu64 ": a reach of %" PRId64 " lattice steps needs pass "
+                             "2 done with .edge files at least that wide (%" PRId64 ")",
+                             k, reach, tl_edge_width(t));
+    st = load(t, k, own, NULL, NULL, 0, 0, &n, around, reach, max_points, err);
+    own->n = n;
+    return st;
 }

@@ -73,8 +73,7 @@ static gdt_status sink_put(sink *s, const gdt_point *p, gdt_error *err)
     gdt_status st = tl_wfile_put(s->pts, p, err);
     if (st != GDT_OK || s->edge == NULL || s->h == 0)
         return st;
-    if (p->x - s->x0 < s->h || s->x0 + s->span - 1 - p->x < s->h || p->y - s->y0 < s->h ||
-        s->y0 + s->span - 1 - p->y < s->h)
+    if (tl_on_edge(p, s->x0, s->y0, s->span, s->h))
         st = tl_wfile_put(s->edge, p, err);
     return st;
 }
@@ -464,7 +463,7 @@ static gdt_status merge_tile(gdt_tiler *t, uint64_t k, gdt_point *recs, scratch 
     out.x0 = tl->i * t->plan.span;
     out.y0 = tl->j * t->plan.span;
     out.span = t->plan.span;
-    out.h = t->plan.halo * t->plan.cell;
+    out.h = tl_edge_width(t);
     if (recs != NULL || t->resident != NULL)
         st = merge_memory(&m, (size_t)tl->count, &out, err);
     else

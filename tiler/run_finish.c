@@ -74,6 +74,23 @@ static gdt_status write_summary(const tr_run *c, gdt_error *err)
         gdt_dem_report_json(&j, c->opts, &s->dem_geo, &s->dem_stats, s->t_dem);
     gdt_json_uint(&j, "points_read", s->points_read);
     gdt_filter_report_json(&j, c->cloud);
+    if (c->opts->ground) {
+        const gdt_pmf_params *p = &c->opts->pmf;
+        gdt_json_begin_object(&j, "ground");
+        gdt_json_string(&j, "method", "pmf");
+        gdt_json_double(&j, "max_window", p->max_window);
+        gdt_json_double(&j, "slope", p->slope);
+        gdt_json_double(&j, "initial_distance", p->initial_distance);
+        gdt_json_double(&j, "max_distance", p->max_distance);
+        gdt_json_double(&j, "cell", p->cell);
+        gdt_json_bool(&j, "exponential", p->exponential != 0);
+        /* of the distinct points (after --dup); recorded with pass 2 */
+        gdt_json_uint(&j, "ground_points", s->ground_points);
+        gdt_json_uint(&j, "nonground_points", s->nonground_points);
+        gdt_json_bool(&j, "classified", s->t_ground > 0);
+        gdt_json_double(&j, "seconds", s->t_ground);
+        gdt_json_end_object(&j);
+    }
     gdt_json_uint(&j, "vertices", s->vertices);
     gdt_json_uint(&j, "faces", s->faces - s->trim.dropped);
     gdt_trim_report_json(&j, &c->opts->trim, &s->trim);
@@ -109,6 +126,8 @@ static gdt_status write_summary(const tr_run *c, gdt_error *err)
     gdt_json_begin_object(&j, "times");
     gdt_json_double(&j, "pass1", s->t_pass1);
     gdt_json_double(&j, "pass2", s->t_pass2);
+    if (c->opts->ground)
+        gdt_json_double(&j, "ground", s->t_ground);
     gdt_json_double(&j, "tiles", s->t_tiles);
     gdt_json_double(&j, "core", s->t_core);
     gdt_json_double(&j, "certify", s->t_certify);
@@ -183,6 +202,15 @@ gdt_status tr_run_output_start(tr_run *c, gdt_error *err)
     gdt_run_mesh_meta(c->cloud, &c->log, &opts->trim, c->filter_comment,
                       sizeof c->filter_comment, c->trim_comment, sizeof c->trim_comment,
                       c->filter_comments, &os.meta);
+    if (opts->ground) {
+        /* the ground filter and its parameters (--ground pmf) */
+        snprintf(c->ground_comment, sizeof c->ground_comment,
+                 "ground pmf max-window %.15g slope %.15g initial-distance %.15g "
+                 "max-distance %.15g cell %.15g exponential %s",
+                 opts->pmf.max_window, opts->pmf.slope, opts->pmf.initial_distance,
+                 opts->pmf.max_distance, opts->pmf.cell, opts->pmf.exponential ? "true" : "false");
+        c->filter_comments[os.meta.ncomments++] = c->ground_comment;
+    }
     os.trim = c->tgraph != NULL;
     os.concavity = c->trim.concavity > 0;
     if (opts->check && gdt_mesh_format_of(opts->output) != GDT_MESH_PLY) {

@@ -114,6 +114,10 @@ static gdt_status build_params(const gdt_options *o, char **out, gdt_error *err)
     text_add(&t, "filter=%s\n", filter);
     if (gdt_trim_on(&o->trim))
         text_add(&t, "trim=%.17g %.17g\n", o->trim.max_edge, o->trim.concavity);
+    if (o->ground)
+        text_add(&t, "ground=pmf %.17g %.17g %.17g %.17g %.17g %d\n", o->pmf.max_window,
+                 o->pmf.slope, o->pmf.initial_distance, o->pmf.max_distance, o->pmf.cell,
+                 o->pmf.exponential);
     text_add(&t, "inputs=%zu\n", o->ninputs);
     for (size_t i = 0; i < o->ninputs; i++) {
         if (strchr(o->inputs[i], '\n') != NULL) {
@@ -455,6 +459,22 @@ gdt_status gdt_cli_resume(const gdt_options *opts, gdt_error *err)
             !isfinite(o.trim.max_edge) || !isfinite(o.trim.concavity)) {
             st = gdt_error_set(err, GDT_EJOB, 6905, "%s: job record has a bad trim '%s'",
                                opts->resume, v);
+            goto done;
+        }
+    }
+    free(v);
+    v = param_get(params, "ground", NULL);
+    if (v != NULL) {
+        gdt_error e2;
+        int used = 0;
+        gdt_error_clear(&e2);
+        o.ground = 1;
+        if (sscanf(v, "pmf %lf %lf %lf %lf %lf %d%n", &o.pmf.max_window, &o.pmf.slope,
+                   &o.pmf.initial_distance, &o.pmf.max_distance, &o.pmf.cell,
+                   &o.pmf.exponential, &used) != 6 ||
+            v[used] != '\0' || gdt_pmf_check(&o.pmf, &e2) != GDT_OK) {
+            st = gdt_error_set(err, GDT_EJOB, 6905, "%s: job record has a bad ground filter "
+                               "'%s'", opts->resume, v);
             goto done;
         }
     }

@@ -42,6 +42,13 @@ static gdt_status record_pass2(tr_run *c, gdt_error *err)
         if (st == GDT_OK)
             st = gdt_job_put_file(c->jobdb, k, GDT_JOB_FILE_EDGE, fs[1].size, fs[1].sum, err);
     }
+    if (st == GDT_OK && c->opts->ground) {
+        /* the classes the ground filter gave, for the reports of a resumed run */
+        char counts[64];
+        snprintf(counts, sizeof counts, "%" PRIu64 " %" PRIu64, c->s.ground_points,
+                 c->s.nonground_points);
+        st = gdt_job_set_meta(c->jobdb, "ground_counts", counts, err);
+    }
     if (st == GDT_OK)
         st = gdt_job_set_stage(c->jobdb, "pass2", 1, err);
     if (st == GDT_OK)
@@ -78,6 +85,17 @@ static gdt_status adopt_pass2(tr_run *c, int *ok, gdt_error *err)
     free(fs);
     if (st != GDT_OK)
         return st;
+    if (ad == GDT_OK && c->opts->ground) {
+        char *counts = NULL;
+        st = gdt_job_get_meta(c->jobdb, "ground_counts", &counts, err);
+        if (st == GDT_OK && (counts == NULL ||
+                             sscanf(counts, "%" SCNu64 " %" SCNu64, &c->s.ground_points,
+                                    &c->s.nonground_points) != 2))
+            ad = gdt_error_set(&e2, GDT_EJOB, 6501, "the job records no ground counts");
+        free(counts);
+        if (st != GDT_OK)
+            return st;
+    }
     if (ad == GDT_OK) {
         *ok = 1;
     } else if (ad == GDT_EJOB) {
@@ -169,6 +187,18 @@ static void tiler_opts(tr_run *c, gdt_tiler_opts *to)
     to->log = &c->log;
     to->progress = tiler_progress;
     to->progress_ctx = c;
+    if (opts->ground) {
+        /* the ground filter reads every point within its reach of a tile:
+         * the .edge files are made that wide (the reach does not depend on
+         * z0; the options were checked when parsed) */
+        gdt_pmf f;
+        gdt_error e;
+        gdt_error_clear(&e);
+        if (gdt_pmf_init(&f, &opts->pmf, &gdt_cloud_get_info(c->cloud)->lattice, 0.0, &e) ==
+            GDT_OK)
+            to->edge_min = f.reach;
+        to->subsets = 1;
+    }
 }
 
 /* Pass 1 through c->p1share: this process's share, then the others'. */
@@ -358,6 +388,8 @@ gdt_status tr_run_pass2(tr_run *c, gdt_error *err)
         } else if (st == GDT_OK) {
             st = gdt_tiler_pass2(c->tiler, err);
         }
+        if (st == GDT_OK && c->opts->ground)
+            st = tr_run_ground(c, err);
         if (st == GDT_EINTERRUPTED)
             st = tr_interrupted(c->job, "pass 2", err);
         if (st == GDT_OK)

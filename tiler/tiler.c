@@ -541,6 +541,8 @@ static gdt_status prepare_tiles_dir(gdt_tiler *t, gdt_error *err)
         int kind = (len > 4 && strcmp(nm + len - 4, ".raw") == 0) ||
                    (len > 4 && strcmp(nm + len - 4, ".pts") == 0) ||
                    (len > 5 && strcmp(nm + len - 5, ".edge") == 0) ||
+                   (len > 5 && strcmp(nm + len - 5, ".gpts") == 0) ||
+                   (len > 6 && strcmp(nm + len - 6, ".gedge") == 0) ||
                    (len > 4 && strcmp(nm + len - 4, ".tmp") == 0) || is_share_file(nm);
         if (ours && kind && unlinkat(dirfd(d), nm, 0) != 0 && errno != ENOENT) {
             int en = errno;
@@ -762,7 +764,8 @@ static gdt_status verify_file(gdt_tiler *t, uint64_t k, int kind, const gdt_tile
                            "%s: tile file damaged or not this job's (its checksum differs from "
                            "the one recorded)",
                            path);
-    else if (size % TL_REC != 0 || (kind == 0 && size == 0) || size / TL_REC > max)
+    else if (size % TL_REC != 0 || (kind == 0 && size == 0 && !t->opts.subsets) ||
+             size / TL_REC > max)
         st = gdt_error_set(err, GDT_EJOB, 6501,
                            "%s: %" PRIu64 " bytes cannot be tile (%" PRId64 ", %" PRId64
                            ") of %" PRIu64 " points",

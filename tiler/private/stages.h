@@ -18,7 +18,9 @@
  *   tr_run_pass1        run_passes.c  cloud, tiler, pass 1 (J/index.vdb);
  *                                     core joined; plan checks
  *   tr_run_pass2        run_passes.c  pass 2 (the .pts, .edge files in J/tiles) or its
- *                                     recorded files adopted; vertex bases
+ *                                     recorded files adopted; with --ground
+ *                                     the ground filter in it (run_ground.c);
+ *                                     vertex bases
  *   tr_run_output_start run_finish.c  trim graph, DEM, mesh writer thread
  *   tr_run_tiles        run_tiles.c   core + post thread per tile: the
  *                                     .tri files in J/tiles and their records
@@ -80,6 +82,9 @@ typedef struct tr_summary {
     gdt_dem_geo dem_geo;
     gdt_dem_stats dem_stats;
     double t_dem;
+    uint64_t ground_points, nonground_points; /* --ground: the classes of pass 2's
+                                 points (deduplicated), when this run classified */
+    double t_ground;        /* the ground filter's wall time (0: adopted, or off) */
     int nranks;             /* ranks of an MPI run; 0 in a plain run */
     tr_rank_stats *ranks;   /* nranks of them, rank 0 first; owned */
 } tr_summary;
@@ -221,7 +226,8 @@ struct tr_run {
     /* the mesh header's filter and trim lines: live until the writer is done */
     char filter_comment[GDT_FILTER_COMMENT_MAX];
     char trim_comment[GDT_TRIM_TEXT_MAX];
-    const char *filter_comments[2];
+    char ground_comment[256];
+    const char *filter_comments[3];
     uint8_t *cert;
     size_t cap_cert;
     uint32_t *count;    /* bucket counts for the face sort */
@@ -337,6 +343,16 @@ gdt_status tr_run_pass1_share(tr_run *c, uint64_t first, uint64_t end, unsigned 
  * returns: GDT_OK; the tiler's and journal's errors; GDT_EINPUT 3801 (more
  * than 2^31 - 1 vertices); GDT_EINTERRUPTED 1302. */
 gdt_status tr_run_pass2(tr_run *c, gdt_error *err);
+
+/* ---- run_ground.c: --ground, inside pass 2 ---- */
+
+/* After the tiler's pass 2 (every tile's .pts and its reach-wide .edge
+ * files): classifies every tile's points with the ground filter on up to
+ * --threads workers and replaces the tile files with the ground points
+ * (gdt_tiler_take_subsets); c->s.ground_points, nonground_points,
+ * t_ground.  returns: GDT_OK; the filter's (2702, 7701) and the tiler's
+ * errors; GDT_EINTERRUPTED 1303. */
+gdt_status tr_run_ground(tr_run *c, gdt_error *err);
 
 /* Another rank of an MPI job, after tr_run_start_core, in place of
  * tr_run_prepare_job, tr_run_pass1 and tr_run_pass2 (which rank 0 ran):

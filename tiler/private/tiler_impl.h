@@ -149,8 +149,24 @@ gdt_status tl_merge_marks(gdt_tiler *t, gdt_error *err);
 void tl_merge_stats(gdt_tiler *t);
 
 /* Paths of tile k's files; malloc'd, NULL when out of memory.  kind is
- * "raw", "pts" or "edge"; tmp adds ".tmp". */
+ * "raw", "pts", "edge", "gpts" or "gedge"; tmp adds ".tmp". */
 char *tl_tile_file(const gdt_tiler *t, uint64_t k, const char *kind, int tmp);
+
+/* 1 when lattice point p of the tile [x0, x0 + span) x [y0, y0 + span)
+ * lies within h of its border (an .edge record). */
+static inline int tl_on_edge(const gdt_point *p, int64_t x0, int64_t y0, int64_t span, int64_t h)
+{
+    return p->x - x0 < h || x0 + span - 1 - p->x < h || p->y - y0 < h ||
+           y0 + span - 1 - p->y < h;
+}
+
+/* Width of the .edge files in lattice steps: the halo h, or opts.edge_min
+ * when that is wider. */
+static inline int64_t tl_edge_width(const gdt_tiler *t)
+{
+    int64_t h = t->plan.halo * t->plan.cell;
+    return t->opts.edge_min > h ? t->opts.edge_min : h;
+}
 
 /* Reports progress (opts.progress); GDT_EINTERRUPTED 1301 when told to stop. */
 gdt_status tl_progress(gdt_tiler *t, int stage, uint64_t done, uint64_t total, gdt_error *err);
