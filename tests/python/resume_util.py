@@ -31,6 +31,7 @@ STAGE_PATTERNS = (
     ("pass1", re.compile(r"^pass\s*1$")),
     ("pass2", re.compile(r"^pass\s*2$")),
     ("dup", re.compile(r"\bdup")),
+    ("ground", re.compile(r"^ground")),
     ("tiles", re.compile(r"^(tiles?|tile stage|core)$")),
     ("merge", re.compile(r"^(seam )?merge$")),
     ("write", re.compile(r"^(write|ply|output|assembl\w*)$")),

@@ -1,0 +1,195 @@
+"""--ground pmf: PCL's progressive morphological filter, tile by tile with a
+halo, gives every point the class of a whole-cloud run of the same filter
+(tests/tools/pmf_whole), whatever the tiling, thread count or resume; the
+mesh is the exact Delaunay triangulation of the ground points; bad options
+are usage errors naming the option."""
+import json
+import pathlib
+import signal
+
+import numpy as np
+import pytest
+
+import resume_util as ru
+from tiled_util import (SCALE, assert_equal_meshes, command, gen_cloud, run, shell,
+                        write_las)
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+
+
+def roof_cloud(path, n, seed):
+    """A tilted plane with a 28 m square flat roof 12 m above it and a few
+    low outliers: the roof is wider than small tiles, so some tiles keep no
+    ground point at all."""
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(0, 120, n)
+    y = rng.uniform(0, 120, n)
+    z = 100 + 0.02 * x + rng.normal(0, 0.02, n)
+    roof = (np.abs(x - 60) < 14) & (np.abs(y - 60) < 14)
+    z[roof] += 12.0
+    z[:5] -= 3.0
+    write_las(path, np.round(x / SCALE), np.round(y / SCALE), np.round(z / SCALE))
+    return path, roof
+
+
+@pytest.fixture(scope="module")
+def clouds(tmp_path_factory):
+    d = tmp_path_factory.mktemp("ground")
+    roof, _ = roof_cloud(d / "roof.las", 40_000, 4)
+    return {
+        "lidar": gen_cloud(d / "lidar.las", 120_000, 7),
+        "roof": roof,
+    }
+
+
+def whole(tool, las, *args):
+    """The whole-cloud oracle: {(ix, iy): class} and the lattice."""
+    r = run([tool("pmf_whole"), *args, las])
+    assert r.returncode == 0, r.stderr
+    lines = r.stdout.splitlines()
+    sx, sy, ox, oy = (float(v) for v in lines[0].split()[2:])
+    d = np.loadtxt(lines[2:], dtype=np.float64, ndmin=2)
+    ground = d[d[:, 3] == 2]
+    keys = set(zip(ground[:, 0].astype(np.int64).tolist(), ground[:, 1].astype(np.int64).tolist()))
+    return keys, len(d), (sx, sy, ox, oy)
+
+
+def vertex_keys(ply, lattice):
+    from plyfile import PlyData
+    sx, sy, ox, oy = lattice
+    v = PlyData.read(str(ply))["vertex"]
+    ix = np.round((np.asarray(v["x"]) - ox) / sx).astype(np.int64)
+    iy = np.round((np.asarray(v["y"]) - oy) / sy).astype(np.int64)
+    keys = set(zip(ix.tolist(), iy.tolist()))
+    assert len(keys) == len(ix)
+    return keys
+
+
+def ground_run(gdt_bin, las, out, *args):
+    js = pathlib.Path(str(out) + ".json")
+    cmd = command(gdt_bin, las, out, "--ground", "pmf", *args, "--json", js)
+    r = run(cmd)
+    assert r.returncode == 0, f"exit {r.returncode}: {shell(cmd)}\n{r.stderr}"
+    return json.loads(js.read_text())
+
+
+@pytest.mark.parametrize("name", ["lidar", "roof"])
+def test_every_tiling_keeps_the_whole_cloud_ground(gdt_bin, tool, clouds, tmp_path, name):
+    las = clouds[name]
+    want, distinct, lattice = whole(tool, las)
+    assert 0 < len(want) < distinct
+    first = None
+    for tile in (64, 256, 1024, 4096):
+        out = tmp_path / f"g{tile}.ply"
+        s = ground_run(gdt_bin, las, out, "--tile", tile, *(["--check"] if tile == 256 else []))
+        got = vertex_keys(out, lattice)
+        assert got == want, f"--tile {tile}: {len(got - want)} extra, {len(want - got)} missing"
+        g = s["ground"]
+        assert g["ground_points"] == len(want) == s["vertices"]
+        assert g["ground_points"] + g["nonground_points"] == distinct
+        assert g["classified"] and g["method"] == "pmf"
+        if first is None:
+            first = out
+        else:
+            assert_equal_meshes(first, out, f"{name} --tile {tile}")
+
+
+@pytest.mark.sanitize
+def test_roof_is_removed_and_empty_tiles_are_fine(gdt_bin, clouds, tmp_path):
+    """The roof's points are all non-ground, the terrain's (but the low
+    outliers' neighbours) ground; at --tile 64 tiles inside the roof keep
+    no point, and the mesh is still exact (--check)."""
+    las = clouds["roof"]
+    out = tmp_path / "r.ply"
+    s = ground_run(gdt_bin, las, out, "--tile", 64, "--check")
+    _, roof = roof_cloud(tmp_path / "again.las", 40_000, 4)
+    assert s["ground"]["nonground_points"] >= roof.sum()
+    assert s["ground"]["nonground_points"] < roof.sum() + 200
+    assert s["tiles"] > 16
+
+
+def test_parameters_change_the_classes_as_the_oracle_does(gdt_bin, tool, clouds, tmp_path):
+    las = clouds["lidar"]
+    args = ["--pmf-max-window", "12", "--pmf-slope", "0.4", "--pmf-initial-distance", "0.3",
+            "--pmf-max-distance", "1.5", "--pmf-cell", "1.5", "--pmf-exponential", "false"]
+    want, _, lattice = whole(tool, las, *args)
+    default, _, _ = whole(tool, las)
+    assert want != default
+    out = tmp_path / "p.ply"
+    ground_run(gdt_bin, las, out, "--tile", 256, *args)
+    assert vertex_keys(out, lattice) == want
+
+
+def test_real_sample_matches_the_oracle(gdt_bin, tool, data_dir, tmp_path):
+    las = data_dir / "autzen_trim.las"
+    if not las.exists():
+        pytest.skip(f"{las} absent (../shared/data is not beside the checkout)")
+    want, _, lattice = whole(tool, las)
+    for tile in (64, 256):
+        out = tmp_path / f"a{tile}.ply"
+        ground_run(gdt_bin, las, out, "--tile", tile)
+        assert vertex_keys(out, lattice) == want, f"--tile {tile}"
+
+
+def test_same_bytes_for_any_threads_and_a_reused_job(gdt_bin, clouds, tmp_path):
+    las = clouds["lidar"]
+    a = tmp_path / "a.ply"
+    b = tmp_path / "b.ply"
+    ground_run(gdt_bin, las, a, "--tile", 256, "--threads", 1, "--keep-job")
+    s = ground_run(gdt_bin, las, b, "--tile", 256, "--threads", 2, "--job", str(a) + ".gdt-job")
+    assert a.read_bytes() == b.read_bytes()
+    # the reused pass 2 classifies nothing, and reports the recorded counts
+    assert not s["ground"]["classified"] and s["ground"]["ground_points"] == s["vertices"]
+    header = a.read_bytes()[:2048].split(b"end_header")[0].decode()
+    assert "comment ground pmf max-window 33 slope 1 initial-distance 0.15" in header
+
+
+@pytest.mark.parametrize("stage,offset", [("ground", 0.05), ("tiles", 0.0)])
+def test_killed_run_resumes_to_the_same_bytes(gdt_bin, clouds, tmp_path, stage, offset):
+    las = clouds["lidar"]
+    want = tmp_path / "want.ply"
+    ground_run(gdt_bin, las, want, "--tile", 64)
+    out = tmp_path / "o.ply"
+    cmd = [gdt_bin, las, "-o", out, "--tile", 64, "--job", tmp_path / "job", "--ground", "pmf"]
+    p = ru.Run(cmd)
+    p.stop_in(stage, offset)
+    rc = p.finish()
+    assert rc in (0, -signal.SIGKILL), p.stderr
+    if rc != 0 and p.died_in not in ("write", "after write"):
+        assert not out.exists(), p.died_in
+    r = run(cmd + ["-q"])
+    assert r.returncode == 0, r.stderr
+    assert out.read_bytes() == want.read_bytes()
+
+
+@pytest.mark.parametrize("args,name", [
+    (["--pmf-max-window", "0"], "--pmf-max-window"),
+    (["--pmf-max-window", "-5"], "--pmf-max-window"),
+    (["--pmf-slope", "nan"], "--pmf-slope"),
+    (["--pmf-slope", "-1"], "--pmf-slope"),
+    (["--pmf-cell", "0"], "--pmf-cell"),
+    (["--pmf-initial-distance", "inf"], "--pmf-initial-distance"),
+    (["--pmf-max-distance", "-0.5"], "--pmf-max-distance"),
+    (["--pmf-exponential", "maybe"], "--pmf-exponential"),
+    (["--pmf-max-window", "0.5", "--pmf-cell", "1"], "--pmf-max-window"),
+])
+def test_bad_parameters_exit_2_naming_the_option(gdt_bin, clouds, tmp_path, args, name):
+    out = tmp_path / "bad.ply"
+    r = run(command(gdt_bin, clouds["roof"], out, "--ground", "pmf", *args))
+    assert r.returncode == 2, r.stderr
+    assert name in r.stderr
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("args,what", [
+    (["--ground", "pmf", "--keep-class", "2"], "--keep-class"),
+    (["--pmf-slope", "0.5"], "--ground"),
+    (["--ground", "csf"], "--ground"),
+    (["--ground", "pmf", "--reference"], "tiled"),
+])
+def test_usage_errors(gdt_bin, clouds, tmp_path, args, what):
+    out = tmp_path / "u.ply"
+    r = run(command(gdt_bin, clouds["roof"], out, *args))
+    assert r.returncode == 2, r.stderr
+    assert what in r.stderr
+    assert not out.exists()
