@@ -355,3 +355,20 @@ def run_in_namespace(script, args, env, timeout=900):
     return subprocess.run(["unshare", "-m", "sh", "-c", script, "sh", *map(str, args)],
                           capture_output=True, text=True, timeout=timeout,
                           env={**os.environ, **env})
+
+
+def kill_then_rerun(cmd, out, stage, offset):
+    """Runs cmd (writing out) killed in stage after offset seconds, checks
+    that a kill before the write stage left no output (one that lands in it,
+    as the run can outpace the offset, may come after the atomic rename),
+    then runs cmd again to the end; returns the output's bytes."""
+    p = Run(cmd)
+    p.stop_in(stage, offset)
+    rc = p.finish()
+    assert rc in (0, -signal.SIGKILL), p.stderr
+    if rc != 0 and p.died_in not in ("write", "after write"):
+        assert not pathlib.Path(out).exists(), p.died_in
+    r = subprocess.run([str(c) for c in cmd] + ["-q"], capture_output=True, text=True,
+                       timeout=900)
+    assert r.returncode == 0, r.stderr
+    return pathlib.Path(out).read_bytes()

@@ -5,7 +5,6 @@ mesh is the exact Delaunay triangulation of the ground points; bad options
 are usage errors naming the option."""
 import json
 import pathlib
-import signal
 
 import numpy as np
 import pytest
@@ -151,15 +150,7 @@ def test_killed_run_resumes_to_the_same_bytes(gdt_bin, clouds, tmp_path, stage, 
     ground_run(gdt_bin, las, want, "--tile", 64)
     out = tmp_path / "o.ply"
     cmd = [gdt_bin, las, "-o", out, "--tile", 64, "--job", tmp_path / "job", "--ground", "pmf"]
-    p = ru.Run(cmd)
-    p.stop_in(stage, offset)
-    rc = p.finish()
-    assert rc in (0, -signal.SIGKILL), p.stderr
-    if rc != 0 and p.died_in not in ("write", "after write"):
-        assert not out.exists(), p.died_in
-    r = run(cmd + ["-q"])
-    assert r.returncode == 0, r.stderr
-    assert out.read_bytes() == want.read_bytes()
+    assert ru.kill_then_rerun(cmd, out, stage, offset) == want.read_bytes()
 
 
 @pytest.mark.parametrize("args,name", [
