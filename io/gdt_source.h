@@ -119,6 +119,14 @@ const char *gdt_source_path(const gdt_source *src);
 gdt_status gdt_source_read(gdt_source *src, gdt_src_point *buf, size_t cap, size_t *n,
                            gdt_error *err);
 
+/* As gdt_source_read, and the records themselves: record i's
+ * info.record_length bytes, exactly as the LAS file stores them (decoded,
+ * for LAZ: with every field, so open the source with need 0), go to
+ * raw + i * record_length.  LAS and LAZ sources only.
+ * returns: as gdt_source_read; GDT_EUSAGE 2150 (not a LAS source). */
+gdt_status gdt_source_read_raw(gdt_source *src, gdt_src_point *buf, unsigned char *raw,
+                               size_t cap, size_t *n, gdt_error *err);
+
 /* 1 when gdt_source_seek can start src at any record: fixed-size records
  * (uncompressed LAS, PCD DATA binary).  LAZ starts at its chunks
  * (gdt_source_starts); PCD ascii (text lines) and binary_compressed (one

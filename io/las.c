@@ -537,8 +537,9 @@ static void las_record_to_point(const las_impl *im, const unsigned char *rec, gd
     }
 }
 
-static gdt_status las_read(gdt_source *src, gdt_src_point *out, size_t cap, size_t *n,
-                           gdt_error *err)
+/* Both reads: raw, when not NULL, receives each record whole. */
+static gdt_status las_read_records(gdt_source *src, gdt_src_point *out, unsigned char *raw,
+                                   size_t cap, size_t *n, gdt_error *err)
 {
     las_impl *im = src->impl;
     unsigned char head[LAS_HEAD_BYTES];
@@ -566,6 +567,12 @@ static gdt_status las_read(gdt_source *src, gdt_src_point *out, size_t cap, size
         } else if (im->buf_len - im->buf_pos >= im->record_length) {
             rec = im->buf + im->buf_pos;
             im->buf_pos += im->record_length;
+        } else if (raw != NULL) {
+            /* a record across the buffer's end, wanted whole */
+            st = las_take(src, im, raw + *n * im->record_length, im->record_length, err);
+            if (st != GDT_OK)
+                goto fail;
+            rec = raw + *n * im->record_length;
         } else {
             st = las_take(src, im, head, LAS_HEAD_BYTES, err);
             if (st == GDT_OK)
@@ -575,6 +582,8 @@ static gdt_status las_read(gdt_source *src, gdt_src_point *out, size_t cap, size
             rec = head;
         }
         las_record_to_point(im, rec, &out[*n]);
+        if (raw != NULL && rec != raw + *n * im->record_length)
+            memcpy(raw + *n * im->record_length, rec, im->record_length);
         (*n)++;
         im->next_point++;
     }
@@ -583,6 +592,12 @@ fail:
     im->failed = st;
     *n = 0;
     return st;
+}
+
+static gdt_status las_read(gdt_source *src, gdt_src_point *out, size_t cap, size_t *n,
+                           gdt_error *err)
+{
+    return las_read_records(src, out, NULL, cap, n, err);
 }
 
 /* Closes and frees im and everything it owns; NULL is allowed. */
@@ -631,7 +646,8 @@ static uint64_t las_starts(const gdt_source *src, uint64_t *out, uint64_t cap)
     return im->laz != NULL ? gdt_laz_stream_starts(im->laz, out, cap) : 0;
 }
 
-static const gdt_source_vtable las_vtable = {las_read, las_close, las_seek, las_starts};
+static const gdt_source_vtable las_vtable = {las_read, las_close, las_seek, las_starts,
+                                             las_read_records};
 
 /* LAZ: the records come from a LAZ stream over [offset to points,
  * points_end).  The LASzip VLR is required: without it the point data

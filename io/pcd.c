@@ -1042,7 +1042,7 @@ static gdt_status pcd_seek(gdt_source *src, uint64_t rec, uint64_t end, gdt_erro
     return GDT_OK;
 }
 
-static const gdt_source_vtable pcd_vtable = {pcd_read, pcd_close, pcd_seek, NULL};
+static const gdt_source_vtable pcd_vtable = {pcd_read, pcd_close, pcd_seek, NULL, NULL};
 
 gdt_status gdt_pcd_open(gdt_source *src, gdt_error *err)
 {

@@ -163,6 +163,18 @@ gdt_status gdt_source_read(gdt_source *src, gdt_src_point *buf, size_t cap, size
     return src->vt->read(src, buf, cap, n, err);
 }
 
+gdt_status gdt_source_read_raw(gdt_source *src, gdt_src_point *buf, unsigned char *raw,
+                               size_t cap, size_t *n, gdt_error *err)
+{
+    *n = 0;
+    if (src->vt->read_raw == NULL)
+        return gdt_error_set(err, GDT_EUSAGE, 2150, "%s: a %s file has no LAS records to copy",
+                             src->path, src->info.format_name);
+    if (cap == 0)
+        return GDT_OK;
+    return src->vt->read_raw(src, buf, raw, cap, n, err);
+}
+
 int gdt_source_can_seek(const gdt_source *src)
 {
     return src->vt->seek != NULL && !src->info.compressed &&

@@ -17,6 +17,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <unistd.h>
 
 #ifndef GDT_VERSION
@@ -30,7 +31,7 @@ typedef enum opt_id {
     OPT_KEEP_CLASS, OPT_DROP_CLASS, OPT_RETURNS, OPT_KEEP_WITHHELD, OPT_MAX_EDGE,
     OPT_CONCAVITY, OPT_DEM, OPT_DEM_RES, OPT_DEM_NODATA, OPT_PREVIEW, OPT_GROUND,
     OPT_PMF_MAX_WINDOW, OPT_PMF_SLOPE, OPT_PMF_INITIAL, OPT_PMF_MAX_DISTANCE, OPT_PMF_CELL,
-    OPT_PMF_EXPONENTIAL
+    OPT_PMF_EXPONENTIAL, OPT_GROUND_OUT
 } opt_id;
 
 /* The option table: every option once, with its argument, default and help. */
@@ -92,6 +93,10 @@ static const opt_spec OPTIONS[] = {
      "--ground pmf: cell size of the filter's grid, CRS units"},
     {OPT_PMF_EXPONENTIAL, "--pmf-exponential", NULL, "true|false", "true",
      "--ground pmf: windows grow exponentially (3, 5, 9, 17, ...) or linearly (5, 9, 13, ...)"},
+    {OPT_GROUND_OUT, "--ground-out", NULL, "FILE.las", NULL,
+     "with --ground: also write every input record as LAS, class 2 (ground) or 1 (the "
+     "filter's points), other records and fields as they were (LAS/LAZ inputs of one "
+     "point layout)"},
     {OPT_MAX_EDGE, "--max-edge", NULL, "L", NULL,
      "drop every triangle with an edge longer than L (horizontal, CRS units)"},
     {OPT_CONCAVITY, "--concavity", NULL, "L", NULL,
@@ -400,6 +405,16 @@ static gdt_status apply(gdt_options *opts, const opt_spec *o, const char *val, g
         if (opts->pmf_set == NULL)
             opts->pmf_set = o->lng;
         break;
+    case OPT_GROUND_OUT: {
+        size_t len = strlen(val);
+        opts->ground_out = val;
+        if (len < 4 || strcasecmp(val + len - 4, ".las") != 0)
+            st = gdt_error_set(err, GDT_EUSAGE, 2704,
+                               "--ground-out %s: the classified points are written as LAS "
+                               "(uncompressed); name the file .las",
+                               val);
+        break;
+    }
     case OPT_MAX_EDGE: st = parse_positive_double(o->lng, val, &opts->trim.max_edge, err); break;
     case OPT_CONCAVITY:
         st = parse_positive_double(o->lng, val, &opts->trim.concavity, err);
@@ -555,6 +570,12 @@ static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
                              "scripts/validate_mesh.py TRIMMED.ply --trimmed-from FULL.ply");
     if (opts->pmf_set != NULL && !opts->ground)
         return gdt_error_set(err, GDT_EUSAGE, 2703, "%s needs --ground pmf", opts->pmf_set);
+    if (opts->ground_out != NULL && !opts->ground)
+        return gdt_error_set(err, GDT_EUSAGE, 2703, "--ground-out needs --ground pmf");
+    if (opts->ground_out != NULL && opts->comm != NULL)
+        return gdt_error_set(err, GDT_EUSAGE, 2704,
+                             "--ground-out is not written under mpirun yet: run the job "
+                             "without the launcher, or without --ground-out");
     if (opts->ground && opts->filter.class_mode > 0)
         return gdt_error_set(err, GDT_EUSAGE, 2703,
                              "--ground pmf classifies the points itself: not with --keep-class "

@@ -55,6 +55,7 @@ typedef struct gdt_options {
     int ground;              /* --ground pmf: triangulate the ground points only */
     gdt_pmf_params pmf;      /* --pmf-* (defaults: gdt_pmf_defaults) */
     const char *pmf_set;     /* the first --pmf-* option given, NULL if none */
+    const char *ground_out;  /* --ground-out FILE.las: every input record, class 2 or 1 */
     int check;               /* --check */
     const char *json;        /* --json FILE */
     const char *dem;         /* --dem OUT.tif, NULL: no DEM */

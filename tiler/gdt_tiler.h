@@ -440,6 +440,16 @@ gdt_status gdt_tiler_write_subset(const gdt_tiler *t, uint64_t k, const gdt_poin
 gdt_status gdt_tiler_take_subsets(gdt_tiler *t, const gdt_tiler_tile_files *files,
                                   gdt_error *err);
 
+/* With opts.keep_spill, after pass 2: tile k's pass-2 records (every
+ * point of the tile, duplicates included, in input order) from its .raw
+ * file into out; gdt_tiler_drop_raw removes the file.  Reads only: calls
+ * for different tiles with different buffers may run concurrently.
+ * returns: GDT_EUSAGE 2505 (no kept .raw files), 2506 (more than
+ * max_points), GDT_EIO 4504, GDT_EINTERNAL 7001. */
+gdt_status gdt_tiler_load_raw(const gdt_tiler *t, uint64_t k, uint64_t max_points,
+                              gdt_point_buf *out, gdt_error *err);
+void gdt_tiler_drop_raw(const gdt_tiler *t, uint64_t k);
+
 const gdt_tiler_stats *gdt_tiler_get_stats(const gdt_tiler *t);
 
 /* t may be NULL.  Leaves the job directory's files in place. */

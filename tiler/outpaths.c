@@ -232,7 +232,7 @@ done:
 
 gdt_status gdt_cli_check_paths(const gdt_options *opts, const char *job, gdt_error *err)
 {
-    gdt_outpath outs[6];
+    gdt_outpath outs[8];
     size_t n = 0;
     char *prj = NULL;
     gdt_status st;
@@ -256,6 +256,7 @@ gdt_status gdt_cli_check_paths(const gdt_options *opts, const char *job, gdt_err
     outs[n++] = (gdt_outpath){"--json", opts->json, 0};
     outs[n++] = (gdt_outpath){"--dem", opts->dem, 0};
     outs[n++] = (gdt_outpath){"--preview", opts->preview, 0};
+    outs[n++] = (gdt_outpath){"--ground-out", opts->ground_out, 0};
     outs[n++] = (gdt_outpath){"--job", job, 1};
     st = gdt_outpaths_check(opts->inputs, opts->ninputs, outs, n, err);
     free(prj);

@@ -2,6 +2,7 @@
  * started before the tile stage and completed after the merge (Euler
  * check), --check, --json and the summary, and the release of the run
  * (private/stages.h). */
+#include "private/ground_out.h"
 #include "private/stages.h"
 
 #include <inttypes.h>
@@ -287,6 +288,8 @@ gdt_status tr_run_finish(tr_run *c, gdt_error *err)
         c->s.dem_done = st == GDT_OK;
         c->s.t_dem = gdt_now() - t1;
     }
+    if (st == GDT_OK && opts->ground_out != NULL)
+        st = tr_ground_out_write(c, err);
     if (st == GDT_OK)
         gdt_progress_update(&c->prog, 1);
     if (st == GDT_OK)
@@ -403,6 +406,7 @@ gdt_status tr_run_close(tr_run *c, gdt_status st)
         unlink(c->check_ply); /* a second copy of the mesh is no state to keep */
     free(c->check_ply);
     free(c->tiles_dir);
+    free(c->ground_bits);
     free(c->job);
     return st;
 }

@@ -14,12 +14,24 @@
  * again once pass 2 is recorded.
  */
 #include "private/cli_modes.h"
+#include "private/job.h"
 #include "private/stages.h"
+#include "private/tiler_io.h"
 
+#include <errno.h>
+#include <fcntl.h>
 #include <inttypes.h>
 #include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
+
+#define BITS_PAGE 4096
+
+/* A ground location of a tile: the (x, y) of one of its ground points. */
+typedef struct xy_key {
+    int64_t x, y;
+} xy_key;
 
 typedef struct ground_ctx {
     tr_run *c;
@@ -32,6 +44,11 @@ typedef struct ground_ctx {
     uint64_t ground, nonground;
     gdt_status st;      /* the first failure */
     gdt_error err;
+    /* --ground-out: one bit per input ordinal (the points the filter
+     * kept, duplicates included), set for ground; bits_mu guards the file */
+    int bits_fd;
+    const char *bits_path;
+    pthread_mutex_t bits_mu;
 } ground_ctx;
 
 typedef struct ground_worker {
@@ -43,7 +60,112 @@ typedef struct ground_worker {
     size_t cap_all;
     uint8_t *keep;
     size_t cap_keep;
+    gdt_point_buf raw;  /* --ground-out: the tile's pass-2 records */
+    xy_key *keys;
+    size_t cap_keys;
+    uint64_t *ords;
+    size_t cap_ords;
 } ground_worker;
+
+static int key_cmp(const void *a, const void *b)
+{
+    const xy_key *p = a, *q = b;
+    if (p->x != q->x)
+        return p->x < q->x ? -1 : 1;
+    return p->y < q->y ? -1 : p->y > q->y;
+}
+
+static int ord_cmp(const void *a, const void *b)
+{
+    uint64_t p = *(const uint64_t *)a, q = *(const uint64_t *)b;
+    return p < q ? -1 : p > q;
+}
+
+/* pread / pwrite of all n bytes at off (EINTR and short transfers
+ * retried); *got: bytes read (fewer at the end of the file).  returns 0 or
+ * an errno value. */
+static int rw_all(int fd, unsigned char *p, size_t n, uint64_t off, int write_it, size_t *got)
+{
+    size_t done = 0;
+    while (done < n) {
+        ssize_t k = write_it ? pwrite(fd, p + done, n - done, (off_t)(off + done))
+                             : pread(fd, p + done, n - done, (off_t)(off + done));
+        if (k < 0 && errno == EINTR)
+            continue;
+        if (k < 0)
+            return errno;
+        if (k == 0) {
+            if (write_it)
+                return EIO;
+            break;
+        }
+        done += (size_t)k;
+    }
+    *got = done;
+    return 0;
+}
+
+/* Sets the bits of ords[0, n) (ascending) in the bitmap file, a page at a
+ * time; the caller holds bits_mu. */
+static gdt_status set_bits(ground_ctx *g, const uint64_t *ords, size_t n, gdt_error *err)
+{
+    unsigned char page[BITS_PAGE];
+    for (size_t i = 0; i < n;) {
+        uint64_t off = ords[i] / 8 / BITS_PAGE * BITS_PAGE;
+        size_t got = 0, put = 0;
+        int e = rw_all(g->bits_fd, page, BITS_PAGE, off, 0, &got);
+        if (e != 0)
+            return gdt_error_set(err, GDT_EIO, 4504, "%s: read failed: %s", g->bits_path,
+                                 strerror(e));
+        for (; i < n && ords[i] / 8 < off + got; i++)
+            page[ords[i] / 8 - off] |= (unsigned char)(1u << (ords[i] % 8));
+        e = rw_all(g->bits_fd, page, got, off, 1, &put);
+        if (e != 0)
+            return gdt_error_set(err, GDT_EIO, 4503, "%s: write failed: %s", g->bits_path,
+                                 strerror(e));
+        if (got == 0)
+            return gdt_error_set(err, GDT_EINTERNAL, 7705,
+                                 "ordinal %" PRIu64 " beyond the ground bits of %s", ords[i],
+                                 g->bits_path);
+    }
+    return GDT_OK;
+}
+
+/* --ground-out: every pass-2 record of tile k (duplicates too) whose (x, y)
+ * is a ground location of the tile gets its ordinal's bit; the tile's .raw
+ * file is removed after. */
+static gdt_status mark_ground(ground_worker *w, uint64_t k, gdt_error *err)
+{
+    ground_ctx *g = w->g;
+    size_t nk = 0, no = 0;
+    gdt_status st;
+
+    if (tr_reserve(&w->keys, &w->cap_keys, w->own.n + 1, sizeof *w->keys) != 0)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    for (size_t i = 0; i < w->own.n; i++)
+        if (w->keep[i]) {
+            w->keys[nk].x = w->own.pts[i].x;
+            w->keys[nk++].y = w->own.pts[i].y;
+        }
+    qsort(w->keys, nk, sizeof *w->keys, key_cmp);
+    st = gdt_tiler_load_raw(g->c->tiler, k, g->max_points, &w->raw, err);
+    if (st != GDT_OK)
+        return st;
+    if (tr_reserve(&w->ords, &w->cap_ords, w->raw.n + 1, sizeof *w->ords) != 0)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    for (size_t i = 0; i < w->raw.n; i++) {
+        xy_key q = {w->raw.pts[i].x, w->raw.pts[i].y};
+        if (nk > 0 && bsearch(&q, w->keys, nk, sizeof q, key_cmp) != NULL)
+            w->ords[no++] = w->raw.pts[i].ord;
+    }
+    qsort(w->ords, no, sizeof *w->ords, ord_cmp);
+    pthread_mutex_lock(&g->bits_mu);
+    st = set_bits(g, w->ords, no, err);
+    pthread_mutex_unlock(&g->bits_mu);
+    if (st == GDT_OK)
+        gdt_tiler_drop_raw(g->c->tiler, k);
+    return st;
+}
 
 static gdt_status classify_tile(ground_worker *w, uint64_t k, gdt_error *err)
 {
@@ -78,6 +200,8 @@ static gdt_status classify_tile(ground_worker *w, uint64_t k, gdt_error *err)
     st = gdt_pmf_classify(g->f, w->all, n, &cloud, &roi, w->keep, g->max_bytes, err);
     if (st == GDT_OK)
         st = gdt_tiler_write_subset(g->c->tiler, k, w->own.pts, w->own.n, w->keep, &out, err);
+    if (st == GDT_OK && g->bits_fd >= 0)
+        st = mark_ground(w, k, err);
     if (st != GDT_OK)
         return st;
     pthread_mutex_lock(&g->mu);
@@ -161,6 +285,18 @@ gdt_status tr_run_ground(tr_run *c, gdt_error *err)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     }
     pthread_mutex_init(&g.mu, NULL);
+    pthread_mutex_init(&g.bits_mu, NULL);
+    g.bits_fd = -1;
+    if (opts->ground_out != NULL) {
+        /* one bit per ordinal, zero: not ground */
+        g.bits_path = c->ground_bits;
+        g.bits_fd = open(c->ground_bits, O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
+        if (g.bits_fd < 0 || ftruncate(g.bits_fd, (off_t)((c->plan->points + 7) / 8)) != 0) {
+            st = gdt_error_set(err, GDT_EIO, 4502, "cannot create %s: %s", c->ground_bits,
+                               strerror(errno));
+            goto out;
+        }
+    }
     gdt_progress_stage(&c->prog, "ground filter", ntiles, "tiles");
     for (unsigned i = 0; i < nw; i++) {
         w[i].g = &g;
@@ -181,6 +317,15 @@ gdt_status tr_run_ground(tr_run *c, gdt_error *err)
         *err = g.err;
     else
         st = gdt_tiler_take_subsets(c->tiler, g.files, err);
+    if (st == GDT_OK && g.bits_fd >= 0) {
+        /* durable, and its sum for the journal (recorded with pass 2) */
+        if (fsync(g.bits_fd) != 0)
+            st = gdt_error_set(err, GDT_EIO, 4505, "%s: fsync failed: %s", c->ground_bits,
+                               strerror(errno));
+        if (st == GDT_OK)
+            st = tl_file_sum(c->ground_bits, gdt_job_file_seed(c->job_id, 0, GDT_JOB_FILE_BITS),
+                             &c->s.ground_bits_size, &c->s.ground_bits_sum, err);
+    }
     if (st == GDT_OK) {
         c->s.ground_points = g.ground;
         c->s.nonground_points = g.nonground;
@@ -190,12 +335,19 @@ gdt_status tr_run_ground(tr_run *c, gdt_error *err)
                      "(%d windows, reach %" PRId64 " lattice steps, %u workers)",
                      g.ground, g.nonground, c->s.t_ground, f.rounds, f.reach, nw);
     }
+out:
     for (unsigned i = 0; i < nw; i++) {
         gdt_point_buf_free(&w[i].own);
         gdt_point_buf_free(&w[i].around);
+        gdt_point_buf_free(&w[i].raw);
         free(w[i].all);
         free(w[i].keep);
+        free(w[i].keys);
+        free(w[i].ords);
     }
+    if (g.bits_fd >= 0)
+        close(g.bits_fd);
+    pthread_mutex_destroy(&g.bits_mu);
     pthread_mutex_destroy(&g.mu);
     free(w);
     free(g.files);

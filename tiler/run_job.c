@@ -2,6 +2,7 @@
  * journal, the params and fingerprint that tie a job to its command, the
  * clean-up, and --resume (private/stages.h, private/job.h). */
 #define _GNU_SOURCE /* st_mtim */
+#include "private/ground_out.h"
 #include "private/stages.h"
 
 #include <dirent.h>
@@ -58,10 +59,18 @@ gdt_status tr_run_init(tr_run *c, const gdt_options *opts, gdt_error *err)
     gdt_progress_init(&c->prog, opts->verbosity);
     c->job = opts->job != NULL ? strdup(opts->job) : default_job(opts->output);
     c->tiles_dir = c->job != NULL ? tr_path_join(c->job, "tiles") : NULL;
-    if (c->job == NULL || c->tiles_dir == NULL)
+    c->ground_bits = c->job != NULL ? tr_path_join(c->job, "ground.bits") : NULL;
+    if (c->job == NULL || c->tiles_dir == NULL || c->ground_bits == NULL)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     /* every path (those the job recorded, for --resume) before any work */
-    return gdt_cli_check_paths(opts, c->job, err);
+    gdt_status st = gdt_cli_check_paths(opts, c->job, err);
+    if (st == GDT_OK && opts->ground_out != NULL && opts->comm != NULL)
+        st = gdt_error_set(err, GDT_EUSAGE, 2704,
+                           "--ground-out is not written under mpirun yet: run the job "
+                           "without the launcher, or without --ground-out");
+    if (st == GDT_OK)
+        st = tr_ground_out_check(opts, err);
+    return st;
 }
 
 /* A growing text buffer. */
@@ -201,7 +210,7 @@ void tr_remove_job_files(const char *job, int final, int own_dir)
     static const char *const names[] = {"job.db", "job.db-wal", "job.db-shm", "job.db-journal",
                                         "index.vdb", "index.vdb.tmp", MF_NAME,
                                         MF_NAME ".tmp", MD_NAME, MD_NAME ".tmp",
-                                        CHECK_PLY_NAME};
+                                        CHECK_PLY_NAME, "ground.bits"};
     char *tiles = tr_path_join(job, "tiles");
     /* the journal first: a removal cut short by a crash must not leave a
      * journal that vouches for files already gone */
@@ -265,6 +274,8 @@ static gdt_status open_journal(tr_run *c, gdt_error *err)
             if (c->opts->preview != NULL)
                 text_abs(&products, "preview", c->opts->preview);
         }
+        if (c->opts->ground_out != NULL)
+            text_abs(&products, "ground_out", c->opts->ground_out);
         if (out.failed || products.failed)
             st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     }
@@ -379,7 +390,7 @@ gdt_status gdt_cli_resume(const gdt_options *opts, gdt_error *err)
     gdt_options o = *opts;
     gdt_job *j = NULL;
     char *params = NULL, *v = NULL, *output = NULL, *products = NULL, *dem = NULL;
-    char *preview = NULL;
+    char *preview = NULL, *ground_out = NULL;
     char **inputs = NULL;
     size_t n = 0;
     gdt_status st = gdt_job_open(&j, opts->resume, 0, NULL, err);
@@ -410,6 +421,8 @@ gdt_status gdt_cli_resume(const gdt_options *opts, gdt_error *err)
         free(r);
         free(nd);
     }
+    if (st == GDT_OK && products != NULL)
+        o.ground_out = ground_out = param_get(products, "ground_out", NULL);
     free(products);
     if (st == GDT_OK && params == NULL)
         st = gdt_error_set(err, GDT_EJOB, 6905,
@@ -421,6 +434,7 @@ gdt_status gdt_cli_resume(const gdt_options *opts, gdt_error *err)
         free(params);
         free(dem);
         free(preview);
+        free(ground_out);
         return st;
     }
 #define NEED(key)                                                                            \
@@ -527,5 +541,6 @@ done:
     free(params);
     free(dem);
     free(preview);
+    free(ground_out);
     return st;
 }

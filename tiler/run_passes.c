@@ -3,6 +3,7 @@
  * records of pass 2 (private/stages.h). */
 #define _GNU_SOURCE /* sigaltstack */
 #include "private/stages.h"
+#include "private/tiler_io.h"
 
 #include <inttypes.h>
 #include <pthread.h>
@@ -48,12 +49,47 @@ static gdt_status record_pass2(tr_run *c, gdt_error *err)
         snprintf(counts, sizeof counts, "%" PRIu64 " %" PRIu64, c->s.ground_points,
                  c->s.nonground_points);
         st = gdt_job_set_meta(c->jobdb, "ground_counts", counts, err);
+        if (st == GDT_OK && c->opts->ground_out != NULL) {
+            /* J/ground.bits, the classes of the input ordinals */
+            snprintf(counts, sizeof counts, "%" PRIu64 " %" PRIu64, c->s.ground_bits_size,
+                     c->s.ground_bits_sum);
+            st = gdt_job_set_meta(c->jobdb, "ground_bits", counts, err);
+        }
     }
     if (st == GDT_OK)
         st = gdt_job_set_stage(c->jobdb, "pass2", 1, err);
     if (st == GDT_OK)
         st = gdt_job_commit(c->jobdb, err);
     return st;
+}
+
+/* --ground-out on a recorded pass 2: J/ground.bits must match the record
+ * the ground filter left (a job classified without --ground-out has none:
+ * *ad receives GDT_EJOB 6501 and pass 2 is redone). */
+static gdt_status adopt_ground_bits(tr_run *c, gdt_status *ad, gdt_error *e2, gdt_error *err)
+{
+    char *rec = NULL;
+    uint64_t size = 0, sum = 0, want_size = 0, want_sum = 0;
+    gdt_error e3;
+    gdt_status st = gdt_job_get_meta(c->jobdb, "ground_bits", &rec, err);
+    if (st != GDT_OK)
+        return st;
+    gdt_error_clear(&e3);
+    if (rec == NULL ||
+        sscanf(rec, "%" SCNu64 " %" SCNu64, &want_size, &want_sum) != 2)
+        *ad = gdt_error_set(e2, GDT_EJOB, 6501,
+                            "the job records no ground classes of the input points "
+                            "(--ground-out)");
+    else if (tl_file_sum(c->ground_bits, gdt_job_file_seed(c->job_id, 0, GDT_JOB_FILE_BITS),
+                         &size, &sum, &e3) != GDT_OK ||
+             size != want_size || sum != want_sum)
+        *ad = gdt_error_set(e2, GDT_EJOB, 6501, "%s: missing or damaged", c->ground_bits);
+    else {
+        c->s.ground_bits_size = size;
+        c->s.ground_bits_sum = sum;
+    }
+    free(rec);
+    return GDT_OK;
 }
 
 /* Pass 2 recorded as done: its files are adopted if every one matches its
@@ -80,12 +116,8 @@ static gdt_status adopt_pass2(tr_run *c, int *ok, gdt_error *err)
                                "the job records no %s file of tile %" PRIu64,
                                i % 2 ? ".edge" : ".pts", i / 2);
     }
-    if (st == GDT_OK && ad == GDT_OK)
-        ad = gdt_tiler_adopt_pass2(c->tiler, fs, &e2);
-    free(fs);
-    if (st != GDT_OK)
-        return st;
-    if (ad == GDT_OK && c->opts->ground) {
+    /* the ground filter's records first: the tiler's adoption is final */
+    if (st == GDT_OK && ad == GDT_OK && c->opts->ground) {
         char *counts = NULL;
         st = gdt_job_get_meta(c->jobdb, "ground_counts", &counts, err);
         if (st == GDT_OK && (counts == NULL ||
@@ -93,9 +125,14 @@ static gdt_status adopt_pass2(tr_run *c, int *ok, gdt_error *err)
                                     &c->s.nonground_points) != 2))
             ad = gdt_error_set(&e2, GDT_EJOB, 6501, "the job records no ground counts");
         free(counts);
-        if (st != GDT_OK)
-            return st;
+        if (st == GDT_OK && ad == GDT_OK && c->opts->ground_out != NULL)
+            st = adopt_ground_bits(c, &ad, &e2, err);
     }
+    if (st == GDT_OK && ad == GDT_OK)
+        ad = gdt_tiler_adopt_pass2(c->tiler, fs, &e2);
+    free(fs);
+    if (st != GDT_OK)
+        return st;
     if (ad == GDT_OK) {
         *ok = 1;
     } else if (ad == GDT_EJOB) {
@@ -198,6 +235,9 @@ static void tiler_opts(tr_run *c, gdt_tiler_opts *to)
             GDT_OK)
             to->edge_min = f.reach;
         to->subsets = 1;
+        /* --ground-out: the pass-2 records (duplicates too) stay for the
+         * classes of every input point */
+        to->keep_spill = opts->ground_out != NULL;
     }
 }
 

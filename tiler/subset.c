@@ -17,6 +17,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #define SUBSET_BUF_RECS 4096
 
@@ -132,4 +133,55 @@ gdt_status gdt_tiler_take_subsets(gdt_tiler *t, const gdt_tiler_tile_files *file
         if (t->tiles[k].points > t->stats.max_tile_points)
             t->stats.max_tile_points = t->tiles[k].points;
     return st;
+}
+
+gdt_status gdt_tiler_load_raw(const gdt_tiler *t, uint64_t k, uint64_t max_points,
+                              gdt_point_buf *out, gdt_error *err)
+{
+    tl_rfile rf;
+    char *path;
+    size_t got = 0;
+    uint64_t n;
+    gdt_status st;
+
+    out->n = 0;
+    if (t->state != 2 || k >= t->ntiles || !t->opts.keep_spill)
+        return gdt_error_set(err, GDT_EUSAGE, 2505,
+                             "tile %" PRIu64 ": its pass-2 records are not kept", k);
+    n = t->tiles[k].count;
+    if (n > max_points)
+        return gdt_error_set(err, GDT_EUSAGE, 2506,
+                             "tile (%" PRId64 ", %" PRId64 ") holds %" PRIu64 " records, more "
+                             "than its share of the memory budget takes (%" PRIu64 ")",
+                             t->tiles[k].i, t->tiles[k].j, n, max_points);
+    if (n > out->cap) {
+        gdt_point *g = realloc(out->pts, (size_t)n * sizeof *g);
+        if (g == NULL)
+            return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory (%" PRIu64
+                                 " records)", n);
+        out->pts = g;
+        out->cap = (size_t)n;
+    }
+    path = tl_tile_file(t, k, "raw", 0);
+    if (path == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    st = tl_rfile_open(&rf, path, n, SUBSET_BUF_RECS, err);
+    free(path);
+    if (st != GDT_OK)
+        return st;
+    st = tl_rfile_read(&rf, out->pts, (size_t)n, &got, err);
+    tl_rfile_close(&rf);
+    if (st == GDT_OK && got != n)
+        st = gdt_error_set(err, GDT_EIO, 4504, "tile %" PRIu64 ": %zu of %" PRIu64
+                           " pass-2 records read", k, got, n);
+    out->n = st == GDT_OK ? got : 0;
+    return st;
+}
+
+void gdt_tiler_drop_raw(const gdt_tiler *t, uint64_t k)
+{
+    char *path = t->opts.keep_spill ? tl_tile_file(t, k, "raw", 0) : NULL;
+    if (path != NULL)
+        unlink(path);
+    free(path);
 }

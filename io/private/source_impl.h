@@ -15,6 +15,9 @@ typedef struct gdt_source_vtable {
     gdt_status (*seek)(gdt_source *src, uint64_t rec, uint64_t end, gdt_error *err);
     /* Same contract as gdt_source_starts; NULL: none. */
     uint64_t (*starts)(const gdt_source *src, uint64_t *out, uint64_t cap);
+    /* Same contract as gdt_source_read_raw; NULL: records are not LAS. */
+    gdt_status (*read_raw)(gdt_source *src, gdt_src_point *buf, unsigned char *raw, size_t cap,
+                           size_t *n, gdt_error *err);
 } gdt_source_vtable;
 
 struct gdt_source {

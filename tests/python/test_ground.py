@@ -201,3 +201,137 @@ def test_ground_eval_script(gdt_bin, clouds, tmp_path):
     assert 0.5 < res["recall"] <= 1.0
     assert res["true_positive"] + res["false_positive"] == res["pmf_ground"]
     assert res["dtm_cells"] > 1000 and res["dtm_p95_abs"] < 1.0
+
+
+def las_records(path):
+    import laspy
+    las = laspy.read(str(path))
+    raw = np.frombuffer(las.points.array.tobytes(), np.uint8).reshape(len(las.points), -1)
+    return las, raw.copy()
+
+
+def check_ground_out(src, out, ply, dropped=None):
+    """Every record of src is in out, in order, byte for byte but the class
+    of the records the run kept: 2 where its (x, y) is a vertex of the
+    ground mesh (duplicates too), else 1; dropped (a mask) records as read."""
+    a, ra = las_records(src)
+    b, rb = las_records(out)
+    assert rb.shape == ra.shape
+    ci, mask = (16, 0xFF) if a.header.point_format.id >= 6 else (15, 0x1F)
+    other = ra != rb
+    other[:, ci] = False
+    assert not other.any(), "bytes other than the class changed"
+    assert ((ra[:, ci] & ~mask & 0xFF) == (rb[:, ci] & ~mask & 0xFF)).all(), "class flags changed"
+    sx, sy = a.header.scales[:2]
+    ox, oy = a.header.offsets[:2]
+    keys = vertex_keys(ply, (sx, sy, ox, oy))
+    X = np.asarray(a.X, np.int64).tolist()
+    Y = np.asarray(a.Y, np.int64).tolist()
+    ground = np.array([(x, y) in keys for x, y in zip(X, Y)])
+    kept = np.ones(len(X), bool) if dropped is None else ~dropped
+    cls = rb[:, ci] & mask
+    assert set(np.unique(cls[kept]).tolist()) <= {1, 2}
+    assert ((cls[kept] == 2) == ground[kept]).all()
+    assert (rb[~kept] == ra[~kept]).all()
+    assert b.header.point_count == len(X)
+    assert np.allclose(b.header.mins, [np.min(a.x), np.min(a.y), np.min(a.z)])
+    assert np.allclose(b.header.maxs, [np.max(a.x), np.max(a.y), np.max(a.z)])
+    return cls
+
+
+def test_ground_out_classifies_every_record(gdt_bin, clouds, tmp_path):
+    """The generator's cloud has duplicated records and noise (class 7):
+    with --drop-class 7 the noise records keep their class, every other
+    record gets the class of its location."""
+    import laspy
+    las = clouds["lidar"]
+    out, ply = tmp_path / "g.las", tmp_path / "g.ply"
+    s = ground_run(gdt_bin, las, ply, "--tile", 256, "--drop-class", 7, "--ground-out", out)
+    noise = np.asarray(laspy.read(str(las)).classification) == 7
+    assert noise.any()
+    cls = check_ground_out(las, out, ply, dropped=noise)
+    assert (cls[~noise] == 2).sum() >= s["ground"]["ground_points"]
+
+
+def test_ground_out_same_records_from_laz_and_las(gdt_bin, data_dir, tmp_path):
+    src = data_dir / "autzen_trim.las"
+    laz = data_dir / "autzen_trim.laz"
+    if not (src.exists() and laz.exists()):
+        pytest.skip(f"{data_dir} lacks the autzen samples")
+    a, b = tmp_path / "a.las", tmp_path / "b.las"
+    ground_run(gdt_bin, src, tmp_path / "a.ply", "--tile", 256, "--ground-out", a)
+    ground_run(gdt_bin, laz, tmp_path / "b.ply", "--tile", 1024, "--ground-out", b)
+    check_ground_out(src, a, tmp_path / "a.ply")
+    assert las_records(a)[1].tobytes() == las_records(b)[1].tobytes()
+    head = b.read_bytes()[:400]
+    assert head[104] == 3  # the compression bits of the point format cleared
+    assert b"laszip encoded" not in b.read_bytes()[:4096]
+
+
+def test_ground_out_of_a_reused_job_and_a_job_without_it(gdt_bin, clouds, tmp_path):
+    las = clouds["roof"]
+    job = tmp_path / "job"
+    first = tmp_path / "a.las"
+    base = ["--tile", 64, "--job", job, "--keep-job"]
+    ground_run(gdt_bin, las, tmp_path / "a.ply", *base)  # no --ground-out: no classes kept
+    ground_run(gdt_bin, las, tmp_path / "b.ply", *base, "--ground-out", first)
+    again = tmp_path / "c.las"
+    s = ground_run(gdt_bin, las, tmp_path / "c.ply", *base, "--ground-out", again)
+    assert not s["ground"]["classified"]
+    assert first.read_bytes() == again.read_bytes()
+    check_ground_out(las, again, tmp_path / "c.ply")
+
+
+@pytest.mark.parametrize("case", ["no-ground", "laz-name", "pcd", "layouts"])
+def test_ground_out_refusals(gdt_bin, clouds, data_dir, tmp_path, case):
+    out = tmp_path / "o.las"
+    inputs, args = [clouds["roof"]], ["--ground", "pmf", "--ground-out", out]
+    if case == "no-ground":
+        args = ["--ground-out", out]
+    elif case == "laz-name":
+        args = ["--ground", "pmf", "--ground-out", tmp_path / "o.laz"]
+    elif case == "pcd":
+        pcd = data_dir / "autzen-utm.pcd"
+        if not pcd.exists():
+            pytest.skip(f"{pcd} absent")
+        inputs = [pcd]
+    else:
+        import laspy
+        other = tmp_path / "f1.las"
+        las = laspy.read(str(clouds["roof"]))
+        conv = laspy.convert(las, point_format_id=1)
+        conv.write(str(other))
+        inputs = [clouds["roof"], other]
+    r = run(command(gdt_bin, inputs, tmp_path / "o.ply", *args))
+    assert r.returncode == 2, r.stderr
+    assert "--ground" in r.stderr or "LAS" in r.stderr
+    assert not out.exists() and not (tmp_path / "o.ply").exists()
+
+
+def test_ground_out_of_two_inputs_with_other_offsets(gdt_bin, clouds, tmp_path):
+    """A cloud cut in two files, the second with another offset (whole
+    steps away): its records come back on the first file's lattice, and the
+    whole output equals the one-file run's."""
+    import laspy
+    src = clouds["lidar"]
+    las = laspy.read(str(src))
+    half = len(las.points) // 2
+    parts = []
+    for name, sl, shift in (("p1.las", slice(0, half), 0.0), ("p2.las", slice(half, None), 123.45)):
+        h = laspy.LasHeader(point_format=las.header.point_format.id,
+                            version=str(las.header.version))
+        h.scales = las.header.scales
+        h.offsets = las.header.offsets + np.array([shift, -shift, 0.0])
+        h.vlrs = las.header.vlrs
+        part = laspy.LasData(h)
+        part.points = laspy.ScaleAwarePointRecord(las.points.array[sl].copy(),
+                                                  las.header.point_format, h.scales, h.offsets)
+        k = int(round(shift / las.header.scales[0]))
+        part.X = np.asarray(las.X[sl]) - k
+        part.Y = np.asarray(las.Y[sl]) + k
+        part.write(str(tmp_path / name))
+        parts.append(tmp_path / name)
+    one, two = tmp_path / "one.las", tmp_path / "two.las"
+    ground_run(gdt_bin, src, tmp_path / "one.ply", "--tile", 256, "--ground-out", one)
+    ground_run(gdt_bin, parts, tmp_path / "two.ply", "--tile", 256, "--ground-out", two)
+    assert las_records(one)[1].tobytes() == las_records(two)[1].tobytes()

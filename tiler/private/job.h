@@ -105,7 +105,7 @@ gdt_status gdt_job_commit(gdt_job *j, gdt_error *err);
 gdt_status gdt_job_clear_tiles(gdt_job *j, gdt_error *err);
 
 /* The kinds of files a checksum is bound to. */
-enum { GDT_JOB_FILE_PTS = 1, GDT_JOB_FILE_EDGE = 2, GDT_JOB_FILE_TRI = 3 };
+enum { GDT_JOB_FILE_PTS = 1, GDT_JOB_FILE_EDGE = 2, GDT_JOB_FILE_TRI = 3, GDT_JOB_FILE_BITS = 4 };
 
 /* Record of pass-2 file (k, kind); *found = 0 when there is none. */
 gdt_status gdt_job_get_file(gdt_job *j, uint64_t k, int kind, int *found, uint64_t *size,

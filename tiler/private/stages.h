@@ -85,6 +85,7 @@ typedef struct tr_summary {
     uint64_t ground_points, nonground_points; /* --ground: the classes of pass 2's
                                  points (deduplicated), when this run classified */
     double t_ground;        /* the ground filter's wall time (0: adopted, or off) */
+    uint64_t ground_bits_size, ground_bits_sum; /* --ground-out: J/ground.bits */
     int nranks;             /* ranks of an MPI run; 0 in a plain run */
     tr_rank_stats *ranks;   /* nranks of them, rank 0 first; owned */
 } tr_summary;
@@ -207,6 +208,7 @@ struct tr_run {
     double t_start;     /* gdt_now() at tr_run_init */
     char *job;          /* owned */
     char *tiles_dir;    /* owned */
+    char *ground_bits;  /* J/ground.bits (--ground-out); owned */
     int created;        /* this run made the job directory */
     int own_dir;        /* a run of this job made it (gdt_job_lock) */
     tr_core_start cstart; /* the core's creation, until tr_run_pass1 joins it */
@@ -294,7 +296,8 @@ gdt_status tr_run_init(tr_run *c, const gdt_options *opts, gdt_error *err);
 gdt_status tr_run_prepare_job(tr_run *c, gdt_error *err);
 
 /* Removes the files a job directory holds (job.db and its WAL files,
- * index.vdb, merge.faces, merge.dem, check.ply, tiles/ with our tile files)
+ * index.vdb, merge.faces, merge.dem, check.ply, ground.bits, tiles/ with our tile
+ * files)
  * and tiles/ if empty.  With final (the end of the run that holds the
  * lock), the lock file goes last, then the job directory itself if it is
  * empty and own_dir; otherwise (--restart) the lock file and the directory

@@ -1,0 +1,74 @@
+/* gdt_las_copy.h — a LAS file made of the records of LAS/LAZ inputs, copied
+ * (the classified cloud of --ground-out).
+ *
+ * The output takes the first input's header and VLRs (its CRS among them),
+ * without the LASzip VLR and with the compression bits of the point format
+ * cleared, so a LAZ input becomes LAS; its EVLRs (LAS 1.4) follow the
+ * records.  The caller gives records of that point format, record length,
+ * scale and offset (gdt_las_copy_accepts checks another input's header), in
+ * the order they go to the file, and may change their bytes on the way
+ * (an input whose offset differs by whole steps has its integers shifted
+ * onto the template's, gdt_las_copy_shift);
+ * the point counts (legacy and 64-bit), the points by return and the bounds
+ * are those of the records written.  A waveform pointer of the template is
+ * cleared (the waveform data is not copied).  Written under a temporary
+ * name beside path, synced and renamed by gdt_las_copy_finish; a failure or
+ * gdt_las_copy_abort removes it.
+ *
+ * Message numbers: 2151 an input the output cannot take (another point
+ * format, record length or scale, an offset not on the template's lattice;
+ * not LAS), 2152 a shifted record out of int32, 3151 the template's
+ * header or VLRs unreadable, 4151 create, 4152 write, 4153 sync or rename,
+ * 7001 out of memory.
+ */
+#ifndef GDT_LAS_COPY_H
+#define GDT_LAS_COPY_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "gdt_error.h"
+#include "gdt_source.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct gdt_las_copy gdt_las_copy;
+
+/* Starts path with the header, VLRs and EVLRs of the LAS/LAZ file template
+ * (its source info tinfo, for the point layout).
+ * Ownership: *out is new; end with gdt_las_copy_finish or _abort. */
+gdt_status gdt_las_copy_open(gdt_las_copy **out, const char *path, const char *template_path,
+                             const gdt_source_info *tinfo, gdt_error *err);
+
+/* GDT_OK when records of an input with this header can be copied (LAS or
+ * LAZ, the template's point format, record length and scale; an offset
+ * that differs by whole multiples of the scale, below 2^31 of them, in
+ * each axis: shift[] receives them, which gdt_las_copy_shift adds to the
+ * record integers); GDT_EUSAGE 2151 naming path and the difference
+ * otherwise.  Usable before open: template_info is the first input's. */
+gdt_status gdt_las_copy_accepts(const gdt_source_info *template_info, const char *path,
+                                const gdt_source_info *in, int64_t shift[3], gdt_error *err);
+
+/* Adds shift[] (from gdt_las_copy_accepts) to the X, Y, Z of n records of
+ * record_length bytes.  returns: GDT_OK; GDT_EUSAGE 2152 when a shifted
+ * integer leaves int32 (the message names path and the record). */
+gdt_status gdt_las_copy_shift(unsigned char *recs, size_t n, unsigned record_length,
+                              const int64_t shift[3], const char *path, uint64_t first,
+                              gdt_error *err);
+
+/* Appends n records (n * record_length bytes). */
+gdt_status gdt_las_copy_put(gdt_las_copy *w, const unsigned char *recs, size_t n,
+                            gdt_error *err);
+
+/* Writes the EVLRs, patches the header, syncs, renames; frees w. */
+gdt_status gdt_las_copy_finish(gdt_las_copy *w, gdt_error *err);
+
+/* Removes the temporary file and frees w; w may be NULL. */
+void gdt_las_copy_abort(gdt_las_copy *w);
+
+#ifdef __cplusplus
+}
+#endif
+#endif
