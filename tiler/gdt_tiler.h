@@ -440,6 +440,17 @@ gdt_status gdt_tiler_write_subset(const gdt_tiler *t, uint64_t k, const gdt_poin
 gdt_status gdt_tiler_take_subsets(gdt_tiler *t, const gdt_tiler_tile_files *files,
                                   gdt_error *err);
 
+/* A subset that an earlier run wrote for tile k (pass 2 writes the same
+ * files again, and leaves .gpts and .gedge files alone): verifies them
+ * against want (sizes and sums as gdt_tiler_write_subset gave them; their
+ * record counts must fit the tile) and, when pts is not NULL, loads the
+ * subset's points.  *ok = 0 when a file is missing or differs (then it is
+ * simply written again).  Reads only.
+ * returns: GDT_OK; GDT_EUSAGE 2505; GDT_EIO 4504; GDT_EINTERNAL 7001. */
+gdt_status gdt_tiler_check_subset(const gdt_tiler *t, uint64_t k,
+                                  const gdt_tiler_tile_files *want, gdt_point_buf *pts, int *ok,
+                                  gdt_error *err);
+
 /* With opts.keep_spill, after pass 2: tile k's pass-2 records (every
  * point of the tile, duplicates included, in input order) from its .raw
  * file into out; gdt_tiler_drop_raw removes the file.  Reads only: calls

@@ -538,8 +538,8 @@ gdt_status gdt_job_commit(gdt_job *j, gdt_error *err)
 gdt_status gdt_job_clear_tiles(gdt_job *j, gdt_error *err)
 {
     return exec(j,
-                "BEGIN; DELETE FROM tile; DELETE FROM pfile; DELETE FROM stage WHERE name = "
-                "'ply'; COMMIT;",
+                "BEGIN; DELETE FROM tile; DELETE FROM pfile WHERE kind IN (1, 2); DELETE FROM stage "
+                "WHERE name = 'ply'; COMMIT;",
                 err);
 }
 

@@ -89,6 +89,7 @@ static gdt_status write_summary(const tr_run *c, gdt_error *err)
         gdt_json_uint(&j, "ground_points", s->ground_points);
         gdt_json_uint(&j, "nonground_points", s->nonground_points);
         gdt_json_bool(&j, "classified", s->t_ground > 0);
+        gdt_json_uint(&j, "tiles_reused", s->ground_tiles_reused);
         gdt_json_double(&j, "seconds", s->t_ground);
         gdt_json_end_object(&j);
     }

@@ -10,8 +10,10 @@
  * and its reach within its share of half the memory budget.  The subsets
  * replace the tile files only when every tile is classified (the others'
  * reach reads the full files until then), as part of pass 2: the journal
- * records pass 2 with the ground files, so a resumed run never classifies
- * again once pass 2 is recorded.
+ * records pass 2 with the ground files.  Each tile's subset is recorded in
+ * the journal as soon as it is written, and a redone pass 2 (a run stopped
+ * during the filter) writes the same tile files and leaves the subsets
+ * alone: a tile whose recorded subset verifies is not classified again.
  */
 #include "private/cli_modes.h"
 #include "private/job.h"
@@ -40,7 +42,7 @@ typedef struct ground_ctx {
     uint64_t ntiles;
     uint64_t max_points, max_bytes;
     pthread_mutex_t mu;
-    uint64_t next, done;
+    uint64_t next, done, adopted;
     uint64_t ground, nonground;
     gdt_status st;      /* the first failure */
     gdt_error err;
@@ -167,8 +169,65 @@ static gdt_status mark_ground(ground_worker *w, uint64_t k, gdt_error *err)
     return st;
 }
 
+/* Counts tile k's subset (own: the tile's points); the caller holds mu. */
+static void done_tile(ground_ctx *g, uint64_t k, const gdt_tiler_tile_files *out, uint64_t own)
+{
+    g->files[k] = *out;
+    g->ground += out->points;
+    g->nonground += own - out->points;
+    g->done++;
+}
+
+/* A subset an earlier run of the job wrote and recorded for tile k (d: the
+ * tile after pass 2) is taken when its files verify (*adopted = 1); with
+ * --ground-out its ground locations mark the tile's records. */
+static gdt_status adopt_subset(ground_worker *w, uint64_t k, const gdt_tile_desc *d, int *adopted,
+                               gdt_error *err)
+{
+    ground_ctx *g = w->g;
+    gdt_tiler_tile_files want;
+    uint64_t size[2] = {0, 0};
+    int found[2] = {0, 0}, ok = 0;
+    gdt_status st;
+
+    *adopted = 0;
+    memset(&want, 0, sizeof want);
+    pthread_mutex_lock(&g->mu);
+    st = gdt_job_get_file(g->c->jobdb, k, GDT_JOB_FILE_GPTS, &found[0], &size[0], &want.sum[0],
+                          err);
+    if (st == GDT_OK)
+        st = gdt_job_get_file(g->c->jobdb, k, GDT_JOB_FILE_GEDGE, &found[1], &size[1],
+                              &want.sum[1], err);
+    pthread_mutex_unlock(&g->mu);
+    if (st != GDT_OK || !found[0] || !found[1] || size[0] % GDT_TILER_REC_BYTES != 0 ||
+        size[1] % GDT_TILER_REC_BYTES != 0)
+        return st;
+    want.points = size[0] / GDT_TILER_REC_BYTES;
+    want.edge = size[1] / GDT_TILER_REC_BYTES;
+    st = gdt_tiler_check_subset(g->c->tiler, k, &want, g->bits_fd >= 0 ? &w->own : NULL, &ok,
+                                err);
+    if (st != GDT_OK || !ok)
+        return st;
+    if (g->bits_fd >= 0) {
+        /* the subset is the tile's ground: every point kept */
+        if (tr_reserve(&w->keep, &w->cap_keep, w->own.n + 1, 1) != 0)
+            return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        memset(w->keep, 1, w->own.n);
+        st = mark_ground(w, k, err);
+        if (st != GDT_OK)
+            return st;
+    }
+    pthread_mutex_lock(&g->mu);
+    done_tile(g, k, &want, d->points);
+    g->adopted++;
+    pthread_mutex_unlock(&g->mu);
+    *adopted = 1;
+    return GDT_OK;
+}
+
 static gdt_status classify_tile(ground_worker *w, uint64_t k, gdt_error *err)
 {
+    int adopted = 0;
     ground_ctx *g = w->g;
     const gdt_tile_plan *plan = g->c->plan;
     const gdt_pmf_box cloud = {plan->min_x, plan->max_x, plan->min_y, plan->max_y};
@@ -183,8 +242,11 @@ static gdt_status classify_tile(ground_worker *w, uint64_t k, gdt_error *err)
     roi.x1 = d.x0 + plan->span - 1;
     roi.y0 = d.y0;
     roi.y1 = d.y0 + plan->span - 1;
-    st = gdt_tiler_load_reach(g->c->tiler, k, g->f->reach, g->max_points, &w->own,
-                                         &w->around, err);
+    st = adopt_subset(w, k, &d, &adopted, err);
+    if (st != GDT_OK || adopted)
+        return st;
+    st = gdt_tiler_load_reach(g->c->tiler, k, g->f->reach, g->max_points, &w->own, &w->around,
+                              err);
     if (st != GDT_OK)
         return st;
     n = w->own.n + w->around.n;
@@ -205,12 +267,20 @@ static gdt_status classify_tile(ground_worker *w, uint64_t k, gdt_error *err)
     if (st != GDT_OK)
         return st;
     pthread_mutex_lock(&g->mu);
-    g->files[k] = out;
-    g->ground += out.points;
-    g->nonground += w->own.n - out.points;
-    g->done++;
+    /* the subset's record: a run stopped later takes it again */
+    st = gdt_job_begin(g->c->jobdb, err);
+    if (st == GDT_OK)
+        st = gdt_job_put_file(g->c->jobdb, k, GDT_JOB_FILE_GPTS, out.points * GDT_TILER_REC_BYTES,
+                              out.sum[0], err);
+    if (st == GDT_OK)
+        st = gdt_job_put_file(g->c->jobdb, k, GDT_JOB_FILE_GEDGE, out.edge * GDT_TILER_REC_BYTES,
+                              out.sum[1], err);
+    if (st == GDT_OK)
+        st = gdt_job_commit(g->c->jobdb, err);
+    if (st == GDT_OK)
+        done_tile(g, k, &out, w->own.n);
     pthread_mutex_unlock(&g->mu);
-    return GDT_OK;
+    return st;
 }
 
 /* Takes tiles until none is left or one failed; worker 0 (the caller's
@@ -330,10 +400,12 @@ gdt_status tr_run_ground(tr_run *c, gdt_error *err)
         c->s.ground_points = g.ground;
         c->s.nonground_points = g.nonground;
         c->s.t_ground = gdt_now() - t0;
+        c->s.ground_tiles_reused = g.adopted;
         gdt_log_note(&c->log,
                      "ground filter: %" PRIu64 " ground and %" PRIu64 " other points in %.2f s "
-                     "(%d windows, reach %" PRId64 " lattice steps, %u workers)",
-                     g.ground, g.nonground, c->s.t_ground, f.rounds, f.reach, nw);
+                     "(%d windows, reach %" PRId64 " lattice steps, %u workers; %" PRIu64
+                     " tiles classified by an earlier run)",
+                     g.ground, g.nonground, c->s.t_ground, f.rounds, f.reach, nw, g.adopted);
     }
 out:
     for (unsigned i = 0; i < nw; i++) {

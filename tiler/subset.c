@@ -185,3 +185,65 @@ void gdt_tiler_drop_raw(const gdt_tiler *t, uint64_t k)
         unlink(path);
     free(path);
 }
+
+gdt_status gdt_tiler_check_subset(const gdt_tiler *t, uint64_t k,
+                                  const gdt_tiler_tile_files *want, gdt_point_buf *pts, int *ok,
+                                  gdt_error *err)
+{
+    static const char *const ext[2] = {"gpts", "gedge"};
+    static const int kind[2] = {GDT_JOB_FILE_PTS, GDT_JOB_FILE_EDGE};
+    const uint64_t recs[2] = {want->points, want->edge};
+    gdt_status st = GDT_OK;
+
+    *ok = 0;
+    if (t->state != 2 || k >= t->ntiles)
+        return gdt_error_set(err, GDT_EUSAGE, 2505, "tile %" PRIu64 ": no pass 2", k);
+    if (want->points > t->tiles[k].points || want->edge > want->points)
+        return GDT_OK;
+    for (int f = 0; f < 2; f++) {
+        char *path = tl_tile_file(t, k, ext[f], 0);
+        uint64_t size = 0, sum = 0;
+        gdt_error e2;
+        if (path == NULL)
+            return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        gdt_error_clear(&e2);
+        st = tl_file_sum(path, gdt_job_file_seed(t->opts.file_id, k, kind[f]), &size, &sum,
+                         &e2);
+        free(path);
+        if (st == GDT_EINTERNAL) {
+            *err = e2;
+            return st;
+        }
+        if (st != GDT_OK || size != recs[f] * TL_REC || sum != want->sum[f])
+            return GDT_OK; /* missing or another: written again */
+    }
+    if (pts != NULL) {
+        tl_rfile rf;
+        size_t got = 0;
+        char *path = tl_tile_file(t, k, "gpts", 0);
+        if (path == NULL)
+            return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        if (want->points > pts->cap) {
+            gdt_point *g = realloc(pts->pts, (size_t)want->points * sizeof *g);
+            if (g == NULL) {
+                free(path);
+                return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+            }
+            pts->pts = g;
+            pts->cap = (size_t)want->points;
+        }
+        st = tl_rfile_open(&rf, path, want->points, SUBSET_BUF_RECS, err);
+        free(path);
+        if (st != GDT_OK)
+            return st;
+        st = tl_rfile_read(&rf, pts->pts, (size_t)want->points, &got, err);
+        tl_rfile_close(&rf);
+        if (st != GDT_OK)
+            return st;
+        pts->n = got;
+        if (got != want->points)
+            return GDT_OK;
+    }
+    *ok = 1;
+    return GDT_OK;
+}

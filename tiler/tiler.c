@@ -541,8 +541,6 @@ static gdt_status prepare_tiles_dir(gdt_tiler *t, gdt_error *err)
         int kind = (len > 4 && strcmp(nm + len - 4, ".raw") == 0) ||
                    (len > 4 && strcmp(nm + len - 4, ".pts") == 0) ||
                    (len > 5 && strcmp(nm + len - 5, ".edge") == 0) ||
-                   (len > 5 && strcmp(nm + len - 5, ".gpts") == 0) ||
-                   (len > 6 && strcmp(nm + len - 6, ".gedge") == 0) ||
                    (len > 4 && strcmp(nm + len - 4, ".tmp") == 0) || is_share_file(nm);
         if (ours && kind && unlinkat(dirfd(d), nm, 0) != 0 && errno != ENOENT) {
             int en = errno;

@@ -5,6 +5,7 @@ mesh is the exact Delaunay triangulation of the ground points; bad options
 are usage errors naming the option."""
 import json
 import pathlib
+import signal
 import sys
 
 import numpy as np
@@ -144,14 +145,37 @@ def test_same_bytes_for_any_threads_and_a_reused_job(gdt_bin, clouds, tmp_path):
     assert "comment ground pmf max-window 33 slope 1 initial-distance 0.15" in header
 
 
-@pytest.mark.parametrize("stage,offset", [("ground", 0.05), ("tiles", 0.0)])
+@pytest.mark.parametrize("stage,offset", [("ground", 0.05), ("ground", 1.0), ("tiles", 0.0)])
 def test_killed_run_resumes_to_the_same_bytes(gdt_bin, clouds, tmp_path, stage, offset):
+    """A run killed in the filter takes the tiles it classified (recorded
+    one by one) and classifies the others; killed later it classifies none."""
+    import sqlite3
     las = clouds["lidar"]
     want = tmp_path / "want.ply"
     ground_run(gdt_bin, las, want, "--tile", 64)
     out = tmp_path / "o.ply"
-    cmd = [gdt_bin, las, "-o", out, "--tile", 64, "--job", tmp_path / "job", "--ground", "pmf"]
-    assert ru.kill_then_rerun(cmd, out, stage, offset) == want.read_bytes()
+    job = tmp_path / "job"
+    cmd = [gdt_bin, las, "-o", out, "--tile", 64, "--job", job, "--ground", "pmf"]
+    p = ru.Run(cmd)
+    p.stop_in(stage, offset)
+    rc = p.finish()
+    assert rc in (0, -signal.SIGKILL), p.stderr
+    recorded = 0
+    if rc != 0 and (job / "job.db").exists():
+        with sqlite3.connect(str(job / "job.db")) as db:
+            recorded = db.execute("SELECT COUNT(*) FROM pfile WHERE kind = 5").fetchone()[0]
+            pass2 = db.execute("SELECT COUNT(*) FROM stage WHERE name = 'pass2' AND done = 1"
+                               ).fetchone()[0]
+    js = tmp_path / "o.json"
+    r = run(cmd + ["-q", "--json", js])
+    assert r.returncode == 0, r.stderr
+    assert out.read_bytes() == want.read_bytes()
+    if rc != 0:
+        g = json.loads(js.read_text())["ground"]
+        if pass2:
+            assert not g["classified"]
+        else:
+            assert g["classified"] and g["tiles_reused"] == recorded
 
 
 @pytest.mark.parametrize("args,name", [

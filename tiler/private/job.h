@@ -16,7 +16,10 @@
  *   tile(k, file, size, checksum)  a finished tile: its .tri file
  *   pfile(k, kind, size, checksum) a pass-2 file of tile k (kind
  *                                  GDT_JOB_FILE_PTS or _EDGE), recorded in
- *                                  the transaction that marks "pass2" done
+ *                                  the transaction that marks "pass2" done;
+ *                                  or (GDT_JOB_FILE_GPTS, _GEDGE) a tile's
+ *                                  ground subset, recorded as soon as it is
+ *                                  written (--ground)
  * Creation: the tables, the schema row and the id are one transaction, so a
  * failure (a full disk) leaves nothing or a complete empty journal; a
  * database without a schema row and without any record, or of another
@@ -100,12 +103,21 @@ gdt_status gdt_job_put_tile(gdt_job *j, uint64_t k, const char *file, uint64_t s
 /* Groups the following updates into one transaction (one sync). */
 gdt_status gdt_job_begin(gdt_job *j, gdt_error *err);
 gdt_status gdt_job_commit(gdt_job *j, gdt_error *err);
-/* Forgets every tile record, every pass-2 file record and the "ply" stage
- * (pass 2 is being redone). */
+/* Forgets every tile record, every record of a .pts or .edge file and the
+ * "ply" stage (pass 2 is being redone); the ground subsets' records stay:
+ * a redone pass 2 writes the same files, so a subset classified before
+ * still holds (its file is verified before it is taken). */
 gdt_status gdt_job_clear_tiles(gdt_job *j, gdt_error *err);
 
 /* The kinds of files a checksum is bound to. */
-enum { GDT_JOB_FILE_PTS = 1, GDT_JOB_FILE_EDGE = 2, GDT_JOB_FILE_TRI = 3, GDT_JOB_FILE_BITS = 4 };
+enum {
+    GDT_JOB_FILE_PTS = 1,
+    GDT_JOB_FILE_EDGE = 2,
+    GDT_JOB_FILE_TRI = 3,
+    GDT_JOB_FILE_BITS = 4,  /* J/ground.bits (its sum's seed; recorded in meta) */
+    GDT_JOB_FILE_GPTS = 5,  /* a tile's ground subset .gpts (summed as a .pts file) */
+    GDT_JOB_FILE_GEDGE = 6  /* and its .gedge (summed as an .edge file) */
+};
 
 /* Record of pass-2 file (k, kind); *found = 0 when there is none. */
 gdt_status gdt_job_get_file(gdt_job *j, uint64_t k, int kind, int *found, uint64_t *size,

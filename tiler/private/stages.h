@@ -85,6 +85,7 @@ typedef struct tr_summary {
     uint64_t ground_points, nonground_points; /* --ground: the classes of pass 2's
                                  points (deduplicated), when this run classified */
     double t_ground;        /* the ground filter's wall time (0: adopted, or off) */
+    uint64_t ground_tiles_reused; /* subsets an earlier, stopped run classified */
     uint64_t ground_bits_size, ground_bits_sum; /* --ground-out: J/ground.bits */
     int nranks;             /* ranks of an MPI run; 0 in a plain run */
     tr_rank_stats *ranks;   /* nranks of them, rank 0 first; owned */
