@@ -292,6 +292,7 @@ def test_ground_out_same_records_from_laz_and_las(gdt_bin, data_dir, tmp_path):
     assert b"laszip encoded" not in b.read_bytes()[:4096]
 
 
+@pytest.mark.sanitize
 def test_ground_out_of_a_reused_job_and_a_job_without_it(gdt_bin, clouds, tmp_path):
     las = clouds["roof"]
     job = tmp_path / "job"
