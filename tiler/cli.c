@@ -583,9 +583,12 @@ static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
     if (opts->ground && opts->mode == GDT_MODE_RESUME)
         return gdt_error_set(err, GDT_EUSAGE, 2703,
                              "--resume DIR classifies ground as its job recorded (no --ground)");
-    if (opts->ground && (opts->mode != GDT_MODE_RUN || opts->single_tile))
+    if (opts->ground && opts->mode != GDT_MODE_RUN && opts->mode != GDT_MODE_REFERENCE)
         return gdt_error_set(err, GDT_EUSAGE, 2703,
-                             "--ground runs in the tiled pipeline (not with --info, --reference "
+                             "--ground applies to a triangulation run (not --info)");
+    if (opts->ground_out != NULL && (opts->mode != GDT_MODE_RUN || opts->single_tile))
+        return gdt_error_set(err, GDT_EUSAGE, 2703,
+                             "--ground-out is written by the tiled run (not with --reference "
                              "or --single-tile)");
     if (opts->dem == NULL && (opts->dem_res_set || opts->dem_nodata_set || opts->preview))
         return gdt_error_set(err, GDT_EUSAGE, 2605, "%s needs --dem OUT.tif",

@@ -67,6 +67,10 @@ typedef struct gdt_pmf_params {
 
 void gdt_pmf_defaults(gdt_pmf_params *p);
 
+/* "ground pmf max-window 33 slope 1 ..." (the PLY header's comment line),
+ * into buf of cap bytes (truncated to fit). */
+void gdt_pmf_describe(const gdt_pmf_params *p, char *buf, size_t cap);
+
 /* Refuses a parameter that is not finite, a window or cell that is not
  * positive, a negative slope or distance, a maximum window under one cell.
  * returns: GDT_EUSAGE 2701 naming the option. */

@@ -4,6 +4,7 @@
 
 #include <cinttypes>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <exception>
 #include <limits>
@@ -25,6 +26,15 @@ extern "C" void gdt_pmf_defaults(gdt_pmf_params *p)
     p->max_distance = 2.5;
     p->cell = 1.0;
     p->exponential = 1;
+}
+
+extern "C" void gdt_pmf_describe(const gdt_pmf_params *p, char *buf, size_t cap)
+{
+    std::snprintf(buf, cap,
+                  "ground pmf max-window %.15g slope %.15g initial-distance %.15g "
+                  "max-distance %.15g cell %.15g exponential %s",
+                  p->max_window, p->slope, p->initial_distance, p->max_distance, p->cell,
+                  p->exponential ? "true" : "false");
 }
 
 extern "C" gdt_status gdt_pmf_check(const gdt_pmf_params *p, gdt_error *err)

@@ -11,6 +11,7 @@
 #include "gdt_raster.h"
 #include "private/filter_report.h"
 #include "private/dem_report.h"
+#include "private/ground_report.h"
 #include "private/mesh_meta.h"
 #include "private/trim_report.h"
 #include "private/cli_modes.h"
@@ -54,12 +55,40 @@ static gdt_status read_all(gdt_memcloud *mc, const char *mode, gdt_error *err)
     }
 }
 
+/* --ground: classifies the kept points (the cloud's box: the whole
+ * cloud's grid) and keeps the ground ones, in ordinal order. */
+static gdt_status ground_filter(gdt_memcloud *mc, const gdt_options *opts, double z0,
+                                int64_t max_x, int64_t max_y, gdt_error *err)
+{
+    const gdt_pmf_box box = {mc->min_x, max_x, mc->min_y, max_y};
+    double t0 = gdt_now();
+    uint8_t *g = malloc(mc->kept > 0 ? mc->kept : 1);
+    gdt_pmf f;
+    size_t n = 0;
+    gdt_status st = g == NULL ? gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory")
+                              : gdt_pmf_init(&f, &opts->pmf,
+                                             &gdt_cloud_get_info(mc->cloud)->lattice, z0, err);
+    if (st == GDT_OK)
+        st = gdt_pmf_classify(&f, mc->pts, mc->kept, &box, &box, g, 0, err);
+    for (size_t i = 0; st == GDT_OK && i < mc->kept; i++)
+        if (g[i])
+            mc->pts[n++] = mc->pts[i];
+    free(g);
+    if (st != GDT_OK)
+        return st;
+    mc->ground = n;
+    mc->nonground = mc->kept - n;
+    mc->kept = n;
+    mc->t_ground = gdt_now() - t0;
+    return GDT_OK;
+}
+
 gdt_status gdt_memcloud_load(gdt_memcloud *mc, const gdt_options *opts, gdt_log *log,
                              const char *mode, gdt_error *err)
 {
     gdt_cloud_opts co;
     int64_t max_x = 0, max_y = 0;
-    double t0 = gdt_now();
+    double t0 = gdt_now(), z0 = 0.0;
     gdt_status st;
 
     memset(mc, 0, sizeof *mc);
@@ -72,6 +101,9 @@ gdt_status gdt_memcloud_load(gdt_memcloud *mc, const gdt_options *opts, gdt_log 
     st = gdt_cloud_open(&mc->cloud, opts->inputs, opts->ninputs, &co, err);
     if (st == GDT_OK)
         st = read_all(mc, mode, err);
+    for (size_t i = 0; i < mc->read; i++) /* --ground: pass 1's lowest z */
+        if (i == 0 || mc->pts[i].z < z0)
+            z0 = mc->pts[i].z;
     if (st == GDT_OK)
         st = gdt_points_dedup(mc->pts, mc->read, opts->dup, &mc->kept, err);
     if (st != GDT_OK)
@@ -93,6 +125,14 @@ gdt_status gdt_memcloud_load(gdt_memcloud *mc, const gdt_options *opts, gdt_log 
         if (st != GDT_OK)
             return st;
     }
+    if (opts->ground) {
+        /* the whole cloud in one call: the classes the tiled run gives */
+        st = ground_filter(mc, opts, z0, max_x, max_y, err);
+        if (st != GDT_OK)
+            return st;
+    }
+    /* the DEM's grid: the cloud's box (all points), the spacing of the
+     * points triangulated (the tiled run's vertices) */
     if (opts->dem != NULL) {
         const gdt_cloud_info *ci = gdt_cloud_get_info(mc->cloud);
         st = gdt_raster_grid_define(&mc->dem_grid, &ci->lattice, mc->min_x, mc->min_y,
@@ -168,13 +208,17 @@ gdt_status gdt_memcloud_write(const gdt_memcloud *mc, const gdt_options *opts,
     int64_t *canon = malloc((mesh->ntris > 0 ? 3 * mesh->ntris : 1) * sizeof *canon);
     double *xyz = malloc(3 * MC_CHUNK * sizeof *xyz);
     int32_t *tri = malloc(3 * MC_CHUNK * sizeof *tri);
-    char filter[GDT_FILTER_COMMENT_MAX], trim[GDT_TRIM_TEXT_MAX];
-    const char *comments[2] = {filter, trim};
+    char filter[GDT_FILTER_COMMENT_MAX], trim[GDT_TRIM_TEXT_MAX], ground[256];
+    const char *comments[3] = {filter, trim, ground};
     uint8_t *keep = NULL;
     gdt_status st;
 
     gdt_run_mesh_meta(mc->cloud, mc->log, &opts->trim, filter, sizeof filter, trim, sizeof trim,
                       comments, &meta);
+    if (opts->ground) {
+        gdt_pmf_describe(&opts->pmf, ground, sizeof ground);
+        comments[meta.ncomments++] = ground;
+    }
     if (xyz == NULL || tri == NULL || canon == NULL) {
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         goto fail;
@@ -315,6 +359,8 @@ gdt_status gdt_memcloud_json_head(gdt_json *j, const gdt_memcloud *mc, const gdt
     if (mc->dem_done)
         gdt_dem_report_json(j, opts, &mc->dem_geo, &mc->dem_stats, mc->t_dem);
     gdt_filter_report_json(j, mc->cloud);
+    if (opts->ground)
+        gdt_ground_report_json(j, &opts->pmf, mc->ground, mc->nonground, 1, 0, mc->t_ground);
     gdt_trim_report_json(j, &opts->trim, tc);
     return GDT_OK;
 }

@@ -13,6 +13,7 @@
 
 #include "gdt_plycheck.h"
 #include "private/dem_report.h"
+#include "private/ground_report.h"
 #include "private/json_out.h"
 #include "private/mesh_meta.h"
 #include "private/tiled_files.h"
@@ -75,24 +76,9 @@ static gdt_status write_summary(const tr_run *c, gdt_error *err)
         gdt_dem_report_json(&j, c->opts, &s->dem_geo, &s->dem_stats, s->t_dem);
     gdt_json_uint(&j, "points_read", s->points_read);
     gdt_filter_report_json(&j, c->cloud);
-    if (c->opts->ground) {
-        const gdt_pmf_params *p = &c->opts->pmf;
-        gdt_json_begin_object(&j, "ground");
-        gdt_json_string(&j, "method", "pmf");
-        gdt_json_double(&j, "max_window", p->max_window);
-        gdt_json_double(&j, "slope", p->slope);
-        gdt_json_double(&j, "initial_distance", p->initial_distance);
-        gdt_json_double(&j, "max_distance", p->max_distance);
-        gdt_json_double(&j, "cell", p->cell);
-        gdt_json_bool(&j, "exponential", p->exponential != 0);
-        /* of the distinct points (after --dup); recorded with pass 2 */
-        gdt_json_uint(&j, "ground_points", s->ground_points);
-        gdt_json_uint(&j, "nonground_points", s->nonground_points);
-        gdt_json_bool(&j, "classified", s->t_ground > 0);
-        gdt_json_uint(&j, "tiles_reused", s->ground_tiles_reused);
-        gdt_json_double(&j, "seconds", s->t_ground);
-        gdt_json_end_object(&j);
-    }
+    if (c->opts->ground) /* the counts are recorded with pass 2 */
+        gdt_ground_report_json(&j, &c->opts->pmf, s->ground_points, s->nonground_points,
+                               s->t_ground > 0, s->ground_tiles_reused, s->t_ground);
     gdt_json_uint(&j, "vertices", s->vertices);
     gdt_json_uint(&j, "faces", s->faces - s->trim.dropped);
     gdt_trim_report_json(&j, &c->opts->trim, &s->trim);
@@ -206,11 +192,7 @@ gdt_status tr_run_output_start(tr_run *c, gdt_error *err)
                       c->filter_comments, &os.meta);
     if (opts->ground) {
         /* the ground filter and its parameters (--ground pmf) */
-        snprintf(c->ground_comment, sizeof c->ground_comment,
-                 "ground pmf max-window %.15g slope %.15g initial-distance %.15g "
-                 "max-distance %.15g cell %.15g exponential %s",
-                 opts->pmf.max_window, opts->pmf.slope, opts->pmf.initial_distance,
-                 opts->pmf.max_distance, opts->pmf.cell, opts->pmf.exponential ? "true" : "false");
+        gdt_pmf_describe(&opts->pmf, c->ground_comment, sizeof c->ground_comment);
         c->filter_comments[os.meta.ncomments++] = c->ground_comment;
     }
     os.trim = c->tgraph != NULL;

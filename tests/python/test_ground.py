@@ -109,6 +109,22 @@ def test_roof_is_removed_and_empty_tiles_are_fine(gdt_bin, clouds, tmp_path):
     assert s["tiles"] > 16
 
 
+def test_in_memory_modes_give_the_tiled_mesh_and_dem(gdt_bin, clouds, tmp_path):
+    """--reference and --single-tile classify the whole cloud in one call:
+    the same mesh as the tiled run, and the same DEM bytes (its grid from
+    the cloud's box and the ground points' count in every mode)."""
+    las = clouds["roof"]
+    tiled = tmp_path / "t.ply"
+    ground_run(gdt_bin, las, tiled, "--tile", 64, "--dem", tmp_path / "t.tif")
+    for mode in (["--reference"], ["--single-tile", "--tile", 4096]):
+        out = tmp_path / f"m{len(mode)}.ply"
+        tif = tmp_path / f"m{len(mode)}.tif"
+        s = ground_run(gdt_bin, las, out, *mode, "--dem", tif)
+        assert_equal_meshes(tiled, out, " ".join(map(str, mode)))
+        assert tif.read_bytes() == (tmp_path / "t.tif").read_bytes()
+        assert s["ground"]["classified"] and s["ground"]["ground_points"] == s["vertices"]
+
+
 def test_parameters_change_the_classes_as_the_oracle_does(gdt_bin, tool, clouds, tmp_path):
     las = clouds["lidar"]
     args = ["--pmf-max-window", "12", "--pmf-slope", "0.4", "--pmf-initial-distance", "0.3",
@@ -201,7 +217,8 @@ def test_bad_parameters_exit_2_naming_the_option(gdt_bin, clouds, tmp_path, args
     (["--ground", "pmf", "--keep-class", "2"], "--keep-class"),
     (["--pmf-slope", "0.5"], "--ground"),
     (["--ground", "csf"], "--ground"),
-    (["--ground", "pmf", "--reference"], "tiled"),
+    (["--ground", "pmf", "--info"], "--info"),
+    (["--ground", "pmf", "--reference", "--ground-out", "x.las"], "tiled run"),
 ])
 def test_usage_errors(gdt_bin, clouds, tmp_path, args, what):
     out = tmp_path / "u.ply"

@@ -29,7 +29,10 @@ typedef struct gdt_memcloud {
     size_t read;        /* points read */
     size_t kept;        /* after the --dup merge */
     int64_t min_x, min_y;
-    double t_read;      /* seconds: open, read, merge, sort */
+    double t_read;      /* seconds: open, read, merge, sort (and --ground) */
+    uint64_t ground, nonground; /* --ground: the classes of the distinct points; pts
+                                   then holds the ground points only */
+    double t_ground;    /* seconds of the ground filter */
     gdt_log *log;       /* the caller's (warnings of the writer); not owned */
     /* --dem: the grid (gdt_memcloud_load), what was written (gdt_memcloud_finish) */
     gdt_raster_grid dem_grid;
