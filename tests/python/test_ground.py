@@ -142,7 +142,7 @@ def test_real_sample_matches_the_oracle(gdt_bin, tool, data_dir, tmp_path):
     if not las.exists():
         pytest.skip(f"{las} absent (../shared/data is not beside the checkout)")
     want, _, lattice = whole(tool, las)
-    for tile in (64, 256):
+    for tile in (64, 1024):
         out = tmp_path / f"a{tile}.ply"
         ground_run(gdt_bin, las, out, "--tile", tile)
         assert vertex_keys(out, lattice) == want, f"--tile {tile}"
@@ -161,14 +161,22 @@ def test_same_bytes_for_any_threads_and_a_reused_job(gdt_bin, clouds, tmp_path):
     assert "comment ground pmf max-window 33 slope 1 initial-distance 0.15" in header
 
 
-@pytest.mark.parametrize("stage,offset", [("ground", 0.05), ("ground", 1.0), ("tiles", 0.0)])
-def test_killed_run_resumes_to_the_same_bytes(gdt_bin, clouds, tmp_path, stage, offset):
+@pytest.fixture(scope="module")
+def lidar_64(gdt_bin, clouds, tmp_path_factory):
+    """The lidar cloud's ground mesh at --tile 64, made once."""
+    want = tmp_path_factory.mktemp("want") / "want.ply"
+    ground_run(gdt_bin, clouds["lidar"], want, "--tile", 64)
+    return want
+
+
+@pytest.mark.parametrize("stage,offset", [("ground", 1.0), ("tiles", 0.0)])
+def test_killed_run_resumes_to_the_same_bytes(gdt_bin, clouds, lidar_64, tmp_path, stage,
+                                              offset):
     """A run killed in the filter takes the tiles it classified (recorded
     one by one) and classifies the others; killed later it classifies none."""
     import sqlite3
     las = clouds["lidar"]
-    want = tmp_path / "want.ply"
-    ground_run(gdt_bin, las, want, "--tile", 64)
+    want = lidar_64
     out = tmp_path / "o.ply"
     job = tmp_path / "job"
     cmd = [gdt_bin, las, "-o", out, "--tile", 64, "--job", job, "--ground", "pmf"]
