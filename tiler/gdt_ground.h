@@ -106,12 +106,14 @@ typedef struct gdt_pmf_box {
     int64_t x0, x1, y0, y1;
 } gdt_pmf_box;
 
-/* Classifies pts[0, n): ground[i] = 1 (ground) or 0.  cloud is the lattice
+/* Classifies pts[0, n) and more[0, nmore) (NULL when nmore is 0) as one
+ * set of points, point i of it being pts[i] for i < n, else more[i - n]:
+ * ground[i] = 1 (ground) or 0, for i < n + nmore.  cloud is the lattice
  * bounding box of the whole cloud (PCL's grid of a whole-cloud run is the
  * box of its cells: cells inside it exist, and erosion and dilation fill
  * the empty ones, which later rounds read); roi is the region whose classes
- * matter.  The class of pts[i] is that of a whole-cloud call when pts[i]
- * lies in roi and pts holds every point of the cloud within f->reach of
+ * matter.  The class of point i is that of a whole-cloud call when it lies
+ * in roi and the points hold every point of the cloud within f->reach of
  * roi (in x and y).  The call's grid is made to cover every cell of the
  * cloud's box within D cells of roi's cells (points with z NaN at two
  * corners widen PCL's box: such a point never changes a cell's lowest z,
@@ -120,8 +122,14 @@ typedef struct gdt_pmf_box {
  * returns: GDT_EUSAGE 2702 (the grid spans more than 2^22 cells a side, or
  *   needs more than max_bytes), GDT_EINTERNAL 7001, 7701. */
 gdt_status gdt_pmf_classify(const gdt_pmf *f, const gdt_point *pts, size_t n,
-                            const gdt_pmf_box *cloud, const gdt_pmf_box *roi, uint8_t *ground,
-                            uint64_t max_bytes, gdt_error *err);
+                            const gdt_point *more, size_t nmore, const gdt_pmf_box *cloud,
+                            const gdt_pmf_box *roi, uint8_t *ground, uint64_t max_bytes,
+                            gdt_error *err);
+
+/* Bytes gdt_pmf_classify holds per point (PCL's cloud and its copy per
+ * round, the index lists; not the caller's points) and per grid cell. */
+#define GDT_PMF_BYTES_PER_POINT 40
+#define GDT_PMF_BYTES_PER_CELL 12
 
 #ifdef __cplusplus
 }

@@ -121,10 +121,13 @@ extern "C" int64_t gdt_pmf_cell_y(const gdt_pmf *f, int64_t y)
     return (int64_t)std::floor((double)y * f->fy);
 }
 
-extern "C" gdt_status gdt_pmf_classify(const gdt_pmf *f, const gdt_point *pts, size_t n,
+extern "C" gdt_status gdt_pmf_classify(const gdt_pmf *f, const gdt_point *pts0, size_t n0,
+                                       const gdt_point *more, size_t nmore,
                                        const gdt_pmf_box *cloud, const gdt_pmf_box *roi,
                                        uint8_t *ground, uint64_t max_bytes, gdt_error *err)
 {
+    const size_t n = n0 + nmore;
+    auto at = [&](size_t i) -> const gdt_point & { return i < n0 ? pts0[i] : more[i - n0]; };
     if (n == 0)
         return GDT_OK;
     std::memset(ground, 0, n);
@@ -141,7 +144,7 @@ extern "C" gdt_status gdt_pmf_classify(const gdt_pmf *f, const gdt_point *pts, s
     wy1 = wy1 > gy1 ? gy1 : wy1;
     int64_t cx0 = wx0, cx1 = wx1, cy0 = wy0, cy1 = wy1;
     for (size_t i = 0; i < n; i++) {
-        int64_t cx = gdt_pmf_cell_x(f, pts[i].x), cy = gdt_pmf_cell_y(f, pts[i].y);
+        int64_t cx = gdt_pmf_cell_x(f, at(i).x), cy = gdt_pmf_cell_y(f, at(i).y);
         cx0 = cx < cx0 ? cx : cx0;
         cx1 = cx > cx1 ? cx : cx1;
         cy0 = cy < cy0 ? cy : cy0;
@@ -154,9 +157,10 @@ extern "C" gdt_status gdt_pmf_classify(const gdt_pmf *f, const gdt_point *pts, s
                              " cells exceeds 2^22 cells a side: use a larger --pmf-cell or a "
                              "smaller --tile",
                              cols, rows);
-    // PCL's three float grids, its copy of the cloud per round, our cloud
-    // and the index lists
-    const double bytes = 12.0 * (double)cols * (double)rows + 48.0 * (double)n;
+    // PCL's three float grids, our cloud for it, its copy per round and the
+    // index lists
+    const double bytes = GDT_PMF_BYTES_PER_CELL * (double)cols * (double)rows +
+                         GDT_PMF_BYTES_PER_POINT * (double)n;
     if (max_bytes > 0 && bytes > (double)max_bytes)
         return gdt_error_set(err, GDT_EUSAGE, 2702,
                              "the ground filter needs %.0f MiB for %zu points on %" PRId64
@@ -168,9 +172,9 @@ extern "C" gdt_status gdt_pmf_classify(const gdt_pmf *f, const gdt_point *pts, s
         pc->resize(n + 2);
         for (size_t i = 0; i < n; i++) {
             pcl::PointXYZ &q = (*pc)[i];
-            q.x = (float)(gdt_pmf_cell_x(f, pts[i].x) - cx0) + 0.5f;
-            q.y = (float)(gdt_pmf_cell_y(f, pts[i].y) - cy0) + 0.5f;
-            q.z = (float)(pts[i].z - f->z0);
+            q.x = (float)(gdt_pmf_cell_x(f, at(i).x) - cx0) + 0.5f;
+            q.y = (float)(gdt_pmf_cell_y(f, at(i).y) - cy0) + 0.5f;
+            q.z = (float)(at(i).z - f->z0);
         }
         // the two corners of the window, z NaN: PCL's box (is_dense, so not
         // skipped there) covers the window; a NaN z never replaces a

@@ -69,7 +69,7 @@ static gdt_status ground_filter(gdt_memcloud *mc, const gdt_options *opts, doubl
                               : gdt_pmf_init(&f, &opts->pmf,
                                              &gdt_cloud_get_info(mc->cloud)->lattice, z0, err);
     if (st == GDT_OK)
-        st = gdt_pmf_classify(&f, mc->pts, mc->kept, &box, &box, g, 0, err);
+        st = gdt_pmf_classify(&f, mc->pts, mc->kept, NULL, 0, &box, &box, g, 0, err);
     for (size_t i = 0; st == GDT_OK && i < mc->kept; i++)
         if (g[i])
             mc->pts[n++] = mc->pts[i];

@@ -58,8 +58,6 @@ typedef struct ground_worker {
     pthread_t tid;
     int started, report;
     gdt_point_buf own, around;
-    gdt_point *all;
-    size_t cap_all;
     uint8_t *keep;
     size_t cap_keep;
     gdt_point_buf raw;  /* --ground-out: the tile's pass-2 records */
@@ -250,16 +248,12 @@ static gdt_status classify_tile(ground_worker *w, uint64_t k, gdt_error *err)
     if (st != GDT_OK)
         return st;
     n = w->own.n + w->around.n;
-    if (tr_reserve(&w->all, &w->cap_all, n, sizeof *w->all) != 0 ||
-        tr_reserve(&w->keep, &w->cap_keep, n, 1) != 0)
+    if (tr_reserve(&w->keep, &w->cap_keep, n, 1) != 0)
         return gdt_error_set(err, GDT_EINTERNAL, 7001,
                              "out of memory (ground filter of %zu points)", n);
     /* own points first: the classes of the reach are not kept */
-    if (w->own.n > 0)
-        memcpy(w->all, w->own.pts, w->own.n * sizeof *w->all);
-    if (w->around.n > 0)
-        memcpy(w->all + w->own.n, w->around.pts, w->around.n * sizeof *w->all);
-    st = gdt_pmf_classify(g->f, w->all, n, &cloud, &roi, w->keep, g->max_bytes, err);
+    st = gdt_pmf_classify(g->f, w->own.pts, w->own.n, w->around.pts, w->around.n, &cloud, &roi,
+                          w->keep, g->max_bytes, err);
     if (st == GDT_OK)
         st = gdt_tiler_write_subset(g->c->tiler, k, w->own.pts, w->own.n, w->keep, &out, err);
     if (st == GDT_OK && g->bits_fd >= 0)
@@ -321,6 +315,36 @@ static void *worker_main(void *arg)
     return NULL;
 }
 
+/* The ground stage holds at most three quarters of the memory budget:
+ * nothing else of the run is large while it runs (pass 2's buffers are
+ * gone, the core has not grown its tile buffers yet). */
+static uint64_t ground_budget(const gdt_tiler_stats *ts)
+{
+    return ts->mem_budget / 4 * 3;
+}
+
+/* Workers: up to threads, as many as can each hold the largest tile with
+ * its reach (its points times the reach's area growth at the same density,
+ * and the filter's grid) within their share of the stage's budget; at
+ * least one (a tile beyond it is refused when loaded, GDT-2506). */
+static unsigned ground_workers(const tr_run *c, const gdt_pmf *f, const gdt_tiler_stats *ts,
+                               unsigned threads)
+{
+    const gdt_tile_plan *pl = c->plan;
+    const uint64_t ntiles = gdt_tiler_tile_count(c->tiler);
+    const double T = (double)pl->span, grow = (T + 2.0 * (double)f->reach) / T;
+    const double side = (T + 2.0 * (double)f->reach) * f->fx + 2.0 * (double)f->reach_cells;
+    const double need = (double)ts->max_tile_points * grow * grow *
+                            (double)(sizeof(gdt_point) + 1 + GDT_PMF_BYTES_PER_POINT) +
+                        side * side * GDT_PMF_BYTES_PER_CELL;
+    unsigned nw = threads > 0 ? threads : 1;
+    if (nw > ntiles)
+        nw = ntiles > 0 ? (unsigned)ntiles : 1;
+    while (nw > 1 && need * nw > (double)ground_budget(ts))
+        nw--;
+    return nw;
+}
+
 gdt_status tr_run_ground(tr_run *c, gdt_error *err)
 {
     const gdt_options *opts = c->opts;
@@ -340,13 +364,12 @@ gdt_status tr_run_ground(tr_run *c, gdt_error *err)
     g.c = c;
     g.f = &f;
     g.ntiles = ntiles;
-    nw = (unsigned)gdt_cli_threads(opts->threads);
-    if (nw > ntiles)
-        nw = ntiles > 0 ? (unsigned)ntiles : 1;
-    /* half the budget for the workers' tiles: points (own, reach, their
-     * copy for the filter) and the filter's own arrays and grids */
-    g.max_bytes = ts->mem_budget / 2 / nw;
-    g.max_points = g.max_bytes / (3 * sizeof(gdt_point) + 48);
+    nw = ground_workers(c, &f, ts, (unsigned)gdt_cli_threads(opts->threads));
+    /* each worker's share of the stage's budget: its points (own and
+     * reach, 32 bytes and a class byte each), and the filter's arrays and
+     * grid within the rest */
+    g.max_bytes = ground_budget(ts) / nw;
+    g.max_points = g.max_bytes / (sizeof(gdt_point) + 1 + GDT_PMF_BYTES_PER_POINT);
     g.files = calloc(ntiles > 0 ? ntiles : 1, sizeof *g.files);
     w = calloc(nw, sizeof *w);
     if (g.files == NULL || w == NULL) {
@@ -412,7 +435,6 @@ out:
         gdt_point_buf_free(&w[i].own);
         gdt_point_buf_free(&w[i].around);
         gdt_point_buf_free(&w[i].raw);
-        free(w[i].all);
         free(w[i].keep);
         free(w[i].keys);
         free(w[i].ords);

@@ -129,7 +129,7 @@ int main(int argc, char **argv)
             box.y0 = all[i].y < box.y0 ? all[i].y : box.y0;
             box.y1 = all[i].y > box.y1 ? all[i].y : box.y1;
         }
-        st = gdt_pmf_classify(&f, all, kept, &box, &box, ground, 0, &err);
+        st = gdt_pmf_classify(&f, all, kept, NULL, 0, &box, &box, ground, 0, &err);
     }
     if (st == GDT_OK) {
         const gdt_lattice *l = &gdt_cloud_get_info(c)->lattice;
