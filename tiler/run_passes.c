@@ -208,7 +208,9 @@ static void cloud_opts(tr_run *c, gdt_cloud_opts *co, int replay)
 }
 
 /* The tiler's options of this run (c->job_id seeds the tile files' sums). */
-static void tiler_opts(tr_run *c, gdt_tiler_opts *to)
+/* The tiler's options; cloud: the cloud it reads (its lattice fixes the
+ * ground filter's reach). */
+static void tiler_opts(tr_run *c, const gdt_cloud *cloud, gdt_tiler_opts *to)
 {
     const gdt_options *opts = c->opts;
     memset(to, 0, sizeof *to);
@@ -231,7 +233,7 @@ static void tiler_opts(tr_run *c, gdt_tiler_opts *to)
         gdt_pmf f;
         gdt_error e;
         gdt_error_clear(&e);
-        if (gdt_pmf_init(&f, &opts->pmf, &gdt_cloud_get_info(c->cloud)->lattice, 0.0, &e) ==
+        if (gdt_pmf_init(&f, &opts->pmf, &gdt_cloud_get_info(cloud)->lattice, 0.0, &e) ==
             GDT_OK)
             to->edge_min = f.reach;
         to->subsets = 1;
@@ -282,7 +284,7 @@ gdt_status tr_run_pass1_share(tr_run *c, uint64_t first, uint64_t end, unsigned 
     cloud_opts(c, &co, 0);
     st = gdt_cloud_open(&cloud, c->opts->inputs, c->opts->ninputs, &co, err);
     if (st == GDT_OK) {
-        tiler_opts(c, &to);
+        tiler_opts(c, cloud, &to);
         to.job_dir = NULL; /* the planning rank saves the index */
         to.progress = NULL;
         st = gdt_tiler_create(&t, &to, cloud, err);
@@ -310,7 +312,7 @@ gdt_status tr_run_pass1(tr_run *c, gdt_error *err)
     st = gdt_cloud_open(&c->cloud, opts->inputs, opts->ninputs, &co, err);
     if (st != GDT_OK)
         return st;
-    tiler_opts(c, &to);
+    tiler_opts(c, c->cloud, &to);
     st = gdt_tiler_create(&c->tiler, &to, c->cloud, err);
     if (st == GDT_OK && c->p1share != NULL)
         st = pass1_shared(c, err);
@@ -462,7 +464,7 @@ gdt_status tr_run_attach(tr_run *c, const uint64_t job_id[2], const unsigned cha
     gdt_tiler_destroy(c->tiler);
     c->tiler = NULL;
     c->plan = NULL;
-    tiler_opts(c, &to);
+    tiler_opts(c, c->cloud, &to);
     st = gdt_tiler_create(&c->tiler, &to, c->cloud, err);
     if (st == GDT_OK)
         st = gdt_tiler_import(c->tiler, state, len, err);

@@ -73,6 +73,8 @@ CASES = {
                                   "--max-edge", "6")),
     "two-inputs-64": (("a", "b"), ("--tile", "64")),
     "laz-128": (("laz",), ("--tile", "128")),
+    # the ground filter inside pass 2 (classified by the planning rank)
+    "ground-128": (("a",), ("--tile", "128", "--ground", "pmf")),
     # every rank of the node takes the node's CPU devices in turn (here: the one)
     "device-local-64": (("b",), ("--tile", "64", "--device", "cpu/local")),
 }
