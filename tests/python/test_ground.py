@@ -137,11 +137,15 @@ def test_parameters_change_the_classes_as_the_oracle_does(gdt_bin, tool, clouds,
     assert vertex_keys(out, lattice) == want
 
 
-def test_real_sample_matches_the_oracle(gdt_bin, tool, data_dir, tmp_path):
-    las = data_dir / "autzen_trim.las"
+@pytest.mark.parametrize("name", ["autzen_trim.las", "epsg_4326.las"])
+def test_real_sample_matches_the_oracle(gdt_bin, tool, data_dir, tmp_path, name):
+    """Real LiDAR: a State Plane cloud in feet, and lon/lat points projected
+    to UTM on the quantum lattice."""
+    las = data_dir / name
     if not las.exists():
         pytest.skip(f"{las} absent (../shared/data is not beside the checkout)")
     want, _, lattice = whole(tool, las)
+    assert want
     for tile in (64, 1024):
         out = tmp_path / f"a{tile}.ply"
         ground_run(gdt_bin, las, out, "--tile", tile)
