@@ -42,6 +42,13 @@ typedef struct gdt_las_copy gdt_las_copy;
 gdt_status gdt_las_copy_open(gdt_las_copy **out, const char *path, const char *template_path,
                              const gdt_source_info *tinfo, gdt_error *err);
 
+/* Starts path as a new LAS 1.2 file of point format 0 (20-byte records)
+ * with these scales and offsets, no VLR (so no CRS) and zero dates: the
+ * caller makes the records (gdt_las_copy_put), e.g. from points that were
+ * not LAS.  Ownership: as gdt_las_copy_open. */
+gdt_status gdt_las_copy_open_new(gdt_las_copy **out, const char *path, const double scale[3],
+                                 const double offset[3], gdt_error *err);
+
 /* GDT_OK when records of an input with this header can be copied (LAS or
  * LAZ, the template's point format, record length and scale; an offset
  * that differs by whole multiples of the scale, below 2^31 of them, in

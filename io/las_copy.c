@@ -235,8 +235,8 @@ done:
     return st;
 }
 
-gdt_status gdt_las_copy_open(gdt_las_copy **out, const char *path, const char *template_path,
-                             const gdt_source_info *tinfo, gdt_error *err)
+/* The writer's state and its temporary file, without a header yet. */
+static gdt_status copy_start(gdt_las_copy **out, const char *path, gdt_error *err)
 {
     gdt_las_copy *w = calloc(1, sizeof *w);
     gdt_status st;
@@ -258,10 +258,6 @@ gdt_status gdt_las_copy_open(gdt_las_copy **out, const char *path, const char *t
         copy_free(w);
         return st;
     }
-    w->format = tinfo->point_format;
-    w->reclen = tinfo->record_length;
-    memcpy(w->scale, tinfo->scale, sizeof w->scale);
-    memcpy(w->offset, tinfo->offset, sizeof w->offset);
     w->fd = open(w->tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
     if (w->fd < 0) {
         st = gdt_error_set(err, GDT_EIO, 4151, "%s: cannot create %s: %s", path, w->tmp,
@@ -269,6 +265,68 @@ gdt_status gdt_las_copy_open(gdt_las_copy **out, const char *path, const char *t
         copy_free(w);
         return st;
     }
+    *out = w;
+    return GDT_OK;
+}
+
+gdt_status gdt_las_copy_open_new(gdt_las_copy **out, const char *path, const double scale[3],
+                                 const double offset[3], gdt_error *err)
+{
+    static const char name[] = "gdt-tile";
+    gdt_las_copy *w = NULL;
+    unsigned char *h;
+    int e;
+    gdt_status st = copy_start(&w, path, err);
+
+    *out = NULL;
+    if (st != GDT_OK)
+        return st;
+    w->hsize = 227;
+    w->head = calloc(1, w->hsize);
+    if (w->head == NULL) {
+        gdt_las_copy_abort(w);
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    }
+    h = w->head;
+    memcpy(h, "LASF", 4);
+    h[24] = 1; /* version 1.2 */
+    h[25] = 2;
+    memcpy(h + 26, name, sizeof name - 1);  /* system identifier */
+    memcpy(h + 58, name, sizeof name - 1);  /* generating software */
+    h[94] = (unsigned char)(w->hsize & 0xFFu);
+    h[95] = (unsigned char)(w->hsize >> 8);
+    gdt_le_put_u32(h + 96, w->hsize);
+    h[104] = 0;
+    h[105] = 20;
+    for (int k = 0; k < 3; k++) {
+        gdt_le_put_f64(h + 131 + 8 * k, scale[k]);
+        gdt_le_put_f64(h + 155 + 8 * k, offset[k]);
+    }
+    w->format = 0;
+    w->reclen = 20;
+    memcpy(w->scale, scale, sizeof w->scale);
+    memcpy(w->offset, offset, sizeof w->offset);
+    e = gdt_fd_write_all(w->fd, h, w->hsize, -1);
+    if (e != 0)
+        return fail(w, err, GDT_EIO, 4152, "write failed", e);
+    w->pos = w->hsize;
+    *out = w;
+    return GDT_OK;
+}
+
+gdt_status gdt_las_copy_open(gdt_las_copy **out, const char *path, const char *template_path,
+                             const gdt_source_info *tinfo, gdt_error *err)
+{
+    gdt_las_copy *w = NULL;
+    gdt_status st = copy_start(&w, path, err);
+
+    *out = NULL;
+    if (st != GDT_OK)
+        return st;
+    w->format = tinfo->point_format;
+    w->reclen = tinfo->record_length;
+    memcpy(w->scale, tinfo->scale, sizeof w->scale);
+    memcpy(w->offset, tinfo->offset, sizeof w->offset);
     st = read_template(w, template_path, err);
     if (st != GDT_OK) {
         gdt_las_copy_abort(w);

@@ -1,5 +1,6 @@
-/* ground_out.c — --ground-out FILE.las: every record of the LAS/LAZ inputs,
- * in input order, with the ground filter's class.
+/* ground_out.c — --ground-out FILE.las: every record of the LAS/LAZ inputs
+ * (or a record made from every point of PCD inputs), in input order, with
+ * the ground filter's class.
  *
  * A record the point filter kept has the next input ordinal (the cloud's
  * numbering: the kept records of every input in turn, no gaps), and
@@ -21,32 +22,125 @@
 #include <errno.h>
 #include <fcntl.h>
 #include <inttypes.h>
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
 
 #define GO_CHUNK 4096 /* records per read */
 
-gdt_status tr_ground_out_check(const gdt_options *opts, gdt_error *err)
+static void put32(unsigned char *p, uint32_t v)
+{
+    p[0] = (unsigned char)(v & 0xFFu);
+    p[1] = (unsigned char)((v >> 8) & 0xFFu);
+    p[2] = (unsigned char)((v >> 16) & 0xFFu);
+    p[3] = (unsigned char)(v >> 24);
+}
+
+/* The inputs' kind: 1 when every input is PCD (the records are made from
+ * the points), 0 when they are LAS/LAZ records of one layout (copied);
+ * GDT_EUSAGE 2151 for a mix or layouts that differ. */
+static gdt_status inputs_kind(const gdt_options *opts, int *pcd, gdt_error *err)
 {
     gdt_source_info first;
     gdt_status st = GDT_OK;
-    if (opts->ground_out == NULL)
-        return GDT_OK;
+    *pcd = 0;
     for (size_t i = 0; i < opts->ninputs && st == GDT_OK; i++) {
         gdt_source *src = NULL;
         gdt_source_opts so;
+        int64_t shift[3];
         memset(&so, 0, sizeof so);
         st = gdt_source_open(&src, opts->inputs[i], &so, err);
         if (st != GDT_OK)
             break;
-        int64_t shift[3];
-        if (i == 0)
+        if (i == 0) {
             first = *gdt_source_get_info(src);
-        st = gdt_las_copy_accepts(&first, opts->inputs[i], gdt_source_get_info(src), shift, err);
+            *pcd = first.format == GDT_FORMAT_PCD;
+        }
+        if (*pcd != (gdt_source_get_info(src)->format == GDT_FORMAT_PCD))
+            st = gdt_error_set(err, GDT_EUSAGE, 2151,
+                               "%s: --ground-out copies LAS records or makes them all from PCD "
+                               "points, not both (the first input is %s)",
+                               opts->inputs[i], first.format_name);
+        else if (!*pcd)
+            st = gdt_las_copy_accepts(&first, opts->inputs[i], gdt_source_get_info(src), shift,
+                                      err);
         gdt_source_close(src);
     }
     return st;
+}
+
+gdt_status tr_ground_out_check(const gdt_options *opts, gdt_error *err)
+{
+    int pcd = 0;
+    return opts->ground_out == NULL ? GDT_OK : inputs_kind(opts, &pcd, err);
+}
+
+/* PCD inputs: one LAS 1.2 record of point format 0 per point of the
+ * cloud (every point: PCD has no class or return to filter), in input
+ * order, on the cloud's lattice: X, Y the lattice integers less the
+ * cloud's lowest, Z = z in steps of the quantum from the lowest z (rounded
+ * to the nearest), return 1 of 1, class 2 or 1, every other field 0. */
+static gdt_status write_from_points(tr_run *c, int bits_fd, gdt_error *err)
+{
+    const gdt_lattice *L = &gdt_cloud_get_info(c->cloud)->lattice;
+    const gdt_tile_plan *pl = c->plan;
+    const double zs = c->opts->quantum;
+    const double scale[3] = {L->sx, L->sy, zs};
+    const double offset[3] = {L->ox + L->sx * (double)pl->min_x,
+                              L->oy + L->sy * (double)pl->min_y, pl->min_z};
+    gdt_las_copy *w = NULL;
+    gdt_point *pts = malloc(GO_CHUNK * sizeof *pts);
+    unsigned char *rec = calloc(GO_CHUNK, 20);
+    uint64_t n_all = 0;
+    gdt_status st = pts == NULL || rec == NULL
+                        ? gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory")
+                        : gdt_las_copy_open_new(&w, c->opts->ground_out, scale, offset, err);
+
+    if (st == GDT_OK)
+        st = gdt_cloud_rewind(c->cloud, err);
+    while (st == GDT_OK) {
+        size_t n = 0;
+        st = gdt_cloud_read(c->cloud, pts, GO_CHUNK, &n, err);
+        if (st != GDT_OK || n == 0)
+            break;
+        for (size_t i = 0; i < n && st == GDT_OK; i++) {
+            unsigned char *r = rec + 20 * i, b = 0;
+            double zq = nearbyint((pts[i].z - pl->min_z) / zs);
+            ssize_t k = pread(bits_fd, &b, 1, (off_t)(pts[i].ord / 8));
+            if (k != 1)
+                st = gdt_error_set(err, GDT_EIO, 4504, "%s: %s", c->ground_bits,
+                                   k < 0 ? strerror(errno) : "shorter than the points");
+            else if (!(zq >= 0.0 && zq <= 2147483647.0))
+                st = gdt_error_set(err, GDT_EUSAGE, 2152,
+                                   "--ground-out: z %.17g is beyond 2^31 steps of --quantum %g "
+                                   "above the lowest z",
+                                   pts[i].z, zs);
+            if (st != GDT_OK)
+                break;
+            memset(r, 0, 20);
+            put32(r, (uint32_t)(pts[i].x - pl->min_x));
+            put32(r + 4, (uint32_t)(pts[i].y - pl->min_y));
+            put32(r + 8, (uint32_t)(int32_t)zq);
+            r[14] = 0x09u; /* return 1 of 1 */
+            r[15] = (b >> (pts[i].ord % 8)) & 1u ? 2u : 1u;
+        }
+        if (st == GDT_OK)
+            st = gdt_las_copy_put(w, rec, n, err);
+        n_all += n;
+    }
+    free(pts);
+    free(rec);
+    if (st == GDT_OK && n_all != pl->points)
+        st = gdt_error_set(err, GDT_EINPUT, 3501,
+                           "the input changed since pass 1: %" PRIu64 " points now, %" PRIu64
+                           " then",
+                           n_all, pl->points);
+    if (st != GDT_OK) {
+        gdt_las_copy_abort(w);
+        return st;
+    }
+    return gdt_las_copy_finish(w, err);
 }
 
 /* Copies input path's records into w (onto the lattice of tinfo, the
@@ -126,11 +220,22 @@ gdt_status tr_ground_out_write(tr_run *c, gdt_error *err)
     gdt_source *src = NULL;
     gdt_source_opts so;
     uint64_t ord = 0;
-    int fd;
+    int fd, pcd = 0;
     gdt_status st;
-
     gdt_source_info tinfo;
 
+    st = inputs_kind(opts, &pcd, err);
+    if (st != GDT_OK)
+        return st;
+    if (pcd) {
+        fd = open(c->ground_bits, O_RDONLY | O_CLOEXEC);
+        if (fd < 0)
+            return gdt_error_set(err, GDT_EIO, 4504, "cannot open %s: %s", c->ground_bits,
+                                 strerror(errno));
+        st = write_from_points(c, fd, err);
+        close(fd);
+        return st;
+    }
     memset(&so, 0, sizeof so);
     st = gdt_source_open(&src, opts->inputs[0], &so, err);
     if (st == GDT_OK) {

@@ -336,7 +336,7 @@ def test_ground_out_of_a_reused_job_and_a_job_without_it(gdt_bin, clouds, tmp_pa
     check_ground_out(las, again, tmp_path / "c.ply")
 
 
-@pytest.mark.parametrize("case", ["no-ground", "laz-name", "pcd", "layouts"])
+@pytest.mark.parametrize("case", ["no-ground", "laz-name", "las-and-pcd", "layouts"])
 def test_ground_out_refusals(gdt_bin, clouds, data_dir, tmp_path, case):
     out = tmp_path / "o.las"
     inputs, args = [clouds["roof"]], ["--ground", "pmf", "--ground-out", out]
@@ -344,11 +344,11 @@ def test_ground_out_refusals(gdt_bin, clouds, data_dir, tmp_path, case):
         args = ["--ground-out", out]
     elif case == "laz-name":
         args = ["--ground", "pmf", "--ground-out", tmp_path / "o.laz"]
-    elif case == "pcd":
+    elif case == "las-and-pcd":
         pcd = data_dir / "autzen-utm.pcd"
         if not pcd.exists():
             pytest.skip(f"{pcd} absent")
-        inputs = [pcd]
+        inputs = [clouds["roof"], pcd]
     else:
         import laspy
         other = tmp_path / "f1.las"
@@ -389,3 +389,36 @@ def test_ground_out_of_two_inputs_with_other_offsets(gdt_bin, clouds, tmp_path):
     ground_run(gdt_bin, src, tmp_path / "one.ply", "--tile", 256, "--ground-out", one)
     ground_run(gdt_bin, parts, tmp_path / "two.ply", "--tile", 256, "--ground-out", two)
     assert las_records(one)[1].tobytes() == las_records(two)[1].tobytes()
+
+
+def test_ground_out_of_pcd_points(gdt_bin, clouds, tmp_path):
+    """PCD input: one LAS record per point, in input order, on the cloud's
+    lattice (x, y exact, z to the quantum), class 2 where the point's
+    location is ground, else 1."""
+    import laspy
+    src = laspy.read(str(clouds["roof"]))
+    pcd = tmp_path / "roof.pcd"
+    with open(pcd, "w") as f:
+        n = len(src.points)
+        f.write("# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 8 8 8\nTYPE F F F\n"
+                f"COUNT 1 1 1\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\n"
+                "DATA ascii\n")
+        for a, b, c in zip(np.asarray(src.x), np.asarray(src.y), np.asarray(src.z)):
+            f.write(f"{a:.2f} {b:.2f} {c:.2f}\n")
+    out, ply = tmp_path / "p.las", tmp_path / "p.ply"
+    s = ground_run(gdt_bin, pcd, ply, "--tile", 64, "--ground-out", out)
+    b = laspy.read(str(out))
+    assert len(b.points) == len(src.points) and b.header.point_format.id == 0
+    for k in ("x", "y", "z"):
+        assert np.abs(np.asarray(getattr(b, k)) - np.asarray(getattr(src, k))).max() < 6e-4
+    sx, sy = b.header.scales[:2]
+    lattice = (sx, sy, 0.0, 0.0)
+    keys = vertex_keys(ply, lattice)
+    ix = np.round(np.asarray(b.x) / sx).astype(np.int64).tolist()
+    iy = np.round(np.asarray(b.y) / sy).astype(np.int64).tolist()
+    ground = np.array([(p, q) in keys for p, q in zip(ix, iy)])
+    cls = np.asarray(b.classification)
+    assert ((cls == 2) == ground).all() and set(np.unique(cls).tolist()) <= {1, 2}
+    # duplicated locations: several records, one ground point
+    assert len({(p, q) for p, q, g in zip(ix, iy, ground) if g}) == s["ground"]["ground_points"]
+    assert (np.asarray(b.return_number) == 1).all()
