@@ -146,7 +146,9 @@ def test_real_sample_matches_the_oracle(gdt_bin, tool, data_dir, tmp_path, name)
         pytest.skip(f"{las} absent (../shared/data is not beside the checkout)")
     want, _, lattice = whole(tool, las)
     assert want
-    for tile in (64, 1024):
+    # autzen at 64 holds tiles near its sides with empty cells inside its box;
+    # the lon/lat sample is sparse over a wide box: one tiling (its grid costs)
+    for tile in ((64, 1024) if name.startswith("autzen") else (256,)):
         out = tmp_path / f"a{tile}.ply"
         ground_run(gdt_bin, las, out, "--tile", tile)
         assert vertex_keys(out, lattice) == want, f"--tile {tile}"
