@@ -16,7 +16,7 @@ the runs' --json:
   - the triangulation's cost per vertex (tile stage and merge) without and
     with the filter, which leaves fewer vertices;
   - the ratio of the two runs' wall times.
-No targets: the figures are for the issue and the README.  Memory figures are
+No targets: the figures are for the README and the project notes.  Memory figures are
 MiB (2^20 bytes).
 
 Exit status: 0; 2 usage or a missing program; 3 a program failed.
