@@ -1,5 +1,6 @@
 /* gdt_las_copy.h — a LAS file made of the records of LAS/LAZ inputs, copied
- * (the classified cloud of --ground-out).
+ * (the classified cloud of --ground-out), or of records the caller makes
+ * (gdt_las_copy_open_new: points that were not LAS).
  *
  * The output takes the first input's header and VLRs (its CRS among them),
  * without the LASzip VLR and with the compression bits of the point format

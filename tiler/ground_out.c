@@ -29,6 +29,33 @@
 
 #define GO_CHUNK 4096 /* records per read */
 
+/* The bits of ordinals [first, first + n) (n <= GO_CHUNK) into bits, whose
+ * byte 0 is that of ordinal first (the bit of ordinal o is bit o % 8 of
+ * bits[o / 8 - first / 8]). */
+static gdt_status read_bits(const tr_run *c, int fd, uint64_t first, size_t n,
+                            unsigned char *bits, gdt_error *err)
+{
+    size_t want, got = 0;
+    if (n == 0)
+        return GDT_OK;
+    want = (size_t)((first + n - 1) / 8 - first / 8 + 1);
+    while (got < want) {
+        ssize_t k = pread(fd, bits + got, want - got, (off_t)(first / 8 + got));
+        if (k < 0 && errno == EINTR)
+            continue;
+        if (k <= 0)
+            return gdt_error_set(err, GDT_EIO, 4504, "%s: %s", c->ground_bits,
+                                 k < 0 ? strerror(errno) : "shorter than the points");
+        got += (size_t)k;
+    }
+    return GDT_OK;
+}
+
+static unsigned bit_class(const unsigned char *bits, uint64_t first, uint64_t ord)
+{
+    return (bits[ord / 8 - first / 8] >> (ord % 8)) & 1u ? 2u : 1u;
+}
+
 static void put32(unsigned char *p, uint32_t v)
 {
     p[0] = (unsigned char)(v & 0xFFu);
@@ -91,7 +118,7 @@ static gdt_status write_from_points(tr_run *c, int bits_fd, gdt_error *err)
                               L->oy + L->sy * (double)pl->min_y, pl->min_z};
     gdt_las_copy *w = NULL;
     gdt_point *pts = malloc(GO_CHUNK * sizeof *pts);
-    unsigned char *rec = calloc(GO_CHUNK, 20);
+    unsigned char *rec = calloc(GO_CHUNK, 20), bits[GO_CHUNK / 8 + 2];
     uint64_t n_all = 0;
     gdt_status st = pts == NULL || rec == NULL
                         ? gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory")
@@ -104,14 +131,16 @@ static gdt_status write_from_points(tr_run *c, int bits_fd, gdt_error *err)
         st = gdt_cloud_read(c->cloud, pts, GO_CHUNK, &n, err);
         if (st != GDT_OK || n == 0)
             break;
+        /* the cloud numbers the points it gives in turn, without gaps */
+        if (pts[n - 1].ord - pts[0].ord != n - 1)
+            st = gdt_error_set(err, GDT_EINTERNAL, 7706, "ordinals %" PRIu64 "..%" PRIu64
+                               " for %zu points", pts[0].ord, pts[n - 1].ord, n);
+        if (st == GDT_OK)
+            st = read_bits(c, bits_fd, pts[0].ord, n, bits, err);
         for (size_t i = 0; i < n && st == GDT_OK; i++) {
-            unsigned char *r = rec + 20 * i, b = 0;
+            unsigned char *r = rec + 20 * i;
             double zq = nearbyint((pts[i].z - pl->min_z) / zs);
-            ssize_t k = pread(bits_fd, &b, 1, (off_t)(pts[i].ord / 8));
-            if (k != 1)
-                st = gdt_error_set(err, GDT_EIO, 4504, "%s: %s", c->ground_bits,
-                                   k < 0 ? strerror(errno) : "shorter than the points");
-            else if (!(zq >= 0.0 && zq <= 2147483647.0))
+            if (!(zq >= 0.0 && zq <= 2147483647.0))
                 st = gdt_error_set(err, GDT_EUSAGE, 2152,
                                    "--ground-out: z %.17g is beyond 2^31 steps of --quantum %g "
                                    "above the lowest z",
@@ -123,7 +152,7 @@ static gdt_status write_from_points(tr_run *c, int bits_fd, gdt_error *err)
             put32(r + 4, (uint32_t)(pts[i].y - pl->min_y));
             put32(r + 8, (uint32_t)(int32_t)zq);
             r[14] = 0x09u; /* return 1 of 1 */
-            r[15] = (b >> (pts[i].ord % 8)) & 1u ? 2u : 1u;
+            r[15] = (unsigned char)bit_class(bits, pts[0].ord, pts[i].ord);
         }
         if (st == GDT_OK)
             st = gdt_las_copy_put(w, rec, n, err);
@@ -154,7 +183,7 @@ static gdt_status copy_input(const tr_run *c, const char *path, const gdt_source
     gdt_source *src = NULL;
     gdt_source_opts so;
     gdt_src_point *pt = NULL;
-    unsigned char *raw = NULL, bits[GO_CHUNK / 8 + 2];
+    unsigned char *raw = NULL, bits[GO_CHUNK / 8 + 2], kept[GO_CHUNK];
     unsigned fmt, rl;
     gdt_status st;
 
@@ -172,29 +201,23 @@ static gdt_status copy_input(const tr_run *c, const char *path, const gdt_source
     if (st == GDT_OK && (pt == NULL || raw == NULL))
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     while (st == GDT_OK) {
-        size_t n = 0, kept = 0, got = 0;
-        uint64_t first = *ord, off;
+        size_t n = 0, nkept = 0;
+        const uint64_t first = *ord;
         st = gdt_source_read_raw(src, pt, raw, GO_CHUNK, &n, err);
         if (st != GDT_OK || n == 0)
             break;
-        for (size_t i = 0; i < n; i++)
-            kept += gdt_filter_test(&opts->filter, &pt[i]) == GDT_KEEP;
-        /* the bits of ordinals [first, first + kept) */
-        off = first / 8;
-        if (kept > 0) {
-            size_t want = (size_t)((first + kept - 1) / 8 - off + 1);
-            ssize_t k = pread(bits_fd, bits, want, (off_t)off);
-            got = k > 0 ? (size_t)k : 0;
-            if (got != want)
-                st = gdt_error_set(err, GDT_EIO, 4504, "%s: %s", c->ground_bits,
-                                   k < 0 ? strerror(errno) : "shorter than the points");
+        for (size_t i = 0; i < n; i++) {
+            kept[i] = gdt_filter_test(&opts->filter, &pt[i]) == GDT_KEEP;
+            nkept += kept[i];
         }
+        /* the kept records have ordinals [first, first + nkept) */
+        st = read_bits(c, bits_fd, first, nkept, bits, err);
         for (size_t i = 0; i < n && st == GDT_OK; i++) {
             unsigned char *r = raw + i * rl;
             unsigned cls;
-            if (gdt_filter_test(&opts->filter, &pt[i]) != GDT_KEEP)
+            if (!kept[i])
                 continue;
-            cls = (bits[*ord / 8 - off] >> (*ord % 8)) & 1u ? 2u : 1u;
+            cls = bit_class(bits, first, *ord);
             if (fmt >= 6)
                 r[16] = (unsigned char)cls;
             else

@@ -245,6 +245,17 @@ static gdt_status classify_tile(ground_worker *w, uint64_t k, gdt_error *err)
         return st;
     st = gdt_tiler_load_reach(g->c->tiler, k, g->f->reach, g->max_points, &w->own, &w->around,
                               err);
+    if (st == GDT_EUSAGE && err->code == 2506) {
+        /* the tiler's message speaks of the tile stage's budget */
+        gdt_error_clear(err);
+        return gdt_error_set(err, GDT_EUSAGE, 2506,
+                             "tile (%" PRId64 ", %" PRId64 ") with the ground filter's reach "
+                             "holds more than %" PRIu64 " points, more than a filter worker's "
+                             "share of three quarters of the memory budget of %" PRIu64
+                             " bytes: use a smaller --tile, fewer --threads or a larger "
+                             "--mem-budget",
+                             d.i, d.j, g->max_points, gdt_tiler_get_stats(g->c->tiler)->mem_budget);
+    }
     if (st != GDT_OK)
         return st;
     n = w->own.n + w->around.n;
