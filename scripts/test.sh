@@ -2,7 +2,7 @@
 # The whole test suite: set-up (packages, .venv, the three builds), then
 # CTest and pytest on the release build, the sanitizer-marked tests again on
 # the ASan+UBSan build, and on the clang fuzz build the saved fuzz inputs and
-# a smoke run of every fuzz target (15 s each).  pytest runs its tests on one
+# a smoke run of every fuzz target (10 s each).  pytest runs its tests on one
 # worker process per CPU (pytest-xdist): every test has its own temporary
 # directory, and the few that time a run compare CPU seconds of their own
 # children, so they do not depend on what runs beside them.
@@ -30,5 +30,5 @@ GDT_BUILD_DIR="$ROOT/build-asan" .venv/bin/python -m pytest -q -n "$JOBS" -m san
 echo "== ctest, saved fuzz inputs (clang fuzz build)"
 ctest --test-dir build-fuzz --output-on-failure -L fuzz
 echo "== fuzz smoke run (clang fuzz build)"
-scripts/fuzz.sh smoke build-fuzz 15
+scripts/fuzz.sh smoke build-fuzz 10
 echo "== all tests passed"

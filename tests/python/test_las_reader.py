@@ -605,5 +605,5 @@ def test_truncated_sampled(dump, runner, tmp_path, maybe_data_dir):
     """The same cuts, sampled (every structure edge kept), for the sanitizer build."""
     for src in truncation_sources(tmp_path, maybe_data_dir):
         data = src.read_bytes()
-        check_truncations(runner, dump, data, truncation_sizes(data, 41, 331),
+        check_truncations(runner, dump, data, truncation_sizes(data, 83, 661),
                           tmp_path / "cut.las")

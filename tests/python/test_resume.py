@@ -40,9 +40,9 @@ BIG_ARGS = ["--tile", "64", "--cell", "0.25"]
 MANY_ARGS = ["--tile", "64", "--cell", "0.125"]
 
 KILL_SEED = 20240611
-UNIFORM_KILLS = 16          # instants drawn uniformly over an uninterrupted run
-MIN_KILLS = 20              # SIGKILLs that must actually hit a running process
-CHAIN_LENGTHS = (1, 3, 1, 4, 2, 1, 3, 2, 1, 4, 2, 3)
+UNIFORM_KILLS = 10          # instants drawn uniformly over an uninterrupted run
+MIN_KILLS = 14              # SIGKILLs that must actually hit a running process
+CHAIN_LENGTHS = (1, 3, 1, 4, 2, 1, 3, 2)
 KILL_AFTER = 2.0    # s into the tile stage (test_json_after_sigkill_in_tile_stage)
 LOSS_WINDOW = 1.5   # s of finished tile work a kill may cost
 

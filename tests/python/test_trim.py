@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 import resume_util as ru
-from tiled_util import SCALE, command, gen_cloud, run, shell, validate, write_las
+from tiled_util import (SCALE, assert_equal_meshes, command, gen_cloud, run, shell, validate,
+                        write_las)
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "scripts"))
@@ -55,6 +56,22 @@ def full_mesh(gdt_bin, las, out):
     return out
 
 
+@pytest.fixture(scope="module")
+def validated_full(gdt_bin, clouds, tmp_path_factory):
+    """kind -> the untrimmed mesh of clouds[kind], checked by validate_mesh.py once
+    (per test worker) and shared by the rules that trim it."""
+    done = {}
+
+    def get(kind):
+        if kind not in done:
+            full = full_mesh(gdt_bin, clouds[kind], tmp_path_factory.mktemp("full") / "full.ply")
+            r = validate(full, clouds[kind])
+            assert r.returncode == 0, r.stdout + r.stderr
+            done[kind] = full
+        return done[kind]
+    return get
+
+
 def trimmed(gdt_bin, las, out, *args):
     js = pathlib.Path(str(out) + ".json")
     cmd = command(gdt_bin, las, out, *args, "--json", js)
@@ -69,11 +86,10 @@ def trimmed(gdt_bin, las, out, *args):
     ("voids", ("--concavity", 1.0)),
     pytest.param("voids", ("--concavity", 0.6, "--max-edge", 2.0), marks=pytest.mark.sanitize),
 ])
-def test_trim_equals_brute_force_for_every_tiling(gdt_bin, clouds, tmp_path, kind, rules):
+def test_trim_equals_brute_force_for_every_tiling(gdt_bin, clouds, validated_full, tmp_path,
+                                                  kind, rules):
     las = clouds[kind]
-    full = full_mesh(gdt_bin, las, tmp_path / "full.ply")
-    r = validate(full, las)
-    assert r.returncode == 0, r.stdout + r.stderr
+    full = validated_full(kind)
     lat = PlyMesh(full).lattice
     me = dict(zip(rules[::2], rules[1::2])).get("--max-edge", 0)
     cc = dict(zip(rules[::2], rules[1::2])).get("--concavity", 0)
@@ -108,9 +124,11 @@ def test_real_sample_and_validate_script(gdt_bin, data_dir, tmp_path):
         out = tmp_path / f"c{t}.ply"
         trimmed(gdt_bin, las, out, "--tile", t, "--concavity", 3, "--max-edge", 10)
         outs.append(out)
-        r = run([sys.executable, ROOT / "scripts" / "validate_mesh.py", out, "--trimmed-from",
-                 full])
-        assert r.returncode == 0 and r.stdout.startswith("OK:"), r.stdout + r.stderr
+    # one tiling checked by the script; the other must hold the same triangles
+    assert_equal_meshes(outs[0], outs[1], "trimmed at --tile 256 and 1024")
+    r = run([sys.executable, ROOT / "scripts" / "validate_mesh.py", outs[0], "--trimmed-from",
+             full])
+    assert r.returncode == 0 and r.stdout.startswith("OK:"), r.stdout + r.stderr
     # the check fails on a mesh trimmed by another rule
     r = run([sys.executable, ROOT / "scripts" / "validate_mesh.py", outs[0], "--trimmed-from",
              full, "--concavity", 6])
