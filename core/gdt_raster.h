@@ -116,36 +116,6 @@ gdt_status gdt_raster_triangle(const gdt_raster_grid *g, gdt_pred_stats *st,
                                const gdt_raster_vertex v[3], gdt_raster_sink sink, void *ctx,
                                gdt_error *err);
 
-/* A window of the grid that one caller fills: cells [row0, row0 + nrows)
- * x [col0, col0 + ncols), row-major in cells (nrows * ncols of them).  A
- * cell holds 0 (no value) or the bits of its float value plus one (a NaN
- * whose bits are all ones as the quiet NaN 0x7fc00000), the encoding of
- * gdt_dem_put_window.  written counts the cells stored; it exceeds the
- * number of non-zero cells exactly when some cell was stored twice. */
-typedef struct gdt_raster_window {
-    int64_t row0, col0, nrows, ncols;
-    uint32_t *cells;
-    uint64_t written;
-} gdt_raster_window;
-
-/* The cells whose centres lie in the lattice box [min_x, max_x] x
- * [min_y, max_y] (clipped to the grid): every centre owned by a triangle
- * with its vertices in the box is among them.  returns 1 and the window's
- * bounds; 0 when no centre lies in the box (or the box is beyond 2^53). */
-int gdt_raster_window_bounds(const gdt_raster_grid *g, int64_t min_x, int64_t min_y,
-                             int64_t max_x, int64_t max_y, int64_t *row0, int64_t *col0,
-                             int64_t *nrows, int64_t *ncols);
-
-/* gdt_raster_triangle storing the owned centres' values in win (same
- * cells, same values) instead of calling a sink.  Several threads may fill
- * one window with different triangles (each keeps its own win struct with
- * the shared cells, or the caller adds up written).
- * returns: GDT_OK; GDT_EINTERNAL 7660 (as gdt_raster_triangle), 7664 (a
- *   candidate cell of the triangle outside the window). */
-gdt_status gdt_raster_triangle_window(const gdt_raster_grid *g, gdt_pred_stats *st,
-                                      const gdt_raster_vertex v[3], gdt_raster_window *win,
-                                      gdt_error *err);
-
 /* gdt_raster_triangle for the faces tri[3f .. 3f+2] (f < nfaces) indexing
  * pts[0 .. npts) (global lattice integers and z, as the cloud gives them).
  * returns: as gdt_raster_triangle; GDT_EINTERNAL 7663 (an index out of

@@ -14,9 +14,6 @@
 #define RASTER_RUN 256
 #define RASTER_SMALL 16 /* bounding boxes of at most this many centres: tested cell by cell */
 #define RASTER_REL_TOL 1e-9
-/* Triangles narrower than this (doubled steps, in x and in y) have exact
- * int64 determinants: differences below 2^30, products below 2^60. */
-#define RASTER_NARROW (INT64_C(1) << 30)
 
 static int64_t floor_div(int64_t n, int64_t d) /* d > 0 */
 {
@@ -184,46 +181,12 @@ static double weight(gdt_i128 w)
     return (double)w;
 }
 
-/* Where one triangle's cells go: the sink's runs, or (win != NULL) the
- * window's cells, stored directly. */
-typedef struct raster_out {
-    gdt_raster_sink sink;
-    void *ctx;
-    gdt_raster_window *win;
-} raster_out;
-
-/* The window encoding of a value: its bits plus one, a NaN whose bits are
- * all ones stored as the quiet NaN (gdt_raster.h). */
-static uint32_t window_code(float z)
+/* Whether the directed edge u -> v (of a counter-clockwise triangle) owns
+ * a point whose determinant orient2d(u, v, p) is e: the rule of
+ * gdt_edge_owns_half, given the determinant. */
+static int owns(gdt_hpt u, gdt_hpt v, gdt_i128 e)
 {
-    uint32_t bits;
-    memcpy(&bits, &z, sizeof bits);
-    if (bits == UINT32_MAX)
-        bits = UINT32_C(0x7fc00000);
-    return bits + 1;
-}
-
-/* Stores cells (row, col .. col + n - 1) in the window.  The caller has
- * checked that they lie inside it.  The store is atomic (relaxed, a plain
- * store on common hardware) so that the rasterisers of one window never
- * race, even on a cell two faces would both own (which the count of
- * gdt_raster_window reveals). */
-static void window_put(gdt_raster_window *w, int64_t row, int64_t col, int64_t n, const float *z)
-{
-    uint32_t *cell = w->cells + (size_t)(row - w->row0) * (size_t)w->ncols + (size_t)(col - w->col0);
-    for (int64_t k = 0; k < n; k++)
-        __atomic_store_n(&cell[k], window_code(z[k]), __ATOMIC_RELAXED);
-    w->written += (uint64_t)n;
-}
-
-static gdt_status emit(const raster_out *o, int64_t row, int64_t col, int64_t n, const float *z,
-                       gdt_error *err)
-{
-    if (o->win != NULL) {
-        window_put(o->win, row, col, n, z);
-        return GDT_OK;
-    }
-    return o->sink(o->ctx, row, col, n, z, err);
+    return e > 0 || (e == 0 && (v.y < u.y || (v.y == u.y && v.x > u.x)));
 }
 
 /* The cells of a bounding box of at most RASTER_SMALL centres (what most
@@ -231,44 +194,37 @@ static gdt_status emit(const raster_out *o, int64_t row, int64_t col, int64_t n,
  * tested against the three edges directly, which costs three determinants
  * instead of the three exact divisions per row of the edge ranges, and
  * owns exactly the same centres (gdt_edge_owned_range is the same rule
- * solved for a row).  a, b, c are counter-clockwise and span less than
- * RASTER_NARROW doubled steps in x and in y, and every centre tested lies
- * in their bounding box: each difference is then below 2^30 and each
- * determinant, a difference of two products below 2^60, is exact in int64
- * and equal to gdt_orient2d_half_det's. */
+ * solved for a row).  a, b, c are counter-clockwise. */
 static gdt_status small_triangle(const gdt_raster_grid *g, gdt_pred_stats *st, gdt_hpt a,
                                  gdt_hpt b, gdt_hpt c, double za, double zb, double zc, double dd,
                                  int64_t r_lo, int64_t r_hi, int64_t c_lo, int64_t c_hi,
-                                 const raster_out *o, gdt_error *err)
+                                 gdt_raster_sink sink, void *ctx, gdt_error *err)
 {
     const int64_t xc0 = 2 * g->x0 + g->mx, dx = 2 * g->mx;
-    const int own_bc = c.y < b.y || (c.y == b.y && c.x > b.x);
-    const int own_ca = a.y < c.y || (a.y == c.y && a.x > c.x);
-    const int own_ab = b.y < a.y || (b.y == a.y && b.x > a.x);
     float run[RASTER_SMALL];
 
-    if (st != NULL)
-        st->orient_calls += 3 * (uint64_t)((r_hi - r_lo + 1) * (c_hi - c_lo + 1));
     for (int64_t r = r_lo; r <= r_hi; r++) {
         int64_t y = 2 * g->y0 - g->my * (2 * r + 1), start = -1, n = 0;
         for (int64_t col = c_lo; col <= c_hi + 1; col++) {
             int in = 0;
             if (col <= c_hi) {
-                const int64_t qx = xc0 + dx * col;
-                const int64_t ia = (c.x - b.x) * (y - b.y) - (c.y - b.y) * (qx - b.x);
-                const int64_t ib = (a.x - c.x) * (y - c.y) - (a.y - c.y) * (qx - c.x);
-                const int64_t ic = (b.x - a.x) * (y - a.y) - (b.y - a.y) * (qx - a.x);
-                in = (ia > 0 || (ia == 0 && own_bc)) && (ib > 0 || (ib == 0 && own_ca)) &&
-                     (ic > 0 || (ic == 0 && own_ab));
+                gdt_hpt q;
+                gdt_i128 ia, ib, ic;
+                q.x = xc0 + dx * col;
+                q.y = y;
+                ia = gdt_orient2d_half_det(st, b, c, q);
+                ib = gdt_orient2d_half_det(st, c, a, q);
+                ic = gdt_orient2d_half_det(st, a, b, q);
+                in = owns(b, c, ia) && owns(c, a, ib) && owns(a, b, ic);
                 if (in) {
-                    double wa = (double)ia, wb = (double)ib, wc = (double)ic;
+                    double wa = weight(ia), wb = weight(ib), wc = weight(ic);
                     if (n == 0)
                         start = col;
                     run[n++] = (float)(((wa * za + wb * zb) + wc * zc) / dd);
                 }
             }
             if (!in && n > 0) {
-                gdt_status s = emit(o, r, start, n, run, err);
+                gdt_status s = sink(ctx, r, start, n, run, err);
                 if (s != GDT_OK)
                     return s;
                 n = 0;
@@ -278,14 +234,13 @@ static gdt_status small_triangle(const gdt_raster_grid *g, gdt_pred_stats *st, g
     return GDT_OK;
 }
 
-/* gdt_raster_triangle and gdt_raster_triangle_window: one body, two ways
- * out (o). */
-static gdt_status raster_one(const gdt_raster_grid *g, gdt_pred_stats *st,
-                             const gdt_raster_vertex v[3], const raster_out *o, gdt_error *err)
+gdt_status gdt_raster_triangle(const gdt_raster_grid *g, gdt_pred_stats *st,
+                               const gdt_raster_vertex v[3], gdt_raster_sink sink, void *ctx,
+                               gdt_error *err)
 {
     gdt_hpt p[3], a, b, c;
     double z[3], za, zb, zc, dd, inv_x, inv_y;
-    int first = 0, narrow;
+    int first = 0;
     gdt_i128 det;
     int64_t minx, maxx, miny, maxy, c_lo, c_hi, r_lo, r_hi, xc0, dx;
     float run[RASTER_RUN];
@@ -328,24 +283,7 @@ static gdt_status raster_one(const gdt_raster_grid *g, gdt_pred_stats *st,
     if (r_hi > g->geo.nrows - 1) r_hi = g->geo.nrows - 1;
     if (r_lo > r_hi)
         return GDT_OK;
-    if (o->win != NULL && (r_lo < o->win->row0 || r_hi >= o->win->row0 + o->win->nrows ||
-                           c_lo < o->win->col0 || c_hi >= o->win->col0 + o->win->ncols))
-        return gdt_error_set(err, GDT_EINTERNAL, 7664,
-                             "rasterising a triangle: cells (%lld..%lld, %lld..%lld) outside "
-                             "the window (%lld..%lld, %lld..%lld)",
-                             (long long)r_lo, (long long)r_hi, (long long)c_lo,
-                             (long long)c_hi, (long long)o->win->row0,
-                             (long long)(o->win->row0 + o->win->nrows - 1),
-                             (long long)o->win->col0,
-                             (long long)(o->win->col0 + o->win->ncols - 1));
-    narrow = maxx - minx < RASTER_NARROW && maxy - miny < RASTER_NARROW;
-    if (narrow) { /* int64 is exact: see small_triangle */
-        if (st != NULL)
-            st->orient_calls++;
-        det = (p[1].x - p[0].x) * (p[2].y - p[0].y) - (p[1].y - p[0].y) * (p[2].x - p[0].x);
-    } else {
-        det = gdt_orient2d_half_det(st, p[0], p[1], p[2]);
-    }
+    det = gdt_orient2d_half_det(st, p[0], p[1], p[2]);
     if (det == 0)
         return GDT_OK;
     if (det < 0) {
@@ -368,8 +306,10 @@ static gdt_status raster_one(const gdt_raster_grid *g, gdt_pred_stats *st,
     zc = z[(first + 2) % 3];
     dd = weight(det);
 
-    if (narrow && (r_hi - r_lo + 1) * (c_hi - c_lo + 1) <= RASTER_SMALL)
-        return small_triangle(g, st, a, b, c, za, zb, zc, dd, r_lo, r_hi, c_lo, c_hi, o, err);
+
+    if ((r_hi - r_lo + 1) * (c_hi - c_lo + 1) <= RASTER_SMALL)
+        return small_triangle(g, st, a, b, c, za, zb, zc, dd, r_lo, r_hi, c_lo, c_hi, sink, ctx,
+                              err);
     for (int64_t r = r_lo; r <= r_hi; r++) {
         int64_t lo = c_lo, hi = c_hi, y = 2 * g->y0 - g->my * (2 * r + 1);
         gdt_edge_owned_range(st, a, b, xc0, dx, y, &lo, &hi);
@@ -397,58 +337,12 @@ static gdt_status raster_one(const gdt_raster_grid *g, gdt_pred_stats *st,
                 double wa = weight(ia), wb = weight(ib), wc = weight(ic);
                 run[k] = (float)(((wa * za + wb * zb) + wc * zc) / dd);
             }
-            s = emit(o, r, col, n, run, err);
+            s = sink(ctx, r, col, n, run, err);
             if (s != GDT_OK)
                 return s;
         }
     }
     return GDT_OK;
-}
-
-gdt_status gdt_raster_triangle(const gdt_raster_grid *g, gdt_pred_stats *st,
-                               const gdt_raster_vertex v[3], gdt_raster_sink sink, void *ctx,
-                               gdt_error *err)
-{
-    const raster_out o = {sink, ctx, NULL};
-    return raster_one(g, st, v, &o, err);
-}
-
-gdt_status gdt_raster_triangle_window(const gdt_raster_grid *g, gdt_pred_stats *st,
-                                      const gdt_raster_vertex v[3], gdt_raster_window *win,
-                                      gdt_error *err)
-{
-    const raster_out o = {NULL, NULL, win};
-    return raster_one(g, st, v, &o, err);
-}
-
-int gdt_raster_window_bounds(const gdt_raster_grid *g, int64_t min_x, int64_t min_y,
-                             int64_t max_x, int64_t max_y, int64_t *row0, int64_t *col0,
-                             int64_t *nrows, int64_t *ncols)
-{
-    /* the cells whose centres lie in the box, by raster_one's own arithmetic
-     * (a triangle with vertices in the box has its candidates among them) */
-    const int64_t xc0 = 2 * g->x0 + g->mx, dx = 2 * g->mx, dy = 2 * g->my;
-    int64_t c_lo, c_hi, r_lo, r_hi;
-
-    if (min_x > max_x || min_y > max_y || min_x <= -RASTER_VERTEX_LIMIT ||
-        max_x >= RASTER_VERTEX_LIMIT || min_y <= -RASTER_VERTEX_LIMIT ||
-        max_y >= RASTER_VERTEX_LIMIT)
-        return 0;
-    c_lo = -floor_div(-(2 * min_x - xc0), dx);
-    c_hi = floor_div(2 * max_x - xc0, dx);
-    r_lo = -floor_div(-(2 * g->y0 - g->my - 2 * max_y), dy);
-    r_hi = floor_div(2 * g->y0 - g->my - 2 * min_y, dy);
-    if (c_lo < 0) c_lo = 0;
-    if (c_hi > g->geo.ncols - 1) c_hi = g->geo.ncols - 1;
-    if (r_lo < 0) r_lo = 0;
-    if (r_hi > g->geo.nrows - 1) r_hi = g->geo.nrows - 1;
-    if (c_lo > c_hi || r_lo > r_hi)
-        return 0;
-    *row0 = r_lo;
-    *col0 = c_lo;
-    *nrows = r_hi - r_lo + 1;
-    *ncols = c_hi - c_lo + 1;
-    return 1;
 }
 
 gdt_status gdt_raster_faces(const gdt_raster_grid *g, gdt_pred_stats *st, const gdt_point *pts,

@@ -350,67 +350,6 @@ gdt_status gdt_dem_put(gdt_dem *w, int64_t row, int64_t col, int64_t n, const fl
     return GDT_OK;
 }
 
-gdt_status gdt_dem_put_window(gdt_dem *w, int64_t row0, int64_t col0, int64_t nrows,
-                              int64_t ncols, uint32_t *codes, uint64_t *set, gdt_error *err)
-{
-    uint64_t count = 0;
-    gdt_status st = GDT_OK;
-
-    if (set != NULL)
-        *set = 0;
-    if (nrows <= 0 || ncols <= 0)
-        return GDT_OK;
-    if (row0 < 0 || col0 < 0 || nrows > w->geo.nrows - row0 || ncols > w->geo.ncols - col0)
-        return gdt_error_set(err, GDT_EINTERNAL, 7661,
-                             "%s: cells (%lld..%lld, %lld..%lld) outside the DEM of %lld x "
-                             "%lld",
-                             w->path, (long long)row0, (long long)(row0 + nrows - 1),
-                             (long long)col0, (long long)(col0 + ncols - 1),
-                             (long long)w->geo.nrows, (long long)w->geo.ncols);
-    for (int64_t r = 0; r < nrows && st == GDT_OK; r++) {
-        int64_t row = row0 + r;
-        uint32_t *src = codes + (size_t)r * (size_t)ncols;
-        for (int64_t c = 0; c < ncols && st == GDT_OK;) {
-            int64_t col = col0 + c, in = col % GDT_DEM_BLOCK;
-            int64_t m = GDT_DEM_BLOCK - in < ncols - c ? GDT_DEM_BLOCK - in : ncols - c;
-            int64_t k = 0;
-            size_t s;
-            uint32_t *cell;
-            while (k < m && src[c + k] == 0)
-                k++;
-            if (k == m) { /* nothing here: no block is made for it */
-                c += m;
-                continue;
-            }
-            st = slot_of(w, (row / GDT_DEM_BLOCK) * w->bcols + col / GDT_DEM_BLOCK, &s, err);
-            if (st != GDT_OK)
-                break;
-            cell = w->cells + s * BLOCK_CELLS + (size_t)(row % GDT_DEM_BLOCK) * GDT_DEM_BLOCK +
-                   (size_t)in;
-            for (; k < m; k++) {
-                uint32_t code = src[c + k];
-                if (code == 0)
-                    continue;
-                if (cell[k] != 0) {
-                    st = gdt_error_set(err, GDT_EINTERNAL, 7662,
-                                       "%s: DEM cell (%lld, %lld) given a value twice", w->path,
-                                       (long long)row, (long long)(col + k));
-                    break;
-                }
-                cell[k] = code;
-                src[c + k] = 0;
-                count++;
-            }
-            c += m;
-        }
-    }
-    w->stats.cells_written += count;
-    w->stats.windows += count > 0;
-    if (set != NULL)
-        *set = count;
-    return st;
-}
-
 gdt_status gdt_dem_sink(void *ctx, int64_t row, int64_t col, int64_t n, const float *z,
                         gdt_error *err)
 {

@@ -87,7 +87,6 @@ typedef struct gdt_dem_stats {
     uint64_t spills;         /* block evictions to the scratch file */
     uint64_t reloads;        /* blocks read back from the scratch file */
     uint64_t blocks_written; /* blocks written to the intermediate file (the rest: nodata) */
-    uint64_t windows;        /* gdt_dem_put_window calls that set a cell */
 } gdt_dem_stats;
 
 typedef struct gdt_dem gdt_dem;
@@ -106,16 +105,6 @@ gdt_status gdt_dem_create(gdt_dem **out, const gdt_dem_geo *geo, const char *pat
  *   cell given a value twice); GDT_EIO 4651 (scratch file I/O). */
 gdt_status gdt_dem_put(gdt_dem *w, int64_t row, int64_t col, int64_t n, const float *z,
                        gdt_error *err);
-
-/* Sets the cells of a window [row0, row0 + nrows) x [col0, col0 + ncols)
- * (row-major, ncols per row) whose code is not 0: a code is a float's bits
- * plus one (a NaN whose bits are all ones given as the quiet NaN), the
- * encoding of gdt_raster_window.  The window is consumed: every cell is
- * left 0.  *set (may be NULL) receives the number of cells set.  Each cell
- * at most once, as gdt_dem_put.
- * returns: as gdt_dem_put. */
-gdt_status gdt_dem_put_window(gdt_dem *w, int64_t row0, int64_t col0, int64_t nrows,
-                              int64_t ncols, uint32_t *codes, uint64_t *set, gdt_error *err);
 
 /* gdt_dem_put with the signature of gdt_raster_sink (core/gdt_raster.h):
  * ctx is the gdt_dem. */

@@ -20,7 +20,6 @@ void gdt_dem_report_json(gdt_json *j, const gdt_options *opts, const gdt_dem_geo
     gdt_json_uint(j, "blocks", st->blocks);
     gdt_json_uint(j, "cache_blocks", st->cache_blocks);
     gdt_json_uint(j, "spills", st->spills);
-    gdt_json_uint(j, "tile_windows", st->windows);
     gdt_json_double(j, "seconds", seconds);
     gdt_json_end_object(j);
 }

@@ -4,9 +4,7 @@
  * threads (--threads - 1 of them), each taking one contiguous part of the
  * faces.  Each rasteriser collects its cell runs in its own buffer and
  * hands them to the writer in batches, so the writer's lock is taken once
- * per batch, not once per run.  When the tile's cells fit a window of a few
- * cells per point (the usual case), the rasterisers store the values in
- * that window instead, and the window goes to the writer once per tile.  The DEM does not depend on the split: every
+ * per batch, not once per run.  The DEM does not depend on the split: every
  * cell centre is owned by one face, and the writer refuses a second value.
  *
  * Invariants: mu guards w (the writer) and nothing else; job_mu serialises
@@ -49,7 +47,6 @@ typedef struct td_part {
     gdt_status st;
     gdt_error err;
     td_batch batch;
-    gdt_raster_window win; /* the job's window cells, this part's count */
 } td_part;
 
 struct tr_dem {
@@ -67,8 +64,7 @@ struct tr_dem {
     size_t npts, m;
     uint64_t base;
     const int32_t *tri;
-    tr_dem_window *win; /* the job's window, or NULL: batches */
-    td_part *parts;     /* [0 .. helpers], part 0 the caller's */
+    td_part *parts; /* [0 .. helpers], part 0 the caller's */
 };
 
 static gdt_status batch_flush(td_batch *b, gdt_error *err)
@@ -145,43 +141,12 @@ static gdt_status raster_range(tr_dem *d, td_batch *b, const gdt_raster_vertex *
     return st;
 }
 
-/* Rasterises faces [lo, hi) of tri into the window win (this part's view
- * of the job's window: its cells, its own count). */
-static gdt_status window_range(tr_dem *d, gdt_raster_window *win, const gdt_raster_vertex *pts,
-                               size_t n, uint64_t base, const int32_t *tri, size_t lo,
-                               size_t hi, gdt_error *err)
-{
-    for (size_t f = lo; f < hi; f++) {
-        gdt_raster_vertex v[3];
-        gdt_status st;
-        for (int i = 0; i < 3; i++) {
-            int64_t k = (int64_t)tri[3 * f + (size_t)i] - (int64_t)base;
-            if (k < 0 || (uint64_t)k >= n)
-                return gdt_error_set(err, GDT_EINTERNAL, 7663,
-                                     "DEM: a certified face names vertex %d, outside its "
-                                     "tile's %" PRIu64 "..%" PRIu64,
-                                     (int)tri[3 * f + (size_t)i], base, base + n - 1);
-            v[i] = pts[k];
-        }
-        st = gdt_raster_triangle_window(&d->grid, NULL, v, win, err);
-        if (st != GDT_OK)
-            return st;
-    }
-    return GDT_OK;
-}
-
 /* Part p of the current job (of parts parts). */
 static void run_part(tr_dem *d, td_part *p, int parts)
 {
     size_t lo = d->m * (size_t)p->index / (size_t)parts;
     size_t hi = d->m * (size_t)(p->index + 1) / (size_t)parts;
-    if (d->win != NULL) {
-        p->win = d->win->win;
-        p->win.written = 0;
-        p->st = window_range(d, &p->win, d->pts, d->npts, d->base, d->tri, lo, hi, &p->err);
-    } else {
-        p->st = raster_range(d, &p->batch, d->pts, d->npts, d->base, d->tri, lo, hi, &p->err);
-    }
+    p->st = raster_range(d, &p->batch, d->pts, d->npts, d->base, d->tri, lo, hi, &p->err);
 }
 
 static void *helper_main(void *arg)
@@ -305,109 +270,15 @@ gdt_status tr_dem_create(tr_dem **out, const gdt_options *opts, const gdt_cloud_
     return GDT_OK;
 }
 
-/* Most cells of a tile's window per point of the tile: a window any
- * larger (a grid much finer than the points) is not worth its memory, and
- * the tile's faces go through the batches instead. */
-#define TD_WINDOW_CELLS_PER_POINT 4
-#define TD_WINDOW_MIN_CELLS 65536
-
-gdt_status tr_dem_window_begin(tr_dem *d, tr_dem_window *w, const gdt_raster_vertex *pts,
-                               size_t n, gdt_error *err)
-{
-    int64_t min_x, min_y, max_x, max_y, r0, c0, nr, nc;
-    size_t cells;
-
-    w->active = 0;
-    if (n == 0)
-        return GDT_OK;
-    min_x = max_x = pts[0].x;
-    min_y = max_y = pts[0].y;
-    for (size_t i = 1; i < n; i++) {
-        if (pts[i].x < min_x) min_x = pts[i].x;
-        if (pts[i].x > max_x) max_x = pts[i].x;
-        if (pts[i].y < min_y) min_y = pts[i].y;
-        if (pts[i].y > max_y) max_y = pts[i].y;
-    }
-    if (!gdt_raster_window_bounds(&d->grid, min_x, min_y, max_x, max_y, &r0, &c0, &nr, &nc))
-        return GDT_OK; /* no centre: the faces own none, the batches find that fast */
-    if ((double)nr * (double)nc >
-        (double)TD_WINDOW_CELLS_PER_POINT * (double)n + (double)TD_WINDOW_MIN_CELLS)
-        return GDT_OK;
-    cells = (size_t)nr * (size_t)nc;
-    if (cells > w->cap) {
-        uint32_t *c = calloc(cells, sizeof *c);
-        if (c == NULL)
-            return GDT_OK; /* the batches need no more memory */
-        free(w->win.cells);
-        w->win.cells = c;
-        w->cap = cells;
-        w->dirty = 0;
-    }
-    if (w->dirty) {
-        memset(w->win.cells, 0, w->cap * sizeof *w->win.cells);
-        w->dirty = 0;
-    }
-    (void)err;
-    w->win.row0 = r0;
-    w->win.col0 = c0;
-    w->win.nrows = nr;
-    w->win.ncols = nc;
-    w->win.written = 0;
-    w->active = 1;
-    return GDT_OK;
-}
-
-gdt_status tr_dem_window_end(tr_dem *d, tr_dem_window *w, gdt_error *err)
-{
-    gdt_status st;
-    uint64_t set = 0;
-
-    if (!w->active)
-        return GDT_OK;
-    w->active = 0;
-    w->dirty = 1; /* until the writer has consumed every cell */
-    pthread_mutex_lock(&d->mu);
-    st = gdt_dem_put_window(d->w, w->win.row0, w->win.col0, w->win.nrows, w->win.ncols,
-                            w->win.cells, &set, err);
-    pthread_mutex_unlock(&d->mu);
-    if (st != GDT_OK)
-        return st;
-    w->dirty = 0;
-    if (set != w->win.written)
-        return gdt_error_set(err, GDT_EINTERNAL, 7662,
-                             "DEM: a tile's faces stored %" PRIu64 " cell values in %" PRIu64
-                             " cells: some cell was given a value twice",
-                             w->win.written, set);
-    return GDT_OK;
-}
-
-void tr_dem_window_free(tr_dem_window *w)
-{
-    if (w == NULL)
-        return;
-    free(w->win.cells);
-    memset(w, 0, sizeof *w);
-}
-
-gdt_status tr_dem_tile_faces(tr_dem *d, tr_dem_window *w, const gdt_raster_vertex *pts,
-                             size_t n, uint64_t base, const int32_t *tri, size_t m,
-                             gdt_error *err)
+gdt_status tr_dem_tile_faces(tr_dem *d, const gdt_raster_vertex *pts, size_t n, uint64_t base,
+                             const int32_t *tri, size_t m, gdt_error *err)
 {
     gdt_status st;
     int parts;
 
-    if (w != NULL && !w->active)
-        w = NULL;
     pthread_mutex_lock(&d->job_mu);
     if (d->helpers == 0 || m < 2 * (size_t)TD_MIN_PART) {
-        if (w != NULL) {
-            gdt_raster_window pw = w->win;
-            pw.written = 0;
-            st = window_range(d, &pw, pts, n, base, tri, 0, m, err);
-            w->win.written += pw.written;
-        } else {
-            st = raster_range(d, &d->parts[0].batch, pts, n, base, tri, 0, m, err);
-        }
+        st = raster_range(d, &d->parts[0].batch, pts, n, base, tri, 0, m, err);
         pthread_mutex_unlock(&d->job_mu);
         return st;
     }
@@ -418,7 +289,6 @@ gdt_status tr_dem_tile_faces(tr_dem *d, tr_dem_window *w, const gdt_raster_verte
     d->base = base;
     d->tri = tri;
     d->m = m;
-    d->win = w;
     d->pending = d->helpers;
     d->gen++;
     pthread_cond_broadcast(&d->jcv);
@@ -430,15 +300,12 @@ gdt_status tr_dem_tile_faces(tr_dem *d, tr_dem_window *w, const gdt_raster_verte
     pthread_mutex_unlock(&d->jmu);
     /* the first failing part in face order names the error */
     st = GDT_OK;
-    for (int i = 0; i < parts; i++) {
-        if (w != NULL)
-            w->win.written += d->parts[i].win.written;
-        if (st == GDT_OK && d->parts[i].st != GDT_OK) {
+    for (int i = 0; i < parts; i++)
+        if (d->parts[i].st != GDT_OK) {
             st = d->parts[i].st;
             *err = d->parts[i].err;
+            break;
         }
-    }
-    d->win = NULL;
     pthread_mutex_unlock(&d->job_mu);
     return st;
 }

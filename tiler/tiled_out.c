@@ -46,7 +46,6 @@ struct tr_out {
     gdt_raster_vertex *tile_pts; /* with a DEM: the points of the tile whose faces are
                                   * copied (24 bytes a point, not the 32 of a record) */
     size_t cap_tile_pts;
-    tr_dem_window dem_win; /* with a DEM: the current tile's cells */
     unsigned char *mdem;  /* with a DEM: MD_RECORD TR_CHUNK bytes of merge.dem */
 };
 
@@ -229,8 +228,6 @@ static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
     r.fd = -1;
     if (st == GDT_OK && o->src.dem != NULL)
         st = load_tile_points(o, &d, err);
-    if (st == GDT_OK && o->src.dem != NULL)
-        st = tr_dem_window_begin(o->src.dem, &o->dem_win, o->tile_pts, (size_t)d.points, err);
     if (st == GDT_OK)
         st = tr_tile_path(o->src.tiles_dir, &d, "tri", &path, err);
     if (st == GDT_OK)
@@ -272,14 +269,10 @@ static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
             st = put_face_records(o, m, o->src.trim ? o->drop : NULL, &kept, err);
         /* the DEM takes the faces the mesh keeps (o->tri holds them) */
         if (st == GDT_OK && o->src.dem != NULL)
-            st = tr_dem_tile_faces(o->src.dem, &o->dem_win, o->tile_pts, (size_t)d.points,
-                                   o->src.base[k], o->tri, kept, err);
+            st = tr_dem_tile_faces(o->src.dem, o->tile_pts, (size_t)d.points, o->src.base[k],
+                                   o->tri, kept, err);
         done += m;
     }
-    if (st == GDT_OK && o->src.dem != NULL)
-        st = tr_dem_window_end(o->src.dem, &o->dem_win, err);
-    else if (o->dem_win.active) /* its cells stay for the next tile to clear */
-        o->dem_win = (tr_dem_window){o->dem_win.win, o->dem_win.cap, 0, 1};
     if (st == GDT_OK)
         o->tc.faces += nf;
     tr_dread_close(&r);
@@ -510,7 +503,6 @@ static void out_free(tr_out *o)
     free(o->cut);
     free(o->cand);
     free(o->tile_pts);
-    tr_dem_window_free(&o->dem_win);
     free(o->mdem);
     free(o);
 }

@@ -11,13 +11,10 @@
  *   - vertices near 2^52 lattice steps: no overflow (UBSan in the sanitizer
  *     tree), the same coverage;
  *   - the grid rule: aligned corners, refused cell sizes, the default size;
- *   - the window path (a tile's cells filled in place) stores the same
- *     cells and bits as the sink path, counts a second store, refuses a
- *     face outside the window;
  *   - the writer: a two-block cache (every block spilled and reloaded)
  *     writes the same bytes as a cache holding everything, for writes in
- *     shuffled order, and for the same cells given as windows; a cell
- *     written twice is an error (runs and windows); abort leaves no file.
+ *     shuffled order; a cell written twice is an error; abort leaves no
+ *     file.
  * usage: test_raster WORKDIR */
 #include <math.h>
 #include <stdio.h>
@@ -153,82 +150,6 @@ static void rasterise_all(const gdt_raster_grid *g, const gdt_point *pts, const 
     }
 }
 
-/* The window path (gdt_raster_triangle_window) over the mesh's box: the
- * same cells and value bits as the sink path (cv); its count reveals a face
- * stored twice; a window smaller than a face is refused. */
-static void check_window(const gdt_raster_grid *g, const gdt_point *pts, const gdt_mesh *m,
-                         int64_t minx, int64_t miny, int64_t maxx, int64_t maxy, const cover *cv)
-{
-    gdt_raster_window w;
-    gdt_error err;
-    uint64_t nonzero = 0;
-    size_t cells;
-
-    gdt_error_clear(&err);
-    memset(&w, 0, sizeof w);
-    GDT_CHECK(&C, gdt_raster_window_bounds(g, minx, miny, maxx, maxy, &w.row0, &w.col0, &w.nrows,
-                                           &w.ncols),
-              "%s", "no window");
-    cells = (size_t)(w.nrows * w.ncols);
-    w.cells = calloc(cells, sizeof *w.cells);
-    for (size_t f = 0; f < m->ntris; f++) {
-        gdt_raster_vertex v[3];
-        for (int k = 0; k < 3; k++) {
-            const gdt_point *p = &pts[m->tri[3 * f + (size_t)(2 - k)]]; /* clockwise */
-            v[k].x = p->x;
-            v[k].y = p->y;
-            v[k].z = p->z;
-        }
-        GDT_CHECK_QUIET_AFTER(&C, 5,
-                              gdt_raster_triangle_window(g, NULL, v, &w, &err) == GDT_OK, "%s",
-                              err.msg);
-    }
-    for (int64_t r = 0; r < g->geo.nrows; r++)
-        for (int64_t c = 0; c < g->geo.ncols; c++) {
-            size_t i = (size_t)(r * g->geo.ncols + c);
-            int inside = r >= w.row0 && r < w.row0 + w.nrows && c >= w.col0 && c < w.col0 + w.ncols;
-            uint32_t code = inside ? w.cells[(size_t)((r - w.row0) * w.ncols + (c - w.col0))] : 0;
-            uint32_t want = 0;
-            if (cv->count[i] == 1) {
-                memcpy(&want, &cv->val[i], sizeof want);
-                want++;
-            }
-            nonzero += code != 0;
-            GDT_CHECK_QUIET_AFTER(&C, 5, code == want, "window: cell (%lld, %lld) code %u, want %u",
-                                  (long long)r, (long long)c, code, want);
-        }
-    GDT_CHECK(&C, w.written == nonzero, "window: %llu stored, %llu cells",
-              (unsigned long long)w.written, (unsigned long long)nonzero);
-    /* a face stored again: the count exceeds the cells */
-    for (size_t f = 0; f < m->ntris; f++) {
-        gdt_raster_vertex v[3];
-        uint64_t before = w.written;
-        for (int k = 0; k < 3; k++) {
-            const gdt_point *p = &pts[m->tri[3 * f + (size_t)k]];
-            v[k].x = p->x;
-            v[k].y = p->y;
-            v[k].z = p->z;
-        }
-        GDT_CHECK(&C, gdt_raster_triangle_window(g, NULL, v, &w, &err) == GDT_OK, "%s", err.msg);
-        if (w.written > before) {
-            GDT_CHECK(&C, w.written > nonzero, "%s", "second store not counted");
-            /* the same face into a window that misses its cells */
-            {
-                gdt_raster_window small = w;
-                small.col0 = w.col0 + w.ncols; /* east of every cell of the mesh */
-                small.ncols = 1;
-                gdt_error_clear(&err);
-                GDT_CHECK(&C, gdt_raster_triangle_window(g, NULL, v, &small, &err) ==
-                                      GDT_EINTERNAL &&
-                                  err.code == 7664,
-                          "window too small: code %d", err.code);
-            }
-            break;
-        }
-    }
-    free(w.cells);
-}
-
 static void test_coverage(int64_t grid_span, int64_t base, int64_t m, int npts, uint64_t seed,
                           int plane)
 {
@@ -330,7 +251,6 @@ static void test_coverage(int64_t grid_span, int64_t base, int64_t m, int npts, 
                                       "variant %d: cell %zu value %.9g vs %.9g", variant, i,
                                       cv.val[i], cv2.val[i]);
     }
-    check_window(&g, pts, &mesh, minx, miny, maxx, maxy, &cv);
     free(order);
     free(cv.count);
     free(cv.val);
@@ -377,29 +297,6 @@ static void test_large_coordinates(void)
                                           "large: value %g", cv.val[i]);
             }
         GDT_CHECK(&C, inside > 500, "large: only %ld centres inside", inside);
-    }
-    { /* the window path of a wide triangle (no int64 shortcut): the same cells */
-        gdt_raster_window w;
-        long same = 0;
-        memset(&w, 0, sizeof w);
-        GDT_CHECK(&C, gdt_raster_window_bounds(&g, B, B, B + L, B + L, &w.row0, &w.col0, &w.nrows,
-                                               &w.ncols),
-                  "%s", "large: no window");
-        w.cells = calloc((size_t)(w.nrows * w.ncols), sizeof *w.cells);
-        GDT_CHECK(&C, gdt_raster_triangle_window(&g, NULL, v, &w, &err) == GDT_OK, "%s", err.msg);
-        for (int64_t r = 0; r < w.nrows; r++)
-            for (int64_t k = 0; k < w.ncols; k++) {
-                size_t i = (size_t)((w.row0 + r) * cv.ncols + w.col0 + k);
-                uint32_t code = w.cells[(size_t)(r * w.ncols + k)], want = 0;
-                if (cv.count[i] == 1) {
-                    memcpy(&want, &cv.val[i], sizeof want);
-                    want++;
-                }
-                same += code == want;
-            }
-        GDT_CHECK(&C, same == (long)(w.nrows * w.ncols) && w.nrows * w.ncols > 500,
-                  "large: window differs in %ld cells", (long)(w.nrows * w.ncols) - same);
-        free(w.cells);
     }
     free(cv.count);
     free(cv.val);
@@ -488,7 +385,7 @@ static int count_entries(const char *dir)
 }
 
 static void write_dem(const char *dir, const char *path, uint64_t budget, uint64_t seed,
-                      int windows, gdt_dem_stats *stats)
+                      gdt_dem_stats *stats)
 {
     gdt_dem_geo geo = {1300, 1100, 500000.0, 4100000.0, 0.5, 0.5};
     gdt_dem_opts o;
@@ -527,25 +424,7 @@ static void write_dem(const char *dir, const char *path, uint64_t budget, uint64
     for (int64_t i = 0; i < nruns; i++) {
         for (int k = 0; k < 433; k++)
             buf[k] = (float)(100.0 + 0.01 * (double)runs[2 * i] + 0.001 * (double)(runs[2 * i + 1] + k));
-        if (windows) { /* the run as a window of 3 rows, its middle row set */
-            uint32_t code[3 * 433];
-            uint64_t set = 0;
-            int64_t r0 = runs[2 * i] > 0 ? runs[2 * i] - 1 : 0;
-            int64_t nr = runs[2 * i] + 2 <= geo.nrows ? runs[2 * i] + 2 - r0 : geo.nrows - r0;
-            memset(code, 0, sizeof code);
-            for (int k = 0; k < 433; k++) {
-                memcpy(&code[(runs[2 * i] - r0) * 433 + k], &buf[k], sizeof *code);
-                code[(runs[2 * i] - r0) * 433 + k]++;
-            }
-            if (gdt_dem_put_window(w, r0, runs[2 * i + 1], nr, 433, code, &set, &err) != GDT_OK) {
-                GDT_CHECK(&C, 0, "%s", err.msg);
-                break;
-            }
-            GDT_CHECK_QUIET_AFTER(&C, 3, set == 433, "window set %llu cells",
-                                  (unsigned long long)set);
-            for (int k = 0; k < 3 * 433; k++)
-                GDT_CHECK_QUIET_AFTER(&C, 3, code[k] == 0, "%s", "window not consumed");
-        } else if (gdt_dem_put(w, runs[2 * i], runs[2 * i + 1], 433, buf, &err) != GDT_OK) {
+        if (gdt_dem_put(w, runs[2 * i], runs[2 * i + 1], 433, buf, &err) != GDT_OK) {
             GDT_CHECK(&C, 0, "%s", err.msg);
             break;
         }
@@ -608,8 +487,8 @@ static void test_writer(const char *work)
     unlink(a);
     unlink(b);
     unlink(c);
-    write_dem(dir, a, 1, 5, 0, &sa);             /* two blocks: spills and reloads */
-    write_dem(dir, b, (uint64_t)1 << 30, 6, 0, &sb); /* everything cached, another order */
+    write_dem(dir, a, 1, 5, &sa);             /* two blocks: spills and reloads */
+    write_dem(dir, b, (uint64_t)1 << 30, 6, &sb); /* everything cached, another order */
     GDT_CHECK(&C, sa.cache_blocks == 2 && sa.spills > 0 && sa.reloads > 0,
               "small cache %llu blocks, %llu spills, %llu reloads",
               (unsigned long long)sa.cache_blocks, (unsigned long long)sa.spills,
@@ -621,13 +500,6 @@ static void test_writer(const char *work)
     bb = slurp(b, &nb);
     GDT_CHECK(&C, ba != NULL && bb != NULL && na == nb && na > 1000 && memcmp(ba, bb, (size_t)na) == 0,
               "spilled and cached DEMs differ (%ld and %ld bytes)", na, nb);
-    free(bb);
-    /* the same cells given as windows (two-block cache again) */
-    unlink(b);
-    write_dem(dir, b, 1, 7, 1, &sb);
-    bb = slurp(b, &nb);
-    GDT_CHECK(&C, bb != NULL && na == nb && memcmp(ba, bb, (size_t)na) == 0,
-              "DEMs written by runs and by windows differ (%ld and %ld bytes)", na, nb);
     free(ba);
     free(bb);
     check_values(a);
@@ -650,21 +522,6 @@ static void test_writer(const char *work)
         gdt_error_clear(&err);
         GDT_CHECK(&C, gdt_dem_put(w, 2, 9, 2, z, &err) == GDT_EINTERNAL && err.code == 7661,
                   "code %d", err.code);
-        {
-            uint32_t code[4] = {0, 7, 0, 0}; /* (1, 4) is free, then (2, 4) was set above */
-            uint64_t set = 9;
-            gdt_error_clear(&err);
-            GDT_CHECK(&C, gdt_dem_put_window(w, 1, 4, 2, 2, code, &set, &err) == GDT_OK && set == 1,
-                      "window: %s", err.msg);
-            code[2] = 7;
-            GDT_CHECK(&C, gdt_dem_put_window(w, 1, 4, 2, 2, code, &set, &err) == GDT_EINTERNAL &&
-                              err.code == 7662,
-                      "window twice: code %d", err.code);
-            gdt_error_clear(&err);
-            GDT_CHECK(&C, gdt_dem_put_window(w, 9, 9, 2, 1, code, &set, &err) == GDT_EINTERNAL &&
-                              err.code == 7661,
-                      "window outside: code %d", err.code);
-        }
         gdt_dem_abort(w);
         GDT_CHECK(&C, file_size(c) < 0 && count_entries(dir) == 2, "%s", "abort left a file");
         o.nodata = 0.1;

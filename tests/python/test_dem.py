@@ -545,7 +545,6 @@ def test_tiled_run_writes_the_reference_dem(gdt_bin, runner, tmp_path, kind, til
     tply, ttif, summary = run_dem(runner, gdt_bin, cloud, til, tile_args,
                                   ("--preview", til / "p.png", "--job", til / "job"))
     assert summary["tiles"] >= 4 and summary["seam_vertices"] > 0
-    assert summary["dem"]["tile_windows"] > 0  # tiles filled in place (the usual way)
     assert ttif.read_bytes() == rtif.read_bytes()
     assert (til / "p.png").read_bytes() == (ref / "p.png").read_bytes()
     oracle = Oracle(tply, summary["dem"]["res"])
@@ -594,8 +593,7 @@ def test_tiled_dem_of_a_real_sample(gdt_bin, runner, tmp_path, data_dir):
 
 def test_tiled_dem_spills_and_resumes(gdt_bin, runner, tmp_path):
     """A raster larger than the DEM's share of the budget, and a rerun that reuses every
-    tile: the same bytes as --reference.  The cells are so much finer than the points
-    that every tile's cells go to the writer in batches, not through a tile window."""
+    tile: the same bytes as --reference."""
     cloud = gen(runner, tmp_path / "c.las", 20000, 9, "uniform")
     ref = tmp_path / "ref"
     ref.mkdir()
@@ -605,8 +603,6 @@ def test_tiled_dem_spills_and_resumes(gdt_bin, runner, tmp_path):
     args = ("--dem-res", "0.02", "--mem-budget", "16M", "--job", til / "job", "--keep-job")
     _, ttif, s1 = run_dem(runner, gdt_bin, cloud, til, ("--tile", "128"), args)
     assert s1["dem"]["spills"] > 0
-    # cells far finer than the points: no tile is filled in place, the batches carry them
-    assert s1["dem"]["tile_windows"] == 0
     assert ttif.read_bytes() == rtif.read_bytes()
     ttif.unlink()
     _, ttif, s2 = run_dem(runner, gdt_bin, cloud, til, ("--tile", "128"), args)

@@ -42,39 +42,13 @@ gdt_status tr_dem_create(tr_dem **out, const gdt_options *opts, const gdt_cloud_
                          const gdt_tile_plan *pl, uint64_t vertices, const char *scratch_dir,
                          gdt_error *err);
 
-/* A tile's cells (gdt_raster_window), owned by one caller and reused from
- * tile to tile; zero-initialise it. */
-typedef struct tr_dem_window {
-    gdt_raster_window win;
-    size_t cap;  /* cells allocated */
-    int active;  /* the current tile's faces go into win */
-    int dirty;   /* cells may hold codes (after an error) */
-} tr_dem_window;
-
-/* Prepares w for a tile whose points are pts[0..n): the window of the
- * cells their box holds, when it is at most a few cells per point (else,
- * or without memory for it, the faces go to the writer in batches, with
- * the same result).  returns: GDT_OK. */
-gdt_status tr_dem_window_begin(tr_dem *d, tr_dem_window *w, const gdt_raster_vertex *pts,
-                               size_t n, gdt_error *err);
-
-/* Hands the tile's window to the writer (nothing when w is not active).
- * returns: GDT_OK; the writer's errors; GDT_EINTERNAL 7662 (a cell given a
- * value twice within the tile). */
-gdt_status tr_dem_window_end(tr_dem *d, tr_dem_window *w, gdt_error *err);
-
-/* Releases w's cells; NULL is accepted. */
-void tr_dem_window_free(tr_dem_window *w);
-
 /* Rasterises m faces tri[3m] (output vertex indices) of a tile whose points
- * pts[0..n) (global lattice, z) have the output indices base..base+n-1,
- * into w when it is active (w from tr_dem_window_begin on the same pts),
- * else (also w NULL) to the writer.  Thread-safe.
- * returns: GDT_OK; GDT_EINTERNAL 7663 (an index outside the tile), 7664 (a
- * face outside the window); the writer's errors. */
-gdt_status tr_dem_tile_faces(tr_dem *d, tr_dem_window *w, const gdt_raster_vertex *pts,
-                             size_t n, uint64_t base, const int32_t *tri, size_t m,
-                             gdt_error *err);
+ * pts[0..n) (global lattice, z) have the output indices base..base+n-1.
+ * Thread-safe.
+ * returns: GDT_OK; GDT_EINTERNAL 7663 (an index outside the tile); the
+ * writer's errors. */
+gdt_status tr_dem_tile_faces(tr_dem *d, const gdt_raster_vertex *pts, size_t n, uint64_t base,
+                             const int32_t *tri, size_t m, gdt_error *err);
 
 /* Rasterises m faces given by their vertices v[3 m] (global lattice, z).
  * Thread-safe.  returns: GDT_OK; the writer's errors. */
