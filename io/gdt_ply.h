@@ -131,6 +131,71 @@ gdt_status gdt_ply_finish(gdt_ply_writer *w, gdt_error *err);
 /* Removes the temporary file and frees w; w may be NULL. */
 void gdt_ply_abort(gdt_ply_writer *w);
 
+/* ---- Writing in parts, by several processes ----
+ *
+ * When the vertex count V is known before anything is written and the
+ * records' places are known from counts (a tiled run under mpirun: each
+ * rank writes the vertex and face blocks of its own tiles), the file is
+ * written in parts:
+ *   - its creator, after gdt_ply_create, calls gdt_ply_begin_parts: the
+ *     header goes to the temporary, V is fixed, and the writer takes no more
+ *     records itself;
+ *   - any process opens the temporary (gdt_ply_temp_path) with
+ *     gdt_ply_part_open and writes vertex records [first, first + n) at
+ *     header + 24 first and face records [first, first + n) at
+ *     header + 24 V + 13 first (the same bytes as the sequential writer),
+ *     through the page cache; gdt_ply_part_close syncs what it wrote;
+ *   - when every part is written and closed, the creator calls
+ *     gdt_ply_finish_parts with the face count F: the file must hold exactly
+ *     header + 24 V + 13 F bytes; the counts are patched and the file is
+ *     synced and renamed as by gdt_ply_finish.
+ * The parts must not overlap and must together cover every record: the
+ * size check finds a missing last part, not a hole, so the caller counts
+ * its parts. */
+
+/* Writes the header out and fixes the vertex count (no record written yet).
+ * *header_bytes: the header's length.
+ * returns: GDT_OK; GDT_EINTERNAL 7720 (records already written, or parts
+ *   begun twice); GDT_EINPUT 3701 (nvert over GDT_PLY_MAX_VERTICES); GDT_EIO
+ *   4702.  On failure the temporary is removed (the writer stays to be
+ *   aborted). */
+gdt_status gdt_ply_begin_parts(gdt_ply_writer *w, uint64_t nvert, uint64_t *header_bytes,
+                               gdt_error *err);
+
+/* Completes a file written in parts with nface faces; frees w, also on
+ * failure.  returns: as gdt_ply_finish; GDT_EINTERNAL 7720 (not begun in
+ * parts), 7721 (the file's size is not that of V vertices and nface faces:
+ * a part is missing). */
+gdt_status gdt_ply_finish_parts(gdt_ply_writer *w, uint64_t nface, gdt_error *err);
+
+typedef struct gdt_ply_part gdt_ply_part;
+
+/* Opens the temporary tmp_path (header_bytes and nvert from
+ * gdt_ply_begin_parts) to write parts.  returns: GDT_OK; GDT_EIO 4720
+ * (cannot open); GDT_EINTERNAL 7001.  Ownership: end with
+ * gdt_ply_part_close or gdt_ply_part_abort. */
+gdt_status gdt_ply_part_open(gdt_ply_part **out, const char *tmp_path, uint64_t header_bytes,
+                             uint64_t nvert, gdt_error *err);
+
+/* Writes vertices first .. first + n - 1 (xyz: 3n finite doubles).
+ * returns: GDT_OK; GDT_EINTERNAL 7722 (beyond V), 7707 (not finite);
+ *   GDT_EIO 4721. */
+gdt_status gdt_ply_part_vertices(gdt_ply_part *p, uint64_t first, const double *xyz, size_t n,
+                                 gdt_error *err);
+
+/* Writes faces first .. first + n - 1 (tri: 3n indices below V, distinct
+ * within a face).  returns: GDT_OK; GDT_EINTERNAL 7705, 7706 (as
+ *   gdt_ply_write_faces); GDT_EIO 4721. */
+gdt_status gdt_ply_part_faces(gdt_ply_part *p, uint64_t first, const int32_t *tri, size_t n,
+                              gdt_error *err);
+
+/* Syncs and closes; frees p (also on failure; NULL accepted).
+ * returns: GDT_OK; GDT_EIO 4722. */
+gdt_status gdt_ply_part_close(gdt_ply_part *p, gdt_error *err);
+
+/* Closes without syncing and frees p; NULL accepted. */
+void gdt_ply_part_abort(gdt_ply_part *p);
+
 #ifdef __cplusplus
 }
 #endif

@@ -49,6 +49,7 @@ struct gdt_ply_writer {
     uint64_t fcount_off;
     int in_faces;
     int direct;
+    int parts;  /* gdt_ply_begin_parts: the records are written by gdt_ply_part */
     gdt_error fail;
 };
 
@@ -365,6 +366,9 @@ gdt_status gdt_ply_write_vertices(gdt_ply_writer *w, const double *xyz, size_t n
         return gdt_error_set(err, GDT_EINTERNAL, 7701, "PLY writer: NULL writer");
     if (w->fail.status != GDT_OK)
         return ply_refail(w, err);
+    if (w->parts)
+        return ply_fail(w, err, GDT_EINTERNAL, 7720, "%s: vertices appended to a file written in parts",
+                        w->path);
     if (w->in_faces)
         return ply_fail(w, err, GDT_EINTERNAL, 7704,
                         "%s: vertices written after the first face (%" PRIu64 " faces so far)",
@@ -409,6 +413,9 @@ gdt_status gdt_ply_write_faces(gdt_ply_writer *w, const int32_t *tri, size_t n, 
         return ply_refail(w, err);
     if (n > 0 && tri == NULL)
         return ply_fail(w, err, GDT_EINTERNAL, 7701, "%s: NULL face array", w->path);
+    if (w->parts)
+        return ply_fail(w, err, GDT_EINTERNAL, 7720, "%s: faces appended to a file written in parts",
+                        w->path);
     w->in_faces = 1;
     /* fill and nvert are kept in locals: the byte stores could alias w */
     fill = w->fill;
@@ -471,20 +478,13 @@ static gdt_status patch_count(gdt_ply_writer *w, uint64_t off, uint64_t count, g
     return GDT_OK;
 }
 
-gdt_status gdt_ply_finish(gdt_ply_writer *w, gdt_error *err)
+/* Patches the counts, syncs, closes and renames the temporary over the
+ * path, syncs the directory; frees w (also on failure). */
+static gdt_status ply_commit(gdt_ply_writer *w, gdt_error *err)
 {
     gdt_status st;
     int e;
 
-    if (w == NULL)
-        return gdt_error_set(err, GDT_EINTERNAL, 7701, "PLY writer: NULL writer");
-    if (w->fail.status != GDT_OK) {
-        st = ply_refail(w, err);
-        goto fail;
-    }
-    st = ply_write_out(w, 1, err);
-    if (st != GDT_OK)
-        goto fail;
     st = patch_count(w, w->vcount_off, w->nvert, err);
     if (st != GDT_OK)
         goto fail;
@@ -534,6 +534,216 @@ fail:
     ply_discard(w);
     ply_free(w);
     return st;
+}
+
+
+gdt_status gdt_ply_finish(gdt_ply_writer *w, gdt_error *err)
+{
+    gdt_status st;
+
+    if (w == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7701, "PLY writer: NULL writer");
+    if (w->fail.status != GDT_OK)
+        st = ply_refail(w, err);
+    else if (w->parts)
+        st = ply_fail(w, err, GDT_EINTERNAL, 7720,
+                      "%s: a file written in parts is finished by gdt_ply_finish_parts", w->path);
+    else
+        st = ply_write_out(w, 1, err);
+    if (st != GDT_OK) {
+        ply_discard(w);
+        ply_free(w);
+        return st;
+    }
+    return ply_commit(w, err);
+}
+
+gdt_status gdt_ply_begin_parts(gdt_ply_writer *w, uint64_t nvert, uint64_t *header_bytes,
+                               gdt_error *err)
+{
+    if (w == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7701, "PLY writer: NULL writer");
+    if (w->fail.status != GDT_OK)
+        return ply_refail(w, err);
+    if (w->parts || w->nvert != 0 || w->in_faces)
+        return ply_fail(w, err, GDT_EINTERNAL, 7720,
+                        "%s: parts begun after records were written", w->path);
+    if (nvert > GDT_PLY_MAX_VERTICES)
+        return ply_fail(w, err, GDT_EINPUT, 3701,
+                        "%s: %" PRIu64 " vertices exceed the PLY limit of %" PRIu64
+                        " (vertex indices are 32-bit signed integers)",
+                        w->path, nvert, GDT_PLY_MAX_VERTICES);
+    if (ply_write_out(w, 1, err) != GDT_OK) /* the header, through the page cache */
+        return w->fail.status;
+    w->parts = 1;
+    w->nvert = nvert;
+    *header_bytes = w->flushed;
+    return GDT_OK;
+}
+
+gdt_status gdt_ply_finish_parts(gdt_ply_writer *w, uint64_t nface, gdt_error *err)
+{
+    struct stat sb;
+    gdt_status st = GDT_OK;
+
+    if (w == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7701, "PLY writer: NULL writer");
+    if (w->fail.status != GDT_OK)
+        st = ply_refail(w, err);
+    else if (!w->parts)
+        st = ply_fail(w, err, GDT_EINTERNAL, 7720, "%s: not written in parts", w->path);
+    else if (fstat(w->fd, &sb) != 0)
+        st = ply_fail(w, err, GDT_EIO, 4702, "%s: cannot stat %s (temporary removed): %s",
+                      w->path, w->tmp_path, strerror(errno));
+    else if ((uint64_t)sb.st_size !=
+             w->flushed + PLY_VERTEX_BYTES * w->nvert + PLY_FACE_BYTES * nface)
+        st = ply_fail(w, err, GDT_EINTERNAL, 7721,
+                      "%s: the parts hold %lld bytes, not the %" PRIu64 " of a header, %" PRIu64
+                      " vertices and %" PRIu64 " faces (temporary %s removed)",
+                      w->path, (long long)sb.st_size,
+                      w->flushed + PLY_VERTEX_BYTES * w->nvert + PLY_FACE_BYTES * nface,
+                      w->nvert, nface, w->tmp_path);
+    if (st != GDT_OK) {
+        ply_discard(w);
+        ply_free(w);
+        return st;
+    }
+    w->nface = nface;
+    return ply_commit(w, err);
+}
+
+/* ---- one process's parts ---- */
+
+struct gdt_ply_part {
+    char *path; /* the temporary */
+    int fd;
+    uint64_t header, nvert;
+    unsigned char *buf; /* GDT_PLY_BUFFER_BYTES */
+};
+
+gdt_status gdt_ply_part_open(gdt_ply_part **out, const char *tmp_path, uint64_t header_bytes,
+                             uint64_t nvert, gdt_error *err)
+{
+    gdt_ply_part *p = calloc(1, sizeof *p);
+    *out = NULL;
+    if (p == NULL || (p->path = strdup(tmp_path)) == NULL ||
+        (p->buf = malloc(GDT_PLY_BUFFER_BYTES)) == NULL) {
+        if (p != NULL) {
+            free(p->path);
+            free(p);
+        }
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    }
+    p->header = header_bytes;
+    p->nvert = nvert;
+    p->fd = open(tmp_path, O_WRONLY | O_CLOEXEC);
+    if (p->fd < 0) {
+        gdt_status st = gdt_error_set(err, GDT_EIO, 4720, "%s: cannot open to write a part: %s",
+                                      tmp_path, strerror(errno));
+        free(p->buf);
+        free(p->path);
+        free(p);
+        return st;
+    }
+    *out = p;
+    return GDT_OK;
+}
+
+static gdt_status part_write(gdt_ply_part *p, size_t n, uint64_t off, gdt_error *err)
+{
+    int e = gdt_fd_write_all(p->fd, p->buf, n, (int64_t)off);
+    if (e != 0)
+        return gdt_error_set(err, GDT_EIO, 4721, "%s: write failed: %s", p->path, strerror(e));
+    return GDT_OK;
+}
+
+gdt_status gdt_ply_part_vertices(gdt_ply_part *p, uint64_t first, const double *xyz, size_t n,
+                                 gdt_error *err)
+{
+    const size_t per = GDT_PLY_BUFFER_BYTES / PLY_VERTEX_BYTES;
+    if (first > p->nvert || (uint64_t)n > p->nvert - first)
+        return gdt_error_set(err, GDT_EINTERNAL, 7722,
+                             "%s: vertices %" PRIu64 "..+%zu outside the %" PRIu64 " of the file",
+                             p->path, first, n, p->nvert);
+    for (size_t done = 0; done < n;) {
+        size_t m = n - done < per ? n - done : per;
+        for (size_t i = 0; i < m; i++) {
+            const double *v = xyz + 3 * (done + i);
+            unsigned char *q = p->buf + PLY_VERTEX_BYTES * i;
+            if (!isfinite(v[0]) || !isfinite(v[1]) || !isfinite(v[2]))
+                return gdt_error_set(err, GDT_EINTERNAL, 7707,
+                                     "%s: vertex %" PRIu64 " is not finite (%g %g %g)", p->path,
+                                     first + done + i, v[0], v[1], v[2]);
+            gdt_le_put_f64(q, v[0]);
+            gdt_le_put_f64(q + 8, v[1]);
+            gdt_le_put_f64(q + 16, v[2]);
+        }
+        if (part_write(p, PLY_VERTEX_BYTES * m, p->header + PLY_VERTEX_BYTES * (first + done),
+                       err) != GDT_OK)
+            return err->status;
+        done += m;
+    }
+    return GDT_OK;
+}
+
+gdt_status gdt_ply_part_faces(gdt_ply_part *p, uint64_t first, const int32_t *tri, size_t n,
+                              gdt_error *err)
+{
+    const size_t per = GDT_PLY_BUFFER_BYTES / PLY_FACE_BYTES;
+    const uint64_t at = p->header + PLY_VERTEX_BYTES * p->nvert;
+    for (size_t done = 0; done < n;) {
+        size_t m = n - done < per ? n - done : per;
+        for (size_t i = 0; i < m; i++) {
+            const int32_t *t = tri + 3 * (done + i);
+            unsigned char *q = p->buf + PLY_FACE_BYTES * i;
+            for (int k = 0; k < 3; k++)
+                if (t[k] < 0 || (uint64_t)t[k] >= p->nvert)
+                    return gdt_error_set(err, GDT_EINTERNAL, 7705,
+                                         "%s: face %" PRIu64 " (%" PRId32 " %" PRId32 " %" PRId32
+                                         ") has an index outside [0, %" PRIu64 ")",
+                                         p->path, first + done + i, t[0], t[1], t[2], p->nvert);
+            if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2])
+                return gdt_error_set(err, GDT_EINTERNAL, 7706,
+                                     "%s: face %" PRIu64 " (%" PRId32 " %" PRId32 " %" PRId32
+                                     ") repeats a vertex",
+                                     p->path, first + done + i, t[0], t[1], t[2]);
+            q[0] = 3;
+            gdt_le_put_u32(q + 1, (uint32_t)t[0]);
+            gdt_le_put_u32(q + 5, (uint32_t)t[1]);
+            gdt_le_put_u32(q + 9, (uint32_t)t[2]);
+        }
+        if (part_write(p, PLY_FACE_BYTES * m, at + PLY_FACE_BYTES * (first + done), err) != GDT_OK)
+            return err->status;
+        done += m;
+    }
+    return GDT_OK;
+}
+
+gdt_status gdt_ply_part_close(gdt_ply_part *p, gdt_error *err)
+{
+    gdt_status st = GDT_OK;
+    if (p == NULL)
+        return GDT_OK;
+    if (fsync(p->fd) != 0)
+        st = gdt_error_set(err, GDT_EIO, 4722, "%s: fsync of a part failed: %s", p->path,
+                           strerror(errno));
+    if (close(p->fd) != 0 && st == GDT_OK)
+        st = gdt_error_set(err, GDT_EIO, 4722, "%s: close of a part failed: %s", p->path,
+                           strerror(errno));
+    p->fd = -1;
+    gdt_ply_part_abort(p);
+    return st;
+}
+
+void gdt_ply_part_abort(gdt_ply_part *p)
+{
+    if (p == NULL)
+        return;
+    if (p->fd >= 0)
+        close(p->fd);
+    free(p->buf);
+    free(p->path);
+    free(p);
 }
 
 void gdt_ply_abort(gdt_ply_writer *w)

@@ -6,7 +6,9 @@
  * independently of the host byte order: the exact header, the records, the
  * file size, the temporary-then-rename protocol, and that every misuse
  * (vertices after faces, bad indices, bad comments, bad lattice, too many
- * vertices) is refused with its message number and leaves no file behind.
+ * vertices) is refused with its message number and leaves no file behind;
+ * a file written in parts (gdt_ply_begin_parts, gdt_ply_part_*) has the
+ * sequential writer's bytes, and a missing part is refused.
  * The writer bypasses the page cache (O_DIRECT, whole 4 KiB blocks) where
  * the file system allows it; the large file crosses many block and buffer
  * boundaries with odd record counts per call.
@@ -579,6 +581,118 @@ static void test_special_path_kept(tctx *t)
     CHECK(t, count_prefixed(t, "fifo.ply.tmp-") == 0, "temporary left after the refusal");
 }
 
+/* A file written in parts (vertex and face blocks in shuffled order, by two
+ * part writers) has the bytes of the same records written in sequence; a
+ * missing last part is refused; parts and sequential writes do not mix. */
+static void test_parts(tctx *t)
+{
+    enum { NV = 1000, NF = 1500 };
+    char seq[4200], par[4200];
+    gdt_ply_meta m = plain_meta();
+    gdt_ply_writer *w = NULL;
+    gdt_ply_part *p[2] = {NULL, NULL};
+    gdt_error err;
+    double *xyz = malloc(3 * NV * sizeof *xyz);
+    int32_t *tri = malloc(3 * NF * sizeof *tri);
+    uint64_t hb = 0, vb[5] = {0, 1, 333, 700, NV}, fb[5] = {0, 499, 500, 1234, NF};
+    unsigned char *a, *b;
+    size_t na = 0, nb = 0;
+
+    gdt_error_clear(&err);
+    for (int i = 0; i < 3 * NV; i++)
+        xyz[i] = 1000.0 * i + 1.0 / (i + 1);
+    for (int f = 0; f < NF; f++) {
+        tri[3 * f] = f % NV;
+        tri[3 * f + 1] = (f * 7 + 1) % NV;
+        tri[3 * f + 2] = (f * 13 + 2) % NV;
+        if (tri[3 * f + 1] == tri[3 * f] || tri[3 * f + 2] == tri[3 * f] ||
+            tri[3 * f + 2] == tri[3 * f + 1])
+            tri[3 * f] = tri[3 * f + 1] = 0, tri[3 * f + 1] = 1, tri[3 * f + 2] = 2;
+    }
+    path_in(t, seq, sizeof seq, "seq.ply");
+    path_in(t, par, sizeof par, "par.ply");
+    CHECK(t, gdt_ply_create(&w, seq, &m, &err) == GDT_OK, "%s", err.msg);
+    CHECK(t, gdt_ply_write_vertices(w, xyz, NV, &err) == GDT_OK, "%s", err.msg);
+    CHECK(t, gdt_ply_write_faces(w, tri, NF, &err) == GDT_OK, "%s", err.msg);
+    CHECK(t, gdt_ply_finish(w, &err) == GDT_OK, "%s", err.msg);
+
+    CHECK(t, gdt_ply_create(&w, par, &m, &err) == GDT_OK, "%s", err.msg);
+    CHECK(t, gdt_ply_begin_parts(w, NV, &hb, &err) == GDT_OK && hb > 100, "%s", err.msg);
+    CHECK(t, gdt_ply_part_open(&p[0], gdt_ply_temp_path(w), hb, NV, &err) == GDT_OK, "%s",
+          err.msg);
+    CHECK(t, gdt_ply_part_open(&p[1], gdt_ply_temp_path(w), hb, NV, &err) == GDT_OK, "%s",
+          err.msg);
+    /* the blocks from the last to the first, alternating writers */
+    for (int i = 3; i >= 0; i--) {
+        CHECK(t, gdt_ply_part_faces(p[i % 2], fb[i], tri + 3 * fb[i], fb[i + 1] - fb[i], &err) ==
+                     GDT_OK, "faces: %s", err.msg);
+        CHECK(t, gdt_ply_part_vertices(p[(i + 1) % 2], vb[i], xyz + 3 * vb[i], vb[i + 1] - vb[i],
+                                       &err) == GDT_OK, "vertices: %s", err.msg);
+    }
+    CHECK(t, gdt_ply_part_vertices(p[0], NV - 1, xyz, 2, &err) == GDT_EINTERNAL &&
+                 err.code == 7722, "vertex beyond V: %d", err.code);
+    {
+        int32_t bad[3] = {0, 1, NV};
+        gdt_error_clear(&err);
+        CHECK(t, gdt_ply_part_faces(p[0], 0, bad, 1, &err) == GDT_EINTERNAL && err.code == 7705,
+              "face index beyond V: %d", err.code);
+    }
+    gdt_error_clear(&err);
+    CHECK(t, gdt_ply_write_faces(w, tri, 1, &err) == GDT_EINTERNAL && err.code == 7720,
+          "sequential face after parts: %d", err.code);
+    gdt_ply_abort(w); /* the sticky failure removed the temporary */
+    gdt_ply_part_abort(p[0]);
+    gdt_ply_part_abort(p[1]);
+
+    /* again, cleanly */
+    gdt_error_clear(&err);
+    CHECK(t, gdt_ply_create(&w, par, &m, &err) == GDT_OK, "%s", err.msg);
+    CHECK(t, gdt_ply_begin_parts(w, NV, &hb, &err) == GDT_OK, "%s", err.msg);
+    CHECK(t, gdt_ply_part_open(&p[0], gdt_ply_temp_path(w), hb, NV, &err) == GDT_OK, "%s",
+          err.msg);
+    for (int i = 3; i >= 0; i--) {
+        CHECK(t, gdt_ply_part_faces(p[0], fb[i], tri + 3 * fb[i], fb[i + 1] - fb[i], &err) ==
+                     GDT_OK, "faces: %s", err.msg);
+        CHECK(t, gdt_ply_part_vertices(p[0], vb[i], xyz + 3 * vb[i], vb[i + 1] - vb[i], &err) ==
+                     GDT_OK, "vertices: %s", err.msg);
+    }
+    CHECK(t, gdt_ply_part_close(p[0], &err) == GDT_OK, "%s", err.msg);
+    CHECK(t, gdt_ply_finish_parts(w, NF, &err) == GDT_OK, "%s", err.msg);
+    a = slurp(seq, &na);
+    b = slurp(par, &nb);
+    CHECK(t, a != NULL && b != NULL && na == nb && memcmp(a, b, na) == 0,
+          "parts differ from the sequential file (%zu and %zu bytes)", na, nb);
+    free(a);
+    free(b);
+
+    /* the last face block missing: refused, nothing at the path */
+    unlink(par);
+    gdt_error_clear(&err);
+    CHECK(t, gdt_ply_create(&w, par, &m, &err) == GDT_OK, "%s", err.msg);
+    CHECK(t, gdt_ply_begin_parts(w, NV, &hb, &err) == GDT_OK, "%s", err.msg);
+    CHECK(t, gdt_ply_part_open(&p[0], gdt_ply_temp_path(w), hb, NV, &err) == GDT_OK, "%s",
+          err.msg);
+    CHECK(t, gdt_ply_part_vertices(p[0], 0, xyz, NV, &err) == GDT_OK, "%s", err.msg);
+    CHECK(t, gdt_ply_part_faces(p[0], 0, tri, NF - 1, &err) == GDT_OK, "%s", err.msg);
+    CHECK(t, gdt_ply_part_close(p[0], &err) == GDT_OK, "%s", err.msg);
+    gdt_error_clear(&err);
+    CHECK(t, gdt_ply_finish_parts(w, NF, &err) == GDT_EINTERNAL && err.code == 7721,
+          "a missing part: %d %s", err.code, err.msg);
+    CHECK(t, !exists(par) && count_prefixed(t, "par.ply.tmp-") == 0,
+          "%s", "a file left after a refused finish");
+    /* parts after a record */
+    gdt_error_clear(&err);
+    CHECK(t, gdt_ply_create(&w, par, &m, &err) == GDT_OK, "%s", err.msg);
+    CHECK(t, gdt_ply_write_vertices(w, xyz, 1, &err) == GDT_OK, "%s", err.msg);
+    gdt_error_clear(&err);
+    CHECK(t, gdt_ply_begin_parts(w, NV, &hb, &err) == GDT_EINTERNAL && err.code == 7720,
+          "parts after a record: %d", err.code);
+    gdt_ply_abort(w);
+    CHECK(t, count_prefixed(t, "par.ply.tmp-") == 0, "%s", "temporary left");
+    free(xyz);
+    free(tri);
+}
+
 int main(int argc, char **argv)
 {
     tctx t;
@@ -603,6 +717,7 @@ int main(int argc, char **argv)
     test_bad_meta(&t);
     test_replace_and_abort(&t);
     test_special_path_kept(&t);
+    test_parts(&t);
 
     int rc = gdt_check_finish(&t.c, "test_ply");
     if (rc == 0)
