@@ -64,6 +64,7 @@
 
 #include "gdt_cloud.h"
 #include "gdt_error.h"
+#include "gdt_ply.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -128,6 +129,15 @@ gdt_mesh_format gdt_mesh_writer_format(const gdt_mesh_writer *w);
  * their paths; 4716/4706 when they are but the directory sync failed;
  * otherwise the first error, every temporary removed. */
 gdt_status gdt_mesh_finish(gdt_mesh_writer *w, gdt_error *err);
+
+/* The PLY writer inside a PLY mesh writer (NULL for the text formats), for
+ * writing the mesh in parts (gdt_ply.h: gdt_ply_begin_parts); such a mesh
+ * is completed by gdt_mesh_finish_parts. */
+gdt_ply_writer *gdt_mesh_ply_writer(gdt_mesh_writer *w);
+
+/* gdt_mesh_finish of a PLY mesh written in parts, with nface faces
+ * (gdt_ply_finish_parts); frees w, also on failure. */
+gdt_status gdt_mesh_finish_parts(gdt_mesh_writer *w, uint64_t nface, gdt_error *err);
 
 /* Removes the temporaries and frees w; w may be NULL. */
 void gdt_mesh_abort(gdt_mesh_writer *w);

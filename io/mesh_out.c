@@ -865,6 +865,27 @@ static gdt_status finish_text(gdt_mesh_writer *w, gdt_error *err)
     return GDT_OK;
 }
 
+gdt_ply_writer *gdt_mesh_ply_writer(gdt_mesh_writer *w)
+{
+    return w != NULL ? w->ply : NULL;
+}
+
+gdt_status gdt_mesh_finish_parts(gdt_mesh_writer *w, uint64_t nface, gdt_error *err)
+{
+    gdt_status st;
+    if (w == NULL || w->ply == NULL)
+        st = gdt_error_set(err, GDT_EINTERNAL, 7710, "mesh writer: %s",
+                           w == NULL ? "NULL writer" : "parts of a text mesh");
+    else
+        st = gdt_ply_finish_parts(w->ply, nface, err);
+    if (w != NULL) {
+        w->ply = NULL;
+        discard(w);
+        writer_free(w);
+    }
+    return st;
+}
+
 gdt_status gdt_mesh_finish(gdt_mesh_writer *w, gdt_error *err)
 {
     gdt_status st;

@@ -45,6 +45,13 @@ void gdt_pack_u64(gdt_pack *m, uint64_t v)
         m->p[m->n++] = (unsigned char)(v >> (8 * i));
 }
 
+void gdt_pack_f64(gdt_pack *m, double d)
+{
+    uint64_t v;
+    memcpy(&v, &d, sizeof v);
+    gdt_pack_u64(m, v);
+}
+
 void gdt_pack_bytes(gdt_pack *m, const void *b, size_t n)
 {
     gdt_pack_u64(m, (uint64_t)n);
@@ -59,6 +66,14 @@ void gdt_pack_free(gdt_pack *m)
 {
     free(m->p);
     memset(m, 0, sizeof *m);
+}
+
+double gdt_unpack_f64(gdt_unpack *u)
+{
+    uint64_t v = gdt_unpack_u64(u);
+    double d;
+    memcpy(&d, &v, sizeof d);
+    return d;
 }
 
 uint64_t gdt_unpack_u64(gdt_unpack *u)

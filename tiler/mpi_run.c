@@ -18,11 +18,13 @@
  *     and STOP tells the others to stop at their next tile), then merges
  *     and writes as a single process does, and sends FINAL: the job's
  *     status, which every rank returns, so mpirun's exit code is the job's.
+ *     A plain PLY output is written by the tiles' owners instead: PARTS
+ *     and WROTE before the merge's faces (mpi_parts.c).
  * A rank that is killed ends the job (mpirun stops the others); what rank
  * 0 recorded stays in the journal, and a rerun with any number of ranks
  * resumes from it.  The output does not depend on the number of ranks:
- * every tile's file is the same whoever computes it, and rank 0 writes the
- * mesh from the files in tile order.  The shared passes (P1, P1DONE;
+ * every tile's file is the same whoever computes it, and the mesh's records
+ * are the tiles' in tile order, whoever writes them.  The shared passes (P1, P1DONE;
  * PLAN, SPILL, P2FAIL, RECS, RECDATA, FILES) are in mpi_pass1.c,
  * mpi_spill.c and mpi_pass2.c; private/mpi_sched.h holds what the files
  * share. */
@@ -37,20 +39,6 @@
 #include "private/run_stats.h"
 #include "private/tiled_files.h"
 
-static double as_double(uint64_t v)
-{
-    double d;
-    memcpy(&d, &v, sizeof d);
-    return d;
-}
-
-static uint64_t as_u64(double d)
-{
-    uint64_t v;
-    memcpy(&v, &d, sizeof v);
-    return v;
-}
-
 /* The counts of a rank's tile stage, in FINISHED: the fields of tr_summary
  * that the tile stage fills, and the rank's own share. */
 static void pack_report(gdt_pack *p, const tr_run *c, uint64_t tiles, uint64_t vertices)
@@ -62,10 +50,12 @@ static void pack_report(gdt_pack *p, const tr_run *c, uint64_t tiles, uint64_t v
                           s->max_halo_points, q->triangles, q->certified, q->inner,
                           q->outside_known, q->halo_hit, q->halo_tests, q->pred.orient_calls,
                           q->pred.incircle_calls, q->pred.incircle_exact,
-                          q->pred.tiebreak_calls, as_u64(s->t_tiles), as_u64(s->t_core),
-                          as_u64(s->t_certify), as_u64(s->t_post)};
+                          q->pred.tiebreak_calls};
+    const double t[] = {s->t_tiles, s->t_core, s->t_certify, s->t_post};
     for (size_t i = 0; i < sizeof v / sizeof v[0]; i++)
         gdt_pack_u64(p, v[i]);
+    for (size_t i = 0; i < sizeof t / sizeof t[0]; i++)
+        gdt_pack_f64(p, t[i]);
     gdt_pack_bytes(p, s->device, strlen(s->device));
 }
 
@@ -104,10 +94,10 @@ static void unpack_report(gdt_unpack *u, tr_summary *sum, uint64_t *seam, tr_ran
     q->pred.incircle_calls += gdt_unpack_u64(u);
     q->pred.incircle_exact += gdt_unpack_u64(u);
     q->pred.tiebreak_calls += gdt_unpack_u64(u);
-    r->t_tiles = as_double(gdt_unpack_u64(u));
-    r->t_core = as_double(gdt_unpack_u64(u));
-    r->t_certify = as_double(gdt_unpack_u64(u));
-    r->t_post = as_double(gdt_unpack_u64(u));
+    r->t_tiles = gdt_unpack_f64(u);
+    r->t_core = gdt_unpack_f64(u);
+    r->t_certify = gdt_unpack_f64(u);
+    r->t_post = gdt_unpack_f64(u);
     sum->t_core += r->t_core;
     sum->t_certify += r->t_certify;
     sum->t_post += r->t_post;
@@ -361,6 +351,8 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
         st = tr_run_pass1(c, err);
     if (st == GDT_OK)
         st = tr_run_pass2(c, err);
+    /* a plain PLY is written by the tiles' owners (mpi_parts.c) */
+    c->out_parts = m->size > 1;
     if (st == GDT_OK)
         st = tr_run_output_start(c, err);
     if (st == GDT_OK)
@@ -461,7 +453,22 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
         s->t_certify += o->t_certify;
         s->t_post += o->t_post;
     }
-    st = tr_run_merge(c, err);
+    {
+        int wait = 0;
+        st = c->out_parts ? mr_parts_send(m, &wait, err) : GDT_OK;
+        if (st == GDT_OK)
+            st = tr_run_merge(c, err);
+        if (wait) {
+            gdt_error e2;
+            gdt_status s2;
+            gdt_error_clear(&e2);
+            s2 = mr_parts_wait(m, &e2);
+            if (st == GDT_OK && s2 != GDT_OK) {
+                st = s2;
+                *err = e2;
+            }
+        }
+    }
     if (st == GDT_OK)
         st = tr_run_finish(c, err);
     return st;
@@ -579,7 +586,6 @@ static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
             vmine += c->base != NULL && ks[i] < c->s.tiles ? c->base[ks[i] + 1] - c->base[ks[i]] : 0;
         st = run_share(m, ks, n, rec, err);
     }
-    free(ks);
     free(rec);
     /* FINISHED: rank 0 waits for it from every rank */
     memset(&p, 0, sizeof p);
@@ -591,13 +597,28 @@ static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
         gdt_error e2;
         gdt_error_clear(&e2);
         gdt_status s2 = mr_send_pack(m, 0, TAG_FINISHED, &p, &e2);
+        int ready = 0, from = 0, tag = 0;
+        /* PARTS (write this rank's tiles into the mesh) may come before FINAL */
         if (s2 == GDT_OK)
-            s2 = rn_wait(m, TAG_FINAL, &fin, &len, &e2);
+            s2 = gdt_comm_wait(m->comm, 0, -1, NULL, &ready, &from, &tag, &len, &e2);
+        if (s2 == GDT_OK && tag == TAG_PARTS) {
+            unsigned char *parts = NULL;
+            s2 = mr_recv(m, 0, TAG_PARTS, len, &parts, &e2);
+            if (s2 == GDT_OK)
+                mr_parts_answer(m, ks, n, parts, len);
+            free(parts);
+            if (s2 == GDT_OK)
+                s2 = rn_wait(m, TAG_FINAL, &fin, &len, &e2);
+        } else if (s2 == GDT_OK) {
+            s2 = tag == TAG_FINAL ? mr_recv(m, 0, TAG_FINAL, len, &fin, &e2)
+                                  : mr_bad_message(0, tag, &e2);
+        }
         if (s2 != GDT_OK) {
             gdt_error_print(&e2, stderr);
             gdt_comm_abort(m->comm, (int)s2);
         }
     }
+    free(ks);
     /* the job's status is every rank's; rank 0 reports the error */
     memset(&u, 0, sizeof u);
     u.p = fin;

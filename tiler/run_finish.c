@@ -137,6 +137,8 @@ static gdt_status write_summary(const tr_run *c, gdt_error *err)
         gdt_json_int(&j, "ranks", s->nranks);
         /* the slowest rank's tile stage over the mean: 1 is perfect */
         gdt_json_double(&j, "load_balance", sum > 0 ? max * s->nranks / sum : 1.0);
+        /* a plain PLY's blocks are written by the ranks owning their tiles */
+        gdt_json_string(&j, "mesh_written_by", c->out_parts ? "tile owners" : "rank 0");
         gdt_json_begin_array(&j, "per_rank");
         for (int r = 0; r < s->nranks; r++) {
             const tr_rank_stats *q = &s->ranks[r];
@@ -217,6 +219,9 @@ gdt_status tr_run_output_start(tr_run *c, gdt_error *err)
             return st;
     }
     os.dem = c->dem;
+    os.parts = c->out_parts && os.dem == NULL && !os.trim && os.check_ply == NULL &&
+               gdt_mesh_format_of(opts->output) == GDT_MESH_PLY;
+    c->out_parts = os.parts;
     st = tr_out_start(&c->out, &os, err);
     if (st != GDT_OK)
         return st;

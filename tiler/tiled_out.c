@@ -10,6 +10,7 @@
 
 #include <dirent.h>
 #include <errno.h>
+#include <inttypes.h>
 #include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -43,6 +44,11 @@ struct tr_out {
     unsigned char *raw;   /* 12 TR_CHUNK */
     unsigned char *rbuf;  /* TL_REC TR_CHUNK: the .pts reads, one buffer for every file */
     uint8_t *drop;        /* TR_CHUNK marks: faces trimmed */
+    gdt_ply_part *part;   /* written in parts (src.parts, or tr_out_open_part): the records
+                           * go here, at part_v (next vertex) and part_f (next face) */
+    uint64_t part_v, part_f;
+    uint64_t part_header, part_nvert;
+    uint64_t tile_faces;  /* src.parts: the faces of every tile (tr_out_set_tile_faces) */
     gdt_raster_vertex *tile_pts; /* with a DEM: the points of the tile whose faces are
                                   * copied (24 bytes a point, not the 32 of a record) */
     size_t cap_tile_pts;
@@ -71,7 +77,12 @@ static gdt_status put_face_records(tr_out *o, size_t m, const uint8_t *drop, siz
         n++;
     }
     *kept = n;
-    st = gdt_mesh_write_faces(o->w, o->tri, n, err);
+    if (o->part != NULL) {
+        st = gdt_ply_part_faces(o->part, o->part_f, o->tri, n, err);
+        o->part_f += n;
+    } else {
+        st = gdt_mesh_write_faces(o->w, o->tri, n, err);
+    }
     if (st == GDT_OK && o->cw != NULL)
         st = gdt_ply_write_faces(o->cw, o->tri, n, err);
     return st;
@@ -354,7 +365,12 @@ static gdt_status write_vertices(tr_out *o, uint64_t k, gdt_error *err)
             o->xyz[3 * i + 1] = L->oy + L->sy * (double)o->pts[i].y;
             o->xyz[3 * i + 2] = o->pts[i].z;
         }
-        st = gdt_mesh_write_vertices(o->w, o->xyz, m, err);
+        if (o->part != NULL) {
+            st = gdt_ply_part_vertices(o->part, o->part_v, o->xyz, m, err);
+            o->part_v += m;
+        } else {
+            st = gdt_mesh_write_vertices(o->w, o->xyz, m, err);
+        }
         if (st == GDT_OK && o->cw != NULL)
             st = gdt_ply_write_vertices(o->cw, o->xyz, m, err);
         if (st != GDT_OK)
@@ -490,6 +506,7 @@ static void *out_main(void *arg)
 
 static void out_free(tr_out *o)
 {
+    gdt_ply_part_abort(o->part);
     gdt_mesh_abort(o->w);
     gdt_ply_abort(o->cw);
     pthread_cond_destroy(&o->cv);
@@ -507,7 +524,8 @@ static void out_free(tr_out *o)
     free(o);
 }
 
-gdt_status tr_out_start(tr_out **out, const tr_out_src *src, gdt_error *err)
+/* A writer's state without a thread or a file: src and the buffers. */
+static gdt_status out_alloc(tr_out **out, const tr_out_src *src, gdt_error *err)
 {
     tr_out *o = calloc(1, sizeof *o);
     *out = NULL;
@@ -527,6 +545,17 @@ gdt_status tr_out_start(tr_out **out, const tr_out_src *src, gdt_error *err)
         out_free(o);
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     }
+    *out = o;
+    return GDT_OK;
+}
+
+gdt_status tr_out_start(tr_out **out, const tr_out_src *src, gdt_error *err)
+{
+    tr_out *o;
+    gdt_status st = out_alloc(&o, src, err);
+    *out = NULL;
+    if (st != GDT_OK)
+        return st;
     remove_stale_temps(src->output);
     {
         char *prj = gdt_mesh_prj_path(src->output, gdt_mesh_format_of(src->output));
@@ -536,13 +565,114 @@ gdt_status tr_out_start(tr_out **out, const tr_out_src *src, gdt_error *err)
     }
     if (src->check_ply != NULL)
         remove_stale_temps(src->check_ply);
+    if (src->parts) {
+        /* the header now; every record through parts (this one for rank 0) */
+        gdt_ply_writer *pw;
+        o->part_nvert = src->base[src->ntiles];
+        st = gdt_mesh_format_of(src->output) == GDT_MESH_PLY && src->dem == NULL && !src->trim &&
+                     src->check_ply == NULL
+                 ? gdt_mesh_create(&o->w, src->output, GDT_MESH_PLY, &src->meta, err)
+                 : gdt_error_set(err, GDT_EINTERNAL, 7830,
+                                 "the mesh written in parts must be a plain PLY");
+        pw = st == GDT_OK ? gdt_mesh_ply_writer(o->w) : NULL;
+        if (st == GDT_OK)
+            st = gdt_ply_begin_parts(pw, o->part_nvert, &o->part_header, err);
+        if (st == GDT_OK)
+            st = gdt_ply_part_open(&o->part, gdt_ply_temp_path(pw), o->part_header,
+                                   o->part_nvert, err);
+        if (st != GDT_OK) {
+            out_free(o);
+            return st;
+        }
+        *out = o;
+        return GDT_OK;
+    }
     o->running = pthread_create(&o->tid, NULL, out_main, o) == 0;
     *out = o;
     return GDT_OK;
 }
 
+void tr_out_parts_layout(const tr_out *o, const char **tmp_path, uint64_t *header,
+                         uint64_t *nvert)
+{
+    *tmp_path = gdt_ply_temp_path(gdt_mesh_ply_writer(o->w));
+    *header = o->part_header;
+    *nvert = o->part_nvert;
+}
+
+gdt_status tr_out_open_part(tr_out **out, const tr_out_src *src, const char *tmp_path,
+                            uint64_t header, uint64_t nvert, gdt_error *err)
+{
+    tr_out *o;
+    gdt_status st = out_alloc(&o, src, err);
+    *out = NULL;
+    if (st != GDT_OK)
+        return st;
+    o->part_header = header;
+    o->part_nvert = nvert;
+    st = gdt_ply_part_open(&o->part, tmp_path, header, nvert, err);
+    if (st != GDT_OK) {
+        out_free(o);
+        return st;
+    }
+    *out = o;
+    return GDT_OK;
+}
+
+gdt_status tr_out_tile_faces(const tr_out_src *src, uint64_t k, uint64_t *nf, gdt_error *err)
+{
+    gdt_tile_desc d;
+    unsigned char hdr[TR_HEADER];
+    char *path = NULL;
+    FILE *f = NULL;
+    gdt_status st = gdt_tiler_tile_info(src->tiler, k, &d, err);
+    if (st == GDT_OK)
+        st = tr_tile_path(src->tiles_dir, &d, "tri", &path, err);
+    if (st == GDT_OK && (f = fopen(path, "rb")) == NULL)
+        st = gdt_error_set(err, GDT_EIO, 4805, "%s: cannot open: %s", path, strerror(errno));
+    if (st == GDT_OK && (fread(hdr, 1, TR_HEADER, f) != TR_HEADER ||
+                         memcmp(hdr, TR_MAGIC, 8) != 0 || tr_get_u64(hdr + 8) != src->base[k] ||
+                         tr_get_u64(hdr + 16) != d.points))
+        st = gdt_error_set(err, GDT_EJOB, 6801, "%s: not the tile file this run wrote", path);
+    if (st == GDT_OK)
+        *nf = tr_get_u64(hdr + 24);
+    if (f != NULL)
+        fclose(f);
+    free(path);
+    return st;
+}
+
+gdt_status tr_out_write_tile(tr_out *o, uint64_t k, uint64_t first_face, gdt_error *err)
+{
+    gdt_status st;
+    if (o->part == NULL || k >= o->src.ntiles)
+        return gdt_error_set(err, GDT_EINTERNAL, 7830, "tile %" PRIu64 " written outside parts",
+                             k);
+    o->part_v = o->src.base[k];
+    o->part_f = first_face;
+    st = write_vertices(o, k, err);
+    if (st == GDT_OK)
+        st = copy_faces(o, k, err);
+    return st;
+}
+
+gdt_status tr_out_close_part(tr_out *o, gdt_error *err)
+{
+    gdt_status st = gdt_ply_part_close(o->part, err);
+    o->part = NULL;
+    out_free(o);
+    return st;
+}
+
+void tr_out_set_tile_faces(tr_out *o, uint64_t n)
+{
+    o->tile_faces = n;
+}
+
 void tr_out_ready(tr_out *o, uint64_t n)
 {
+    if (o->src.parts)
+        return; /* no thread waits */
     pthread_mutex_lock(&o->mu);
     if (n > o->ready) {
         o->ready = n;
@@ -579,6 +709,21 @@ gdt_status tr_out_finish(tr_out *o, const char *merge_path, const char *merge_de
                          gdt_trim_counts *tc, gdt_error *err)
 {
     gdt_status st;
+    if (o->w != NULL && o->part != NULL) { /* written in parts: the merge's faces last */
+        o->part_f = o->tile_faces;
+        st = stopped(o) ? tr_interrupted(o->src.job, "the output", err)
+                        : copy_merge_faces(o, merge_path, merge_dem, merge_faces, err);
+        if (st == GDT_OK)
+            st = gdt_ply_part_close(o->part, err);
+        o->part = NULL;
+        if (st == GDT_OK)
+            st = gdt_mesh_finish_parts(o->w, o->tile_faces + merge_faces, err);
+        o->w = NULL;
+        memset(tc, 0, sizeof *tc);
+        tc->faces = o->tile_faces + merge_faces;
+        out_free(o);
+        return st;
+    }
     tr_out_ready(o, o->src.ntiles);
     if (o->running) {
         out_join(o, 0);

@@ -78,6 +78,7 @@ typedef struct gdt_pack {
 
 void gdt_pack_u64(gdt_pack *m, uint64_t v);
 void gdt_pack_bytes(gdt_pack *m, const void *b, size_t n); /* u64 length, then the bytes */
+void gdt_pack_f64(gdt_pack *m, double d);                  /* its bits, as a u64 */
 void gdt_pack_free(gdt_pack *m);
 
 typedef struct gdt_unpack {
@@ -87,6 +88,7 @@ typedef struct gdt_unpack {
 } gdt_unpack;
 
 uint64_t gdt_unpack_u64(gdt_unpack *u);
+double gdt_unpack_f64(gdt_unpack *u);
 /* The next byte string: a pointer into the message and its length. */
 const unsigned char *gdt_unpack_bytes(gdt_unpack *u, size_t *n);
 

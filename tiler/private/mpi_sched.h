@@ -24,7 +24,9 @@ enum {
     TAG_P1 = 11,      /* 0 -> r: the rank's share of pass 1 */
     TAG_P1DONE = 12,  /* r -> 0: what it read, or its failure */
     TAG_SPILL = 13,   /* r <-> q: pass 2 in shares: status, then records */
-    TAG_P2FAIL = 14   /* r -> 0: why this rank's share of pass 2 failed */
+    TAG_P2FAIL = 14,  /* r -> 0: why this rank's share of pass 2 failed */
+    TAG_PARTS = 15,   /* 0 -> r: write your tiles into the mesh (mpi_run.c) */
+    TAG_WROTE = 16    /* r -> 0: the rank's part is written and synced, or why not */
 };
 
 /* Records per TAG_RECDATA message (32 MiB of gdt_point). */
@@ -110,6 +112,24 @@ void mr_spill_hooks(mr_ctx *m);
  * .raw files (mpi_spill.c); *st, *err: this rank's status, in and out. */
 void mr_spill_answer(mr_ctx *m, uint64_t first, uint64_t end, uint64_t base, int files,
                      gdt_status *st, gdt_error *err);
+
+/* The mesh in parts (mpi_parts.c; c->out_parts): rank 0 reads every
+ * tile's face count, sends PARTS (the temporary, the layout, the tiles'
+ * first faces) to every other rank and writes its own tiles; *wait is set
+ * when the others were told to write (then mr_parts_wait must follow, also
+ * after a failure here).  returns: GDT_OK; the tile files' and the part's
+ * errors. */
+gdt_status mr_parts_send(mr_ctx *m, int *wait, gdt_error *err);
+
+/* Rank 0: WROTE from every other rank; the first failure becomes the
+ * job's, which is returned. */
+gdt_status mr_parts_wait(mr_ctx *m, gdt_error *err);
+
+/* Another rank, given PARTS (msg, len): writes its tiles ks[0, n) into the
+ * temporary, syncs them and answers WROTE (nothing when PARTS carries a
+ * failure).  Ends the job (gdt_comm_abort) when the answer cannot be sent. */
+void mr_parts_answer(mr_ctx *m, const uint64_t *ks, uint64_t n, const unsigned char *msg,
+                     size_t len);
 
 /* Rank 0: the hooks of the shared pass 2 into m->p2 (mpi_pass2.c). */
 void mr_pass2_hooks(mr_ctx *m);

@@ -224,6 +224,9 @@ struct tr_run {
     tr_post post;
     tr_reclaim reclaim;
     tr_out *out;        /* the mesh writer, from the tile stage on */
+    int out_parts;      /* asked by the MPI run before tr_run_output_start: the tiles'
+                         * owners write the mesh in parts when it is a plain PLY;
+                         * tr_run_output_start leaves it set only then */
     char *check_ply;    /* --check of a text output: the PLY copy in the job; owned */
     tr_dem *dem;        /* --dem: fed by the mesh writer */
     /* the mesh header's filter and trim lines: live until the writer is done */

@@ -49,6 +49,8 @@ typedef struct tr_out_src {
     tr_dem *dem;                 /* --dem: each tile's kept certified faces are rasterised
                                     into it as they are copied (NULL: no DEM); must outlive
                                     the writer */
+    int parts;                   /* a plain PLY (no DEM, trimming or check copy) written in
+                                  * parts by the tiles' owners (mpirun): see below */
 } tr_out_src;
 
 /* Starts the writer (src is copied; the arrays and strings it points to
@@ -77,6 +79,50 @@ void tr_out_set_trim(tr_out *o, const gdt_trim_graph *g);
 gdt_status tr_out_finish(tr_out *o, const char *merge_path, const char *merge_dem,
                          uint64_t merge_faces,
                          gdt_trim_counts *tc, gdt_error *err);
+
+/* ---- A PLY written in parts by the tiles' owners (src.parts) ----
+ *
+ * Under mpirun every rank writes the vertex and face blocks of its own
+ * tiles straight into the output's temporary (gdt_ply.h, "in parts"), so
+ * that rank 0 does not copy the whole mesh.  Vertices of tile k go to
+ * base[k]; its faces to the sum of the face counts of tiles 0..k-1
+ * (tr_out_tile_faces), known once every tile is finished; the merge's
+ * faces follow the last tile's.  The bytes are those of the sequential
+ * writer.  Rank 0: tr_out_start with src.parts creates the file, writes its
+ * header and starts no thread (tr_out_ready does nothing);
+ * tr_out_parts_layout gives what the other ranks need; tr_out_write_tile
+ * writes rank 0's own tiles; tr_out_set_tile_faces, then tr_out_finish
+ * writes the merge's faces and completes the file once every other rank
+ * has closed its part.  Another rank: tr_out_open_part,
+ * tr_out_write_tile for each of its tiles, tr_out_close_part (which syncs
+ * its writes). */
+
+/* The temporary's path (owned by o), the header's length and the vertex
+ * count, for tr_out_open_part. */
+void tr_out_parts_layout(const tr_out *o, const char **tmp_path, uint64_t *header,
+                         uint64_t *nvert);
+
+/* Opens the temporary written in parts (src: tiler, tiles_dir, job, base,
+ * ntiles, meta.lattice as on rank 0).  returns: GDT_OK; gdt_ply_part_open's
+ * errors; GDT_EINTERNAL 7001. */
+gdt_status tr_out_open_part(tr_out **out, const tr_out_src *src, const char *tmp_path,
+                            uint64_t header, uint64_t nvert, gdt_error *err);
+
+/* The face count in tile k's .tri header (checked against the tile).
+ * returns: GDT_OK; GDT_EIO 4805; GDT_EJOB 6801. */
+gdt_status tr_out_tile_faces(const tr_out_src *src, uint64_t k, uint64_t *nf, gdt_error *err);
+
+/* Writes tile k's vertices and its faces from face index first_face.
+ * returns: GDT_OK; the part's and the tile files' errors (4805, 6801-6802,
+ * 47xx). */
+gdt_status tr_out_write_tile(tr_out *o, uint64_t k, uint64_t first_face, gdt_error *err);
+
+/* Syncs and closes another rank's part; frees o.  returns: GDT_OK; GDT_EIO
+ * 4722. */
+gdt_status tr_out_close_part(tr_out *o, gdt_error *err);
+
+/* Rank 0: the faces of all tiles (where the merge's faces begin). */
+void tr_out_set_tile_faces(tr_out *o, uint64_t n);
 
 /* Stops the writer and removes its temporary file.  o may be NULL. */
 void tr_out_abort(tr_out *o);

@@ -1,0 +1,224 @@
+/* mpi_parts.c — the mesh written by the tiles' owners under mpirun (see
+ * private/mpi_sched.h and, for the file layout, private/tiled_out.h).
+ *
+ * Protocol, after every rank's FINISHED and when the job has not failed:
+ *   rank 0 reads the face count of every tile's .tri file, so tile k's faces
+ *   start at the sum of those before it, and sends PARTS to every other
+ *   rank: a status, then (when it is GDT_OK) the temporary's path, the
+ *   header's length, the vertex count, the lattice and the first face of
+ *   every tile (ntiles + 1 prefix sums);
+ *   each rank writes its own tiles (its GO list) at their places, syncs
+ *   and answers WROTE: its status and message;
+ *   rank 0 writes its own tiles meanwhile, finishes the seam merge, waits
+ *   for every WROTE and completes the file with the merge's faces.
+ * A failed PARTS (rank 0 could not read a tile's count) asks nothing: the
+ * ranks wait for FINAL as before.  Every record has the place and bytes
+ * of the sequential writer's, so the file is the same for any rank count. */
+#include "private/mpi_sched.h"
+
+#include <inttypes.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "gdt_cloud.h"
+#include "private/tiled_out.h"
+
+/* What tr_out needs of the run to write tiles in parts. */
+static void part_src(const tr_run *c, const gdt_lattice *lat, tr_out_src *s)
+{
+    memset(s, 0, sizeof *s);
+    s->output = c->opts->output;
+    s->meta.lattice = *lat;
+    s->tiler = c->tiler;
+    s->tiles_dir = c->tiles_dir;
+    s->job = c->job;
+    s->base = c->base;
+    s->ntiles = gdt_tiler_tile_count(c->tiler);
+    s->stop = c->opts->stop;
+}
+
+gdt_status mr_parts_send(mr_ctx *m, int *wait, gdt_error *err)
+{
+    tr_run *c = m->c;
+    const gdt_lattice *lat = &gdt_cloud_get_info(c->cloud)->lattice;
+    uint64_t n = m->ntiles, header = 0, nvert = 0;
+    uint64_t *first = malloc((n + 1) * sizeof *first);
+    const char *tmp = NULL;
+    tr_out_src src;
+    gdt_status st = first != NULL ? GDT_OK
+                                  : gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+
+    *wait = 0;
+    part_src(c, lat, &src);
+    if (st == GDT_OK)
+        first[0] = 0;
+    for (uint64_t k = 0; st == GDT_OK && k < n; k++) {
+        uint64_t nf = 0;
+        st = tr_out_tile_faces(&src, k, &nf, err);
+        first[k + 1] = first[k] + nf;
+    }
+    if (st == GDT_OK)
+        tr_out_parts_layout(c->out, &tmp, &header, &nvert);
+    for (int r = 1; r < m->size; r++) {
+        gdt_pack p;
+        gdt_error e2;
+        memset(&p, 0, sizeof p);
+        gdt_error_clear(&e2);
+        gdt_pack_u64(&p, (uint64_t)st);
+        if (st == GDT_OK) {
+            gdt_pack_bytes(&p, tmp, strlen(tmp));
+            gdt_pack_u64(&p, header);
+            gdt_pack_u64(&p, nvert);
+            gdt_pack_f64(&p, lat->sx);
+            gdt_pack_f64(&p, lat->sy);
+            gdt_pack_f64(&p, lat->ox);
+            gdt_pack_f64(&p, lat->oy);
+            gdt_pack_u64(&p, n);
+            for (uint64_t k = 0; k <= n; k++)
+                gdt_pack_u64(&p, first[k]);
+        }
+        if (mr_send_pack(m, r, TAG_PARTS, &p, &e2) != GDT_OK) {
+            /* this rank would wait for ever: the job cannot go on */
+            gdt_error_print(&e2, stderr);
+            gdt_comm_abort(m->comm, (int)e2.status);
+        }
+    }
+    if (st == GDT_OK) {
+        *wait = m->size > 1;
+        for (uint64_t k = 0; st == GDT_OK && k < n; k++)
+            if (mr_owner_of(c->base, n, k, m->size) == 0)
+                st = tr_out_write_tile(c->out, k, first[k], err);
+        if (st == GDT_OK)
+            tr_out_set_tile_faces(c->out, first[n]);
+    }
+    free(first);
+    return st;
+}
+
+gdt_status mr_parts_wait(mr_ctx *m, gdt_error *err)
+{
+    for (int got = 1; got < m->size; got++) {
+        int ready = 0, from = 0, tag = 0;
+        size_t len = 0, ml = 0;
+        unsigned char *buf = NULL;
+        gdt_unpack u;
+        gdt_status st = gdt_comm_wait(m->comm, -1, TAG_WROTE, NULL, &ready, &from, &tag, &len,
+                                      err);
+        if (st == GDT_OK)
+            st = mr_recv(m, from, TAG_WROTE, len, &buf, err);
+        if (st != GDT_OK) {
+            free(buf);
+            gdt_error_print(err, stderr);
+            gdt_comm_abort(m->comm, (int)st);
+            return st;
+        }
+        memset(&u, 0, sizeof u);
+        u.p = buf;
+        u.n = len;
+        {
+            gdt_status rst = (gdt_status)gdt_unpack_u64(&u);
+            int code = (int)gdt_unpack_u64(&u);
+            const unsigned char *msg = gdt_unpack_bytes(&u, &ml);
+            if (u.bad) {
+                char text[64];
+                snprintf(text, sizeof text, "a WROTE message that does not parse");
+                mr_fail(m, from, GDT_EINTERNAL, 7952, text);
+            } else if (rst != GDT_OK) {
+                char text[GDT_ERROR_MSG_MAX];
+                snprintf(text, sizeof text, "%.*s",
+                         (int)(ml < sizeof text ? ml : sizeof text - 1), (const char *)msg);
+                mr_fail(m, from, rst, code, text);
+            }
+        }
+        free(buf);
+    }
+    if (m->job_st != GDT_OK) {
+        *err = m->job_err;
+        return m->job_st;
+    }
+    return GDT_OK;
+}
+
+/* Writes tiles ks[0, n) as PARTS (u, positioned after its status) asks. */
+static gdt_status write_part(mr_ctx *m, const uint64_t *ks, uint64_t n, gdt_unpack *u,
+                             gdt_error *err)
+{
+    tr_run *c = m->c;
+    size_t tl = 0;
+    const unsigned char *tmp = gdt_unpack_bytes(u, &tl);
+    uint64_t header = gdt_unpack_u64(u), nvert = gdt_unpack_u64(u), ntiles;
+    gdt_lattice lat;
+    tr_out_src src;
+    tr_out *o = NULL;
+    char *path = NULL;
+    uint64_t *first = NULL;
+    gdt_status st = GDT_OK;
+
+    lat.sx = gdt_unpack_f64(u);
+    lat.sy = gdt_unpack_f64(u);
+    lat.ox = gdt_unpack_f64(u);
+    lat.oy = gdt_unpack_f64(u);
+    ntiles = gdt_unpack_u64(u);
+    if (u->bad || tmp == NULL || ntiles != gdt_tiler_tile_count(c->tiler) ||
+        (u->n - u->at) / 8 < ntiles + 1)
+        return mr_bad_message(0, TAG_PARTS, err);
+    path = malloc(tl + 1);
+    first = malloc((ntiles + 1) * sizeof *first);
+    if (path == NULL || first == NULL) {
+        free(path);
+        free(first);
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    }
+    memcpy(path, tmp, tl);
+    path[tl] = '\0';
+    for (uint64_t k = 0; k <= ntiles; k++)
+        first[k] = gdt_unpack_u64(u);
+    part_src(c, &lat, &src);
+    st = tr_out_open_part(&o, &src, path, header, nvert, err);
+    for (uint64_t i = 0; st == GDT_OK && i < n; i++)
+        st = ks[i] < ntiles ? tr_out_write_tile(o, ks[i], first[ks[i]], err)
+                            : mr_bad_message(0, TAG_PARTS, err);
+    if (o != NULL) {
+        gdt_error e2;
+        gdt_error_clear(&e2);
+        gdt_status s2 = tr_out_close_part(o, &e2);
+        if (st == GDT_OK && s2 != GDT_OK) {
+            st = s2;
+            *err = e2;
+        }
+    }
+    free(path);
+    free(first);
+    return st;
+}
+
+void mr_parts_answer(mr_ctx *m, const uint64_t *ks, uint64_t n, const unsigned char *msg,
+                     size_t len)
+{
+    gdt_unpack u;
+    gdt_error err, e2;
+    gdt_status st;
+    gdt_pack p;
+
+    memset(&u, 0, sizeof u);
+    u.p = msg;
+    u.n = len;
+    gdt_error_clear(&err);
+    st = (gdt_status)gdt_unpack_u64(&u);
+    if (u.bad)
+        st = mr_bad_message(0, TAG_PARTS, &err);
+    else if (st != GDT_OK)
+        return; /* rank 0 failed first: no part, FINAL follows */
+    else
+        st = write_part(m, ks, n, &u, &err);
+    memset(&p, 0, sizeof p);
+    gdt_pack_u64(&p, (uint64_t)st);
+    gdt_pack_u64(&p, st != GDT_OK ? (uint64_t)err.code : 0);
+    gdt_pack_bytes(&p, st != GDT_OK ? err.msg : "", st != GDT_OK ? strlen(err.msg) : 0);
+    gdt_error_clear(&e2);
+    if (mr_send_pack(m, 0, TAG_WROTE, &p, &e2) != GDT_OK) {
+        gdt_error_print(&e2, stderr);
+        gdt_comm_abort(m->comm, (int)e2.status);
+    }
+}
