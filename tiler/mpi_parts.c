@@ -1,16 +1,22 @@
 /* mpi_parts.c — the mesh written by the tiles' owners under mpirun (see
  * private/mpi_sched.h and, for the file layout, private/tiled_out.h).
  *
- * Protocol, after every rank's FINISHED and when the job has not failed:
- *   rank 0 reads the face count of every tile's .tri file, so tile k's faces
- *   start at the sum of those before it, and sends PARTS to every other
- *   rank: a status, then (when it is GDT_OK) the temporary's path, the
- *   header's length, the vertex count, the lattice and the first face of
- *   every tile (ntiles + 1 prefix sums);
- *   each rank writes its own tiles (its GO list) at their places, syncs
- *   and answers WROTE: its status and message;
- *   rank 0 writes its own tiles meanwhile, finishes the seam merge, waits
- *   for every WROTE and completes the file with the merge's faces.
+ * Protocol:
+ *   GO (mpi_run.c) ends with the layout: whether the mesh is written in
+ *   parts, then the temporary's path, the header's length, the vertex
+ *   count and the lattice; each rank opens its part;
+ *   during the tile stage each rank writes the vertices of each of its
+ *   tiles as the tile is finished or reused (their places, base[k], are
+ *   known from pass 2), so that the disk works beside the tiles;
+ *   after every rank's FINISHED, when the job has not failed, rank 0 reads
+ *   the face count of every tile's .tri file, so tile k's faces start at
+ *   the sum of those before it, and sends PARTS to every other rank: a
+ *   status, then (when it is GDT_OK) every tile's first face (ntiles + 1
+ *   prefix sums);
+ *   each rank writes its own tiles' faces, syncs its part and answers
+ *   WROTE: its status (the first failure of any of its writes) and message;
+ *   rank 0 writes its own tiles' faces meanwhile, finishes the seam merge,
+ *   waits for every WROTE and completes the file with the merge's faces.
  * A failed PARTS (rank 0 could not read a tile's count) asks nothing: the
  * ranks wait for FINAL as before.  Every record has the place and bytes
  * of the sequential writer's, so the file is the same for any rank count. */
@@ -38,13 +44,86 @@ static void part_src(const tr_run *c, const gdt_lattice *lat, tr_out_src *s)
     s->stop = c->opts->stop;
 }
 
+/* Keeps the first failure of this rank's writes. */
+static void part_fail(mr_ctx *m, gdt_status st, const gdt_error *err)
+{
+    if (st != GDT_OK && m->part_st == GDT_OK) {
+        m->part_st = st;
+        m->part_err = *err;
+    }
+}
+
+void mr_parts_pack_layout(mr_ctx *m, gdt_pack *p)
+{
+    tr_run *c = m->c;
+    const char *tmp = NULL;
+    uint64_t header = 0, nvert = 0;
+    const gdt_lattice *lat;
+
+    gdt_pack_u64(p, (uint64_t)(c->out_parts != 0));
+    if (!c->out_parts)
+        return;
+    lat = &gdt_cloud_get_info(c->cloud)->lattice;
+    tr_out_parts_layout(c->out, &tmp, &header, &nvert);
+    gdt_pack_bytes(p, tmp, strlen(tmp));
+    gdt_pack_u64(p, header);
+    gdt_pack_u64(p, nvert);
+    gdt_pack_f64(p, lat->sx);
+    gdt_pack_f64(p, lat->sy);
+    gdt_pack_f64(p, lat->ox);
+    gdt_pack_f64(p, lat->oy);
+}
+
+gdt_status mr_parts_read_layout(mr_ctx *m, gdt_unpack *u, gdt_error *err)
+{
+    size_t tl = 0;
+    const unsigned char *tmp;
+
+    m->parts = gdt_unpack_u64(u) != 0;
+    if (!m->parts)
+        return u->bad ? mr_bad_message(0, TAG_GO, err) : GDT_OK;
+    tmp = gdt_unpack_bytes(u, &tl);
+    m->part_header = gdt_unpack_u64(u);
+    m->part_nvert = gdt_unpack_u64(u);
+    m->part_lattice.sx = gdt_unpack_f64(u);
+    m->part_lattice.sy = gdt_unpack_f64(u);
+    m->part_lattice.ox = gdt_unpack_f64(u);
+    m->part_lattice.oy = gdt_unpack_f64(u);
+    if (u->bad || tmp == NULL)
+        return mr_bad_message(0, TAG_GO, err);
+    free(m->part_path);
+    m->part_path = malloc(tl + 1);
+    if (m->part_path == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    memcpy(m->part_path, tmp, tl);
+    m->part_path[tl] = '\0';
+    return GDT_OK;
+}
+
+gdt_status mr_parts_open(mr_ctx *m, gdt_error *err)
+{
+    tr_out_src src;
+    part_src(m->c, &m->part_lattice, &src);
+    return tr_out_open_part(&m->part_out, &src, m->part_path, m->part_header, m->part_nvert,
+                            err);
+}
+
+void mr_parts_tile_done(mr_ctx *m, uint64_t k)
+{
+    tr_out *o = m->rank == 0 ? (m->c->out_parts ? m->c->out : NULL) : m->part_out;
+    gdt_error e;
+    if (o == NULL || m->part_st != GDT_OK)
+        return;
+    gdt_error_clear(&e);
+    part_fail(m, tr_out_write_vertices(o, k, &e), &e);
+}
+
 gdt_status mr_parts_send(mr_ctx *m, int *wait, gdt_error *err)
 {
     tr_run *c = m->c;
     const gdt_lattice *lat = &gdt_cloud_get_info(c->cloud)->lattice;
-    uint64_t n = m->ntiles, header = 0, nvert = 0;
+    uint64_t n = m->ntiles;
     uint64_t *first = malloc((n + 1) * sizeof *first);
-    const char *tmp = NULL;
     tr_out_src src;
     gdt_status st = first != NULL ? GDT_OK
                                   : gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
@@ -58,8 +137,6 @@ gdt_status mr_parts_send(mr_ctx *m, int *wait, gdt_error *err)
         st = tr_out_tile_faces(&src, k, &nf, err);
         first[k + 1] = first[k] + nf;
     }
-    if (st == GDT_OK)
-        tr_out_parts_layout(c->out, &tmp, &header, &nvert);
     for (int r = 1; r < m->size; r++) {
         gdt_pack p;
         gdt_error e2;
@@ -67,13 +144,6 @@ gdt_status mr_parts_send(mr_ctx *m, int *wait, gdt_error *err)
         gdt_error_clear(&e2);
         gdt_pack_u64(&p, (uint64_t)st);
         if (st == GDT_OK) {
-            gdt_pack_bytes(&p, tmp, strlen(tmp));
-            gdt_pack_u64(&p, header);
-            gdt_pack_u64(&p, nvert);
-            gdt_pack_f64(&p, lat->sx);
-            gdt_pack_f64(&p, lat->sy);
-            gdt_pack_f64(&p, lat->ox);
-            gdt_pack_f64(&p, lat->oy);
             gdt_pack_u64(&p, n);
             for (uint64_t k = 0; k <= n; k++)
                 gdt_pack_u64(&p, first[k]);
@@ -86,9 +156,13 @@ gdt_status mr_parts_send(mr_ctx *m, int *wait, gdt_error *err)
     }
     if (st == GDT_OK) {
         *wait = m->size > 1;
+        if (m->part_st != GDT_OK) { /* a vertex write of the tile stage failed */
+            *err = m->part_err;
+            st = m->part_st;
+        }
         for (uint64_t k = 0; st == GDT_OK && k < n; k++)
             if (mr_owner_of(c->base, n, k, m->size) == 0)
-                st = tr_out_write_tile(c->out, k, first[k], err);
+                st = tr_out_write_faces(c->out, k, first[k], err);
         if (st == GDT_OK)
             tr_out_set_tile_faces(c->out, first[n]);
     }
@@ -140,55 +214,40 @@ gdt_status mr_parts_wait(mr_ctx *m, gdt_error *err)
     return GDT_OK;
 }
 
-/* Writes tiles ks[0, n) as PARTS (u, positioned after its status) asks. */
+/* Writes the faces of tiles ks[0, n) as PARTS (u, after its status) asks,
+ * then syncs and closes the part. */
 static gdt_status write_part(mr_ctx *m, const uint64_t *ks, uint64_t n, gdt_unpack *u,
                              gdt_error *err)
 {
-    tr_run *c = m->c;
-    size_t tl = 0;
-    const unsigned char *tmp = gdt_unpack_bytes(u, &tl);
-    uint64_t header = gdt_unpack_u64(u), nvert = gdt_unpack_u64(u), ntiles;
-    gdt_lattice lat;
-    tr_out_src src;
-    tr_out *o = NULL;
-    char *path = NULL;
+    uint64_t ntiles = gdt_unpack_u64(u);
     uint64_t *first = NULL;
-    gdt_status st = GDT_OK;
+    gdt_status st = m->part_st;
 
-    lat.sx = gdt_unpack_f64(u);
-    lat.sy = gdt_unpack_f64(u);
-    lat.ox = gdt_unpack_f64(u);
-    lat.oy = gdt_unpack_f64(u);
-    ntiles = gdt_unpack_u64(u);
-    if (u->bad || tmp == NULL || ntiles != gdt_tiler_tile_count(c->tiler) ||
-        (u->n - u->at) / 8 < ntiles + 1)
-        return mr_bad_message(0, TAG_PARTS, err);
-    path = malloc(tl + 1);
-    first = malloc((ntiles + 1) * sizeof *first);
-    if (path == NULL || first == NULL) {
-        free(path);
-        free(first);
-        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-    }
-    memcpy(path, tmp, tl);
-    path[tl] = '\0';
-    for (uint64_t k = 0; k <= ntiles; k++)
+    if (st != GDT_OK)
+        *err = m->part_err;
+    else if (m->part_out == NULL)
+        st = gdt_error_set(err, GDT_EINTERNAL, 7830, "PARTS without a part open");
+    else if (u->bad || ntiles != gdt_tiler_tile_count(m->c->tiler) ||
+             (u->n - u->at) / 8 < ntiles + 1)
+        st = mr_bad_message(0, TAG_PARTS, err);
+    else if ((first = malloc((ntiles + 1) * sizeof *first)) == NULL)
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    for (uint64_t k = 0; st == GDT_OK && k <= ntiles; k++)
         first[k] = gdt_unpack_u64(u);
-    part_src(c, &lat, &src);
-    st = tr_out_open_part(&o, &src, path, header, nvert, err);
     for (uint64_t i = 0; st == GDT_OK && i < n; i++)
-        st = ks[i] < ntiles ? tr_out_write_tile(o, ks[i], first[ks[i]], err)
+        st = ks[i] < ntiles ? tr_out_write_faces(m->part_out, ks[i], first[ks[i]], err)
                             : mr_bad_message(0, TAG_PARTS, err);
-    if (o != NULL) {
+    if (m->part_out != NULL) {
         gdt_error e2;
+        gdt_status s2;
         gdt_error_clear(&e2);
-        gdt_status s2 = tr_out_close_part(o, &e2);
+        s2 = tr_out_close_part(m->part_out, &e2);
+        m->part_out = NULL;
         if (st == GDT_OK && s2 != GDT_OK) {
             st = s2;
             *err = e2;
         }
     }
-    free(path);
     free(first);
     return st;
 }
@@ -206,12 +265,14 @@ void mr_parts_answer(mr_ctx *m, const uint64_t *ks, uint64_t n, const unsigned c
     u.n = len;
     gdt_error_clear(&err);
     st = (gdt_status)gdt_unpack_u64(&u);
-    if (u.bad)
+    if (u.bad) {
         st = mr_bad_message(0, TAG_PARTS, &err);
-    else if (st != GDT_OK)
-        return; /* rank 0 failed first: no part, FINAL follows */
-    else
+    } else if (st != GDT_OK) {
+        mr_parts_drop(m); /* rank 0 failed first: no part, FINAL follows */
+        return;
+    } else {
         st = write_part(m, ks, n, &u, &err);
+    }
     memset(&p, 0, sizeof p);
     gdt_pack_u64(&p, (uint64_t)st);
     gdt_pack_u64(&p, st != GDT_OK ? (uint64_t)err.code : 0);
@@ -221,4 +282,10 @@ void mr_parts_answer(mr_ctx *m, const uint64_t *ks, uint64_t n, const unsigned c
         gdt_error_print(&e2, stderr);
         gdt_comm_abort(m->comm, (int)e2.status);
     }
+}
+
+void mr_parts_drop(mr_ctx *m)
+{
+    tr_out_abort(m->part_out);
+    m->part_out = NULL;
 }

@@ -127,6 +127,7 @@ static void r0_mark(mr_ctx *m, uint64_t k)
 static void r0_done(void *ctx, uint64_t k)
 {
     r0_mark(ctx, k);
+    mr_parts_tile_done(ctx, k); /* its vertices into the mesh, in parts */
 }
 
 /* A rank's failure is the job's (the first one stands). */
@@ -314,6 +315,7 @@ static gdt_status r0_go(mr_ctx *m, int r, gdt_status run_st, const unsigned char
             gdt_pack_u64(&p, size);
             gdt_pack_u64(&p, sum);
         }
+        mr_parts_pack_layout(m, &p);
     }
     if (st != GDT_OK) {
         gdt_pack_free(&p);
@@ -499,6 +501,7 @@ static void rn_done(void *ctx, uint64_t k)
         gdt_error_print(&e, stderr);
         gdt_comm_abort(m->comm, (int)e.status);
     }
+    mr_parts_tile_done(m, k); /* its vertices into the mesh, in parts */
 }
 
 static gdt_status rn_poll(void *ctx, gdt_error *err)
@@ -578,7 +581,11 @@ static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
             rec[i].sum = gdt_unpack_u64(&u);
         }
         if (st == GDT_OK)
+            st = mr_parts_read_layout(m, &u, err);
+        if (st == GDT_OK)
             st = tr_run_attach(c, id, state, slen, err);
+        if (st == GDT_OK && m->parts)
+            st = mr_parts_open(m, err);
     }
     free(go);
     if (st == GDT_OK) {
@@ -619,6 +626,7 @@ static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
         }
     }
     free(ks);
+    mr_parts_drop(m); /* a part PARTS never came for */
     /* the job's status is every rank's; rank 0 reports the error */
     memset(&u, 0, sizeof u);
     u.p = fin;
@@ -688,6 +696,7 @@ gdt_status gdt_cli_tiled_mpi(const gdt_options *opts, gdt_comm *comm, gdt_error 
     }
     st = tr_run_close(&c, st);
     free(m.raw_pre);
+    free(m.part_path);
     free(m.p1_bounds);
     free(m.p1_kept);
     free(m.p1_counts);

@@ -642,18 +642,22 @@ gdt_status tr_out_tile_faces(const tr_out_src *src, uint64_t k, uint64_t *nf, gd
     return st;
 }
 
-gdt_status tr_out_write_tile(tr_out *o, uint64_t k, uint64_t first_face, gdt_error *err)
+gdt_status tr_out_write_vertices(tr_out *o, uint64_t k, gdt_error *err)
 {
-    gdt_status st;
     if (o->part == NULL || k >= o->src.ntiles)
         return gdt_error_set(err, GDT_EINTERNAL, 7830, "tile %" PRIu64 " written outside parts",
                              k);
     o->part_v = o->src.base[k];
+    return write_vertices(o, k, err);
+}
+
+gdt_status tr_out_write_faces(tr_out *o, uint64_t k, uint64_t first_face, gdt_error *err)
+{
+    if (o->part == NULL || k >= o->src.ntiles)
+        return gdt_error_set(err, GDT_EINTERNAL, 7830, "tile %" PRIu64 " written outside parts",
+                             k);
     o->part_f = first_face;
-    st = write_vertices(o, k, err);
-    if (st == GDT_OK)
-        st = copy_faces(o, k, err);
-    return st;
+    return copy_faces(o, k, err);
 }
 
 gdt_status tr_out_close_part(tr_out *o, gdt_error *err)

@@ -59,6 +59,14 @@ typedef struct mr_ctx {
     gdt_filter_counts *p1_counts; /* the filter's counts of the whole pass, per input */
     /* another rank */
     int stopped;            /* STOP received */
+    /* the mesh in parts (mpi_parts.c), on every rank */
+    int parts;              /* this run writes a plain PLY in parts */
+    char *part_path;        /* another rank: the temporary, from GO */
+    uint64_t part_header, part_nvert;
+    gdt_lattice part_lattice;
+    tr_out *part_out;       /* another rank: its part, open from GO to PARTS */
+    gdt_status part_st;     /* the first failure of this rank's writes */
+    gdt_error part_err;
 } mr_ctx;
 
 /* Sends the packed message p to dest and frees it. */
@@ -113,23 +121,35 @@ void mr_spill_hooks(mr_ctx *m);
 void mr_spill_answer(mr_ctx *m, uint64_t first, uint64_t end, uint64_t base, int files,
                      gdt_status *st, gdt_error *err);
 
-/* The mesh in parts (mpi_parts.c; c->out_parts): rank 0 reads every
- * tile's face count, sends PARTS (the temporary, the layout, the tiles'
- * first faces) to every other rank and writes its own tiles; *wait is set
- * when the others were told to write (then mr_parts_wait must follow, also
- * after a failure here).  returns: GDT_OK; the tile files' and the part's
- * errors. */
+/* The mesh in parts (mpi_parts.c; c->out_parts).  GO carries the file's
+ * layout: mr_parts_pack_layout (rank 0) and mr_parts_read_layout (another
+ * rank, then mr_parts_open after tr_run_attach).  mr_parts_tile_done writes
+ * the vertices of this rank's finished or reused tile k during the tile
+ * stage (a failure is kept for WROTE). */
+void mr_parts_pack_layout(mr_ctx *m, gdt_pack *p);
+gdt_status mr_parts_read_layout(mr_ctx *m, gdt_unpack *u, gdt_error *err);
+gdt_status mr_parts_open(mr_ctx *m, gdt_error *err);
+void mr_parts_tile_done(mr_ctx *m, uint64_t k);
+
+/* Rank 0, after every FINISHED: reads every tile's face count, sends
+ * PARTS (the tiles' first faces) to every other rank and writes its own
+ * tiles' faces; *wait is set when the others were told to write (then
+ * mr_parts_wait must follow, also after a failure here).  returns: GDT_OK;
+ * the tile files' and the part's errors (also those of the vertex writes). */
 gdt_status mr_parts_send(mr_ctx *m, int *wait, gdt_error *err);
 
 /* Rank 0: WROTE from every other rank; the first failure becomes the
  * job's, which is returned. */
 gdt_status mr_parts_wait(mr_ctx *m, gdt_error *err);
 
-/* Another rank, given PARTS (msg, len): writes its tiles ks[0, n) into the
- * temporary, syncs them and answers WROTE (nothing when PARTS carries a
- * failure).  Ends the job (gdt_comm_abort) when the answer cannot be sent. */
+/* Another rank, given PARTS (msg, len): writes its tiles' faces ks[0, n),
+ * syncs its part and answers WROTE (nothing when PARTS carries a failure).
+ * Ends the job (gdt_comm_abort) when the answer cannot be sent. */
 void mr_parts_answer(mr_ctx *m, const uint64_t *ks, uint64_t n, const unsigned char *msg,
                      size_t len);
+
+/* Another rank: closes a part PARTS never came for (the job failed). */
+void mr_parts_drop(mr_ctx *m);
 
 /* Rank 0: the hooks of the shared pass 2 into m->p2 (mpi_pass2.c). */
 void mr_pass2_hooks(mr_ctx *m);

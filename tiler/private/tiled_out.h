@@ -90,12 +90,12 @@ gdt_status tr_out_finish(tr_out *o, const char *merge_path, const char *merge_de
  * faces follow the last tile's.  The bytes are those of the sequential
  * writer.  Rank 0: tr_out_start with src.parts creates the file, writes its
  * header and starts no thread (tr_out_ready does nothing);
- * tr_out_parts_layout gives what the other ranks need; tr_out_write_tile
- * writes rank 0's own tiles; tr_out_set_tile_faces, then tr_out_finish
+ * tr_out_parts_layout gives what the other ranks need; rank 0 writes its
+ * own tiles (tr_out_write_vertices as each is done, tr_out_write_faces
+ * once every tile is counted); tr_out_set_tile_faces, then tr_out_finish
  * writes the merge's faces and completes the file once every other rank
- * has closed its part.  Another rank: tr_out_open_part,
- * tr_out_write_tile for each of its tiles, tr_out_close_part (which syncs
- * its writes). */
+ * has closed its part.  Another rank: tr_out_open_part, the same two
+ * writes for each of its tiles, tr_out_close_part (which syncs them). */
 
 /* The temporary's path (owned by o), the header's length and the vertex
  * count, for tr_out_open_part. */
@@ -112,10 +112,12 @@ gdt_status tr_out_open_part(tr_out **out, const tr_out_src *src, const char *tmp
  * returns: GDT_OK; GDT_EIO 4805; GDT_EJOB 6801. */
 gdt_status tr_out_tile_faces(const tr_out_src *src, uint64_t k, uint64_t *nf, gdt_error *err);
 
-/* Writes tile k's vertices and its faces from face index first_face.
+/* Writes tile k's vertices (at base[k]; any time after pass 2), or its
+ * faces from face index first_face (once the tiles before it are counted).
  * returns: GDT_OK; the part's and the tile files' errors (4805, 6801-6802,
  * 47xx). */
-gdt_status tr_out_write_tile(tr_out *o, uint64_t k, uint64_t first_face, gdt_error *err);
+gdt_status tr_out_write_vertices(tr_out *o, uint64_t k, gdt_error *err);
+gdt_status tr_out_write_faces(tr_out *o, uint64_t k, uint64_t first_face, gdt_error *err);
 
 /* Syncs and closes another rank's part; frees o.  returns: GDT_OK; GDT_EIO
  * 4722. */
