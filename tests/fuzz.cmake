@@ -16,6 +16,9 @@
 # build, through a plain main() (replay_main.c) otherwise, so they also run
 # under the ASan build.
 set(GDT_FUZZ_DIR ${CMAKE_CURRENT_SOURCE_DIR}/fuzz)
+# gdt_fuzz_all: every fuzz target, for a fuzz tree that builds only what
+# the fuzz runs need (with gdt-tile and pcd_write_pcl, which make the seeds)
+add_custom_target(gdt_fuzz_all)
 
 # gdt_fuzz_target(name SOURCES file... [DEFINES def...])
 function(gdt_fuzz_target name)
@@ -36,6 +39,7 @@ function(gdt_fuzz_target name)
   target_include_directories(${exe} PRIVATE ${GDT_FUZZ_DIR})
   target_compile_definitions(${exe} PRIVATE ${F_DEFINES})
   gdt_target_flags(${exe})
+  add_dependencies(gdt_fuzz_all ${exe})
   add_test(NAME fuzz_regress_${name} COMMAND ${cmd})
   set_tests_properties(fuzz_regress_${name} PROPERTIES LABELS "fuzz")
 endfunction()
