@@ -52,7 +52,9 @@ def test_cpu_run_prints_the_table(bundle, libc):
     assert len(perf) == 2 and all(len(p) == 11 for p in perf), r.stdout
     for p in perf:
         phases = [float(v) for v in p[2:9]]
-        assert float(p[9]) > 0 and sum(phases) <= float(p[9]) * 1.01 + 1e-3, p
+        # Each of the seven phases and the total is printed rounded to 1 ms, so the
+        # printed phases may exceed the printed total by up to 8 half-milliseconds.
+        assert float(p[9]) > 0 and sum(phases) <= float(p[9]) * 1.01 + 8 * 5e-4, p
 
 
 def test_a_failing_run_fails_the_check(bundle):
