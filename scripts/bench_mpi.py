@@ -15,7 +15,9 @@ core of its own (K = 1 too, so that it runs on one core as the others do;
 under one rank gdt-tile runs as a plain process).  Each K runs --repeat
 rounds, the configurations in turn; the best wall time (of mpirun, the whole
 job) counts.  Printed per K: wall time, the speed-up over the first K, the
-stage times of rank 0's --json (pass 1, pass 2, tiles, merge, write), the
+stage times of rank 0's --json (pass 1, pass 2, tiles, merge; parts, the
+plain PLY's tiles written by their owners beside the merge, K > 1 only;
+write, the rest of the output after the merge), the
 load balance of the tile stage (slowest rank over the mean), and whether the
 PLY is byte for byte the first K's.  The target is the speed-up of the
 largest K over the first, at least --target (1.8 for K = 2), PASS or MISS.
@@ -40,7 +42,7 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import bench_e2e as be  # noqa: E402  (cloud generation, process measuring, size parsing)
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
-STAGES = ("pass1", "pass2", "tiles", "merge", "write")
+STAGES = ("pass1", "pass2", "tiles", "merge", "parts", "write")
 
 
 def rank_list(s):

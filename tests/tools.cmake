@@ -5,5 +5,9 @@ gdt_add_test_exe(src_read ${CMAKE_CURRENT_SOURCE_DIR}/tools/src_read.c)
 add_library(gdt_fail_threads MODULE ${CMAKE_CURRENT_SOURCE_DIR}/tools/fail_threads.c)
 target_link_libraries(gdt_fail_threads PRIVATE ${CMAKE_DL_LIBS})
 gdt_target_flags(gdt_fail_threads)
+# LD_PRELOAD shim that makes positional writes to matching files fail (ENOSPC).
+add_library(gdt_fail_write MODULE ${CMAKE_CURRENT_SOURCE_DIR}/tools/fail_write.c)
+target_link_libraries(gdt_fail_write PRIVATE ${CMAKE_DL_LIBS})
+gdt_target_flags(gdt_fail_write)
 # The tiled run's stages over a subset of the tiles (tests/python/test_stages.py).
 gdt_add_test_exe(stages_subset ${CMAKE_CURRENT_SOURCE_DIR}/tools/stages_subset.c)

@@ -14,7 +14,8 @@
  *   status, then (when it is GDT_OK) every tile's first face (ntiles + 1
  *   prefix sums);
  *   each rank writes its own tiles' faces, syncs its part and answers
- *   WROTE: its status (the first failure of any of its writes) and message;
+ *   WROTE: its status (the first failure of any of its writes), the
+ *   seconds it spent writing its part, and its message;
  *   rank 0 writes its own tiles' faces meanwhile, finishes the seam merge,
  *   waits for every WROTE and completes the file with the merge's faces.
  * A failed PARTS (rank 0 could not read a tile's count) asks nothing: the
@@ -28,6 +29,7 @@
 #include <string.h>
 
 #include "gdt_cloud.h"
+#include "private/run_stats.h"
 #include "private/tiled_out.h"
 
 /* What tr_out needs of the run to write tiles in parts. */
@@ -112,10 +114,13 @@ void mr_parts_tile_done(mr_ctx *m, uint64_t k)
 {
     tr_out *o = m->rank == 0 ? (m->c->out_parts ? m->c->out : NULL) : m->part_out;
     gdt_error e;
+    double t0;
     if (o == NULL || m->part_st != GDT_OK)
         return;
     gdt_error_clear(&e);
+    t0 = gdt_now();
     part_fail(m, tr_out_write_vertices(o, k, &e), &e);
+    m->part_t += gdt_now() - t0;
 }
 
 gdt_status mr_parts_send(mr_ctx *m, int *wait, gdt_error *err)
@@ -160,12 +165,16 @@ gdt_status mr_parts_send(mr_ctx *m, int *wait, gdt_error *err)
             *err = m->part_err;
             st = m->part_st;
         }
+        double t0 = gdt_now();
         for (uint64_t k = 0; st == GDT_OK && k < n; k++)
             if (mr_owner_of(c->base, n, k, m->size) == 0)
                 st = tr_out_write_faces(c->out, k, first[k], err);
         if (st == GDT_OK)
             tr_out_set_tile_faces(c->out, first[n]);
+        m->part_t += gdt_now() - t0;
     }
+    if (c->s.ranks != NULL)
+        c->s.ranks[0].t_write = m->part_t;
     free(first);
     return st;
 }
@@ -193,7 +202,10 @@ gdt_status mr_parts_wait(mr_ctx *m, gdt_error *err)
         {
             gdt_status rst = (gdt_status)gdt_unpack_u64(&u);
             int code = (int)gdt_unpack_u64(&u);
+            double t = gdt_unpack_f64(&u);
             const unsigned char *msg = gdt_unpack_bytes(&u, &ml);
+            if (!u.bad && from > 0 && from < m->c->s.nranks)
+                m->c->s.ranks[from].t_write = t;
             if (u.bad) {
                 char text[64];
                 snprintf(text, sizeof text, "a WROTE message that does not parse");
@@ -222,6 +234,7 @@ static gdt_status write_part(mr_ctx *m, const uint64_t *ks, uint64_t n, gdt_unpa
     uint64_t ntiles = gdt_unpack_u64(u);
     uint64_t *first = NULL;
     gdt_status st = m->part_st;
+    double t0 = gdt_now();
 
     if (st != GDT_OK)
         *err = m->part_err;
@@ -248,6 +261,7 @@ static gdt_status write_part(mr_ctx *m, const uint64_t *ks, uint64_t n, gdt_unpa
             *err = e2;
         }
     }
+    m->part_t += gdt_now() - t0;
     free(first);
     return st;
 }
@@ -276,6 +290,7 @@ void mr_parts_answer(mr_ctx *m, const uint64_t *ks, uint64_t n, const unsigned c
     memset(&p, 0, sizeof p);
     gdt_pack_u64(&p, (uint64_t)st);
     gdt_pack_u64(&p, st != GDT_OK ? (uint64_t)err.code : 0);
+    gdt_pack_f64(&p, m->part_t);
     gdt_pack_bytes(&p, st != GDT_OK ? err.msg : "", st != GDT_OK ? strlen(err.msg) : 0);
     gdt_error_clear(&e2);
     if (mr_send_pack(m, 0, TAG_WROTE, &p, &e2) != GDT_OK) {

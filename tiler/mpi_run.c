@@ -457,6 +457,7 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
     }
     {
         int wait = 0;
+        double t_parts0 = gdt_now();
         st = c->out_parts ? mr_parts_send(m, &wait, err) : GDT_OK;
         if (st == GDT_OK)
             st = tr_run_merge(c, err);
@@ -470,6 +471,8 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
                 *err = e2;
             }
         }
+        if (c->out_parts) /* beside the merge: until the last part was synced */
+            c->s.t_parts = gdt_now() - t_parts0;
     }
     if (st == GDT_OK)
         st = tr_run_finish(c, err);

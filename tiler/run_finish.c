@@ -122,6 +122,8 @@ static gdt_status write_summary(const tr_run *c, gdt_error *err)
     gdt_json_double(&j, "post", s->t_post);
     gdt_json_double(&j, "merge", s->t_merge);
     gdt_json_double(&j, "write", s->t_write);
+    if (s->nranks > 1 && c->out_parts) /* beside the merge, not after it */
+        gdt_json_double(&j, "parts", s->t_parts);
     if (s->checked)
         gdt_json_double(&j, "check", s->t_check);
     gdt_json_double(&j, "total", s->t_total);
@@ -153,6 +155,8 @@ static gdt_status write_summary(const tr_run *c, gdt_error *err)
             gdt_json_double(&j, "core_s", q->t_core);
             gdt_json_double(&j, "certify_s", q->t_certify);
             gdt_json_double(&j, "post_s", q->t_post);
+            if (c->out_parts)
+                gdt_json_double(&j, "write_s", q->t_write);
             gdt_json_end_object(&j);
         }
         gdt_json_end_array(&j);

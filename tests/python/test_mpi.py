@@ -120,6 +120,11 @@ def test_any_rank_count_writes_the_same_bytes(mpi_bin, clouds, tmp_path, case):
         # trimming, rank 0's writer rasterises and drops faces as it copies
         plain = "--dem" not in opts and "--max-edge" not in opts
         assert mpi["mesh_written_by"] == ("tile owners" if plain else "rank 0"), (k, case)
+        # the parts' writing is timed: the stage beside the merge, and each rank's share
+        assert ("parts" in j["times"]) == plain, (k, case)
+        assert all(("write_s" in q) == plain for q in mpi["per_rank"]), (k, case)
+        if plain:
+            assert j["times"]["parts"] > 0 and all(q["write_s"] > 0 for q in mpi["per_rank"])
 
 
 def test_shared_pass2_out_of_core(mpi_bin, root, tmp_path):
@@ -384,6 +389,38 @@ def test_another_rank_failing_fails_the_job_with_its_message(mpi_bin, clouds, tm
     assert not out.exists() and job.is_dir()
     r = run([mpi_bin, *args])
     assert r.returncode == 0, r.stderr
+    ref = tmp_path / "ref.ply"
+    r = run([mpi_bin, clouds["a"], "-o", ref, "--tile", "64", "-q"])
+    assert r.returncode == 0, r.stderr
+    assert out.read_bytes() == ref.read_bytes()
+
+
+@pytest.mark.parametrize("after", [0, 40])
+def test_a_failing_part_write_fails_the_job(mpi_bin, clouds, tools_dir, tmp_path, after):
+    """Rank 1's positional writes into the mesh's temporary fail as on a full
+    disk (an LD_PRELOAD shim, rank 1 only): its first vertex write (after=0)
+    or a later one, of its vertices or faces (after=40).  The job exits 4
+    with rank 1's message once, nothing is left at the output (no
+    temporary either), and a plain rerun resumes the job to the bytes of an
+    undisturbed run."""
+    shim = tools_dir / "libgdt_fail_write.so"
+    if not shim.exists():
+        pytest.fail(f"libgdt_fail_write.so not built at {shim}")
+    out, job, log = tmp_path / "o.ply", tmp_path / "job", tmp_path / "refused.log"
+    args = [str(clouds["a"]), "-o", str(out), "--tile", "64", "-q", "--job", str(job)]
+    r = run(["mpirun", "--oversubscribe", "-np", "1", mpi_bin, *args, ":", "-np", "1", "env",
+             f"LD_PRELOAD={shim}", "GDT_TEST_FAIL_WRITE_MATCH=o.ply.tmp-",
+             f"GDT_TEST_FAIL_WRITE_AFTER={after}", f"GDT_TEST_FAIL_WRITE_LOG={log}", mpi_bin,
+             *args])
+    assert log.exists(), r.stdout + r.stderr  # the shim refused a write of rank 1
+    assert r.returncode == 4, r.stdout + r.stderr
+    assert r.stderr.count("error GDT-4") == 1 and "rank 1: " in r.stderr, r.stderr
+    assert "No space left on device" in r.stderr, r.stderr
+    assert not out.exists() and job.is_dir()
+    assert [p.name for p in tmp_path.iterdir() if ".tmp-" in p.name] == []
+    r = run([mpi_bin, *args, "--json", tmp_path / "j.json"])
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "j.json").read_text())["reused"]["tiles"] > 0
     ref = tmp_path / "ref.ply"
     r = run([mpi_bin, clouds["a"], "-o", ref, "--tile", "64", "-q"])
     assert r.returncode == 0, r.stderr

@@ -67,6 +67,7 @@ typedef struct mr_ctx {
     tr_out *part_out;       /* another rank: its part, open from GO to PARTS */
     gdt_status part_st;     /* the first failure of this rank's writes */
     gdt_error part_err;
+    double part_t;          /* seconds this rank spent writing its part */
 } mr_ctx;
 
 /* Sends the packed message p to dest and frees it. */

@@ -63,6 +63,7 @@
 typedef struct tr_rank_stats {
     uint64_t tiles, vertices, certified, reused;
     double t_tiles, t_core, t_certify, t_post;
+    double t_write; /* its parts of a mesh written in parts: vertices, faces, sync */
     char device[128];
 } tr_rank_stats;
 
@@ -71,6 +72,7 @@ typedef struct tr_summary {
     uint64_t points_read, vertices, tiles, faces, certified, merge_faces;
     uint64_t max_tile_points, max_halo_points, gcd_tiles, insert_tiles;
     double t_pass1, t_pass2, t_tiles, t_core, t_certify, t_post, t_merge, t_write, t_check, t_total;
+    double t_parts; /* MPI, a mesh in parts: from PARTS to the last part synced */
     gdt_cert_stats cert;
     gdt_merge_stats merge;
     int checked;

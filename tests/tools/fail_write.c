@@ -1,0 +1,79 @@
+/* fail_write — an LD_PRELOAD library for tests: positional writes (pwrite,
+ * pwrite64) to a file whose path contains GDT_TEST_FAIL_WRITE_MATCH fail
+ * with ENOSPC, as on a full disk, after the first GDT_TEST_FAIL_WRITE_AFTER
+ * of them (0 when unset) have succeeded.  Other writes are untouched.  When
+ * GDT_TEST_FAIL_WRITE_LOG names a file, each refusal appends a line to it,
+ * so a test can tell that the shim was in effect.
+ *
+ *   GDT_TEST_FAIL_WRITE_MATCH=.ply.tmp- LD_PRELOAD=libgdt_fail_write.so gdt-tile ...
+ */
+#undef _FILE_OFFSET_BITS /* pwrite and pwrite64 are two symbols here */
+#define _GNU_SOURCE
+#include <dlfcn.h>
+#include <errno.h>
+#include <limits.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/types.h>
+#include <unistd.h>
+
+typedef ssize_t (*pwrite_fn)(int, const void *, size_t, off_t);
+
+static atomic_long matched;
+
+/* Whether this write to fd is to be refused. */
+static int refuse(int fd)
+{
+    const char *match = getenv("GDT_TEST_FAIL_WRITE_MATCH");
+    const char *after = getenv("GDT_TEST_FAIL_WRITE_AFTER");
+    char link[64], path[PATH_MAX];
+    ssize_t n;
+
+    if (match == NULL || *match == '\0')
+        return 0;
+    snprintf(link, sizeof link, "/proc/self/fd/%d", fd);
+    n = readlink(link, path, sizeof path - 1);
+    if (n <= 0)
+        return 0;
+    path[n] = '\0';
+    if (strstr(path, match) == NULL)
+        return 0;
+    if (atomic_fetch_add(&matched, 1) < (after != NULL ? strtol(after, NULL, 10) : 0))
+        return 0;
+    {
+        const char *log = getenv("GDT_TEST_FAIL_WRITE_LOG");
+        FILE *f = log != NULL ? fopen(log, "a") : NULL;
+        if (f != NULL) {
+            fprintf(f, "refused %s\n", path);
+            fclose(f);
+        }
+    }
+    return 1;
+}
+
+static ssize_t forward(const char *name, int fd, const void *buf, size_t n, off_t off)
+{
+    pwrite_fn real;
+    if (refuse(fd)) {
+        errno = ENOSPC;
+        return -1;
+    }
+    real = (pwrite_fn)dlsym(RTLD_NEXT, name);
+    if (real == NULL) {
+        errno = ENOSYS;
+        return -1;
+    }
+    return real(fd, buf, n, off);
+}
+
+ssize_t pwrite(int fd, const void *buf, size_t n, off_t off)
+{
+    return forward("pwrite", fd, buf, n, off);
+}
+
+ssize_t pwrite64(int fd, const void *buf, size_t n, off_t off)
+{
+    return forward("pwrite64", fd, buf, n, off);
+}
