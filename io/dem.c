@@ -50,8 +50,11 @@ struct gdt_dem {
     int64_t last_block;    /* the slot of the last block used, a fast path */
     size_t last_slot;
     int cells_aligned;     /* cells is page-aligned memory of its own (posix_memalign) */
-    uint32_t *xfer;        /* one block read back during gdt_dem_finish */
+    uint32_t *xfer;        /* one block read back during gdt_dem_build */
     gdt_dem_stats stats;
+    int built;             /* gdt_dem_build succeeded: the temporaries are complete */
+    gdt_status preview_st; /* the preview's failure in gdt_dem_build, told by the commit */
+    gdt_error preview_err;
 };
 
 static char *dup_str(const char *s)
@@ -458,7 +461,7 @@ static gdt_status publish(const char *tmp, const char *path, gdt_error *err)
     return GDT_OK;
 }
 
-gdt_status gdt_dem_finish(gdt_dem *w, gdt_dem_stats *stats, gdt_error *err)
+gdt_status gdt_dem_build(gdt_dem *w, gdt_dem_stats *stats, gdt_error *err)
 {
     gdt_status st;
     uint64_t gdal_cache = w->mem_budget / 2;
@@ -471,6 +474,9 @@ gdt_status gdt_dem_finish(gdt_dem *w, gdt_dem_stats *stats, gdt_error *err)
     const int in_memory = w->nblocks <= (int64_t)w->nslots;
     void *mem_ds = NULL;
 
+    if (w->cells == NULL || w->built)
+        return gdt_error_set(err, GDT_EINTERNAL, 7664, "%s: the DEM was built already",
+                             w->path);
     w->xfer = malloc(BLOCK_BYTES);
     if (w->xfer == NULL) {
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
@@ -501,18 +507,48 @@ gdt_status gdt_dem_finish(gdt_dem *w, gdt_dem_stats *stats, gdt_error *err)
     else
         gdt_dem_gdal_discard(mem_ds);
     remove_tiles(w);
-    if (st == GDT_OK)
-        st = publish(w->tmp_path, w->path, err);
+    /* the preview from the complete temporary; its failure alone is told by
+     * the commit, after the DEM is in place */
     if (st == GDT_OK && w->preview != NULL) {
-        st = gdt_dem_gdal_preview(w->path, w->preview_tmp, w->preview, gdal_cache, err);
-        if (st == GDT_OK)
-            st = publish(w->preview_tmp, w->preview, err);
+        gdt_error_clear(&w->preview_err);
+        w->preview_st = gdt_dem_gdal_preview(w->tmp_path, w->preview_tmp, w->preview,
+                                             gdal_cache, &w->preview_err);
     }
+    w->built = st == GDT_OK;
 done:
     if (stats != NULL)
         *stats = w->stats;
+    return st;
+}
+
+gdt_status gdt_dem_commit(gdt_dem *w, gdt_error *err)
+{
+    gdt_status st = w->built ? GDT_OK
+                             : gdt_error_set(err, GDT_EINTERNAL, 7664,
+                                             "%s: the DEM is committed before it is built",
+                                             w->path);
+    if (st == GDT_OK)
+        st = publish(w->tmp_path, w->path, err);
+    if (st == GDT_OK && w->preview != NULL) {
+        if (w->preview_st != GDT_OK) {
+            *err = w->preview_err;
+            st = w->preview_st;
+        } else {
+            st = publish(w->preview_tmp, w->preview, err);
+        }
+    }
     gdt_dem_abort(w);
     return st;
+}
+
+gdt_status gdt_dem_finish(gdt_dem *w, gdt_dem_stats *stats, gdt_error *err)
+{
+    gdt_status st = gdt_dem_build(w, stats, err);
+    if (st != GDT_OK) {
+        gdt_dem_abort(w);
+        return st;
+    }
+    return gdt_dem_commit(w, err);
 }
 
 void gdt_dem_abort(gdt_dem *w)

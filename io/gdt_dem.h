@@ -40,7 +40,7 @@
  * GDAL's messages never reach stderr: a GDAL failure is an error here,
  * with GDAL's last message in it.  Not thread-safe per writer (one thread
  * feeds it); writers are independent, but GDAL's block cache size is
- * process-wide and is set during gdt_dem_finish.
+ * process-wide and is set during gdt_dem_finish (gdt_dem_build).
  */
 #ifndef GDT_DEM_H
 #define GDT_DEM_H
@@ -94,8 +94,8 @@ typedef struct gdt_dem gdt_dem;
 /* Starts a DEM at path.  Strings are copied.
  * returns: GDT_OK; GDT_EUSAGE 2611 (a geo or option out of range);
  *   GDT_EIO 4650 (scratch file); GDT_EINTERNAL 7001.
- * Ownership: *out is owned by the caller, released by gdt_dem_finish or
- * gdt_dem_abort (exactly one of them). */
+ * Ownership: *out is owned by the caller, released by gdt_dem_finish,
+ * gdt_dem_commit or gdt_dem_abort (exactly one of them). */
 gdt_status gdt_dem_create(gdt_dem **out, const gdt_dem_geo *geo, const char *path,
                           const gdt_dem_opts *opts, gdt_error *err);
 
@@ -122,6 +122,18 @@ gdt_dem_stats gdt_dem_get_stats(const gdt_dem *w);
  *   4651 (scratch file), 4652 (GDAL could not write a file: its message),
  *   4653 (fsync or rename); GDT_EINTERNAL 7001. */
 gdt_status gdt_dem_finish(gdt_dem *w, gdt_dem_stats *stats, gdt_error *err);
+
+/* gdt_dem_finish in two steps, so that the work of the first can run
+ * beside something the second must wait for (the mesh's own sync):
+ * gdt_dem_build writes the GeoTIFF (and the preview) as above to their
+ * temporaries, synced, frees the cache and keeps w; no gdt_dem_put after
+ * it.  Then gdt_dem_commit (after a successful build) renames them into
+ * place and releases w, or gdt_dem_abort removes them.  A failure of the
+ * preview alone is returned by the commit, after the DEM is in place.
+ * returns: as gdt_dem_finish; GDT_EINTERNAL 7664 (built twice, or
+ *   committed unbuilt). */
+gdt_status gdt_dem_build(gdt_dem *w, gdt_dem_stats *stats, gdt_error *err);
+gdt_status gdt_dem_commit(gdt_dem *w, gdt_error *err);
 
 /* Releases w without writing anything; removes its scratch file.  NULL is
  * accepted. */

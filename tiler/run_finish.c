@@ -6,6 +6,7 @@
 #include "private/stages.h"
 
 #include <inttypes.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -55,6 +56,64 @@ static gdt_status check_output(tr_run *c, gdt_error *err)
     }
     if (c->check_ply != NULL)
         unlink(c->check_ply);
+    return st;
+}
+
+/* The DEM's build on a thread of its own, started when the mesh has every
+ * face (and the DEM every cell), so that its CPU work runs beside the
+ * mesh's sync, which waits for the disk.  Only the commit puts the DEM in
+ * place, after the mesh is: a failed mesh leaves no new DEM either. */
+typedef struct dem_bg {
+    tr_run *c;
+    pthread_t tid;
+    int started; /* a thread runs the build */
+    int built;   /* the build ran (on the thread or here): st and err hold its result */
+    gdt_status st;
+    gdt_error err;
+    double t;    /* its seconds */
+} dem_bg;
+
+static void *dem_build_main(void *arg)
+{
+    dem_bg *b = arg;
+    double t0 = gdt_now();
+    gdt_error_clear(&b->err);
+    b->st = tr_dem_build(b->c->dem, &b->c->s.dem_geo, &b->c->s.dem_stats, &b->err);
+    b->t = gdt_now() - t0;
+    b->built = 1;
+    return NULL;
+}
+
+/* tr_out_on_complete: the build starts; without a thread it runs later,
+ * in dem_finish. */
+static void dem_build_start(void *arg)
+{
+    dem_bg *b = arg;
+    b->started = pthread_create(&b->tid, NULL, dem_build_main, b) == 0;
+}
+
+/* After the mesh (its status st): the build joined or run, then the commit
+ * when both succeeded, else the DEM dropped.  returns: the first failure. */
+static gdt_status dem_finish(tr_run *c, dem_bg *b, gdt_status st, gdt_error *err)
+{
+    double t0;
+    if (b->started)
+        pthread_join(b->tid, NULL);
+    else if (st == GDT_OK)
+        dem_build_main(b);
+    t0 = gdt_now();
+    if (st == GDT_OK && b->built && b->st != GDT_OK) {
+        st = b->st;
+        *err = b->err;
+    }
+    if (st == GDT_OK) {
+        st = tr_dem_commit(c->dem, err);
+        c->s.dem_done = st == GDT_OK;
+    } else {
+        tr_dem_abort(c->dem);
+    }
+    c->dem = NULL;
+    c->s.t_dem = b->t + (gdt_now() - t0);
     return st;
 }
 
@@ -239,6 +298,7 @@ gdt_status tr_run_finish(tr_run *c, gdt_error *err)
     double t0;
     char ftext[160], ttext[GDT_TRIM_TEXT_MAX];
     gdt_filter_counts fcounts;
+    dem_bg bg;
     gdt_status st;
 
     /* the writer may copy trimmed faces from now on */
@@ -261,6 +321,10 @@ gdt_status tr_run_finish(tr_run *c, gdt_error *err)
 
     t0 = gdt_now();
     gdt_progress_stage(&c->prog, "write", 1, "files");
+    memset(&bg, 0, sizeof bg);
+    bg.c = c;
+    if (c->dem != NULL && c->out != NULL)
+        tr_out_on_complete(c->out, dem_build_start, &bg);
     {
         char *mf = tr_path_join(c->job, MF_NAME);
         char *md = c->dem != NULL ? tr_path_join(c->job, MD_NAME) : NULL;
@@ -273,13 +337,8 @@ gdt_status tr_run_finish(tr_run *c, gdt_error *err)
         free(md);
         free(mf);
     }
-    if (st == GDT_OK && c->dem != NULL) {
-        double t1 = gdt_now();
-        st = tr_dem_finish(c->dem, &c->s.dem_geo, &c->s.dem_stats, err);
-        c->dem = NULL;
-        c->s.dem_done = st == GDT_OK;
-        c->s.t_dem = gdt_now() - t1;
-    }
+    if (c->dem != NULL)
+        st = dem_finish(c, &bg, st, err);
     if (st == GDT_OK && opts->ground_out != NULL)
         st = tr_ground_out_write(c, err);
     if (st == GDT_OK)

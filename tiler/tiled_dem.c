@@ -332,6 +332,22 @@ gdt_status tr_dem_finish(tr_dem *d, gdt_dem_geo *geo, gdt_dem_stats *stats, gdt_
     return st;
 }
 
+gdt_status tr_dem_build(tr_dem *d, gdt_dem_geo *geo, gdt_dem_stats *stats, gdt_error *err)
+{
+    stop_helpers(d); /* the rasterising is over */
+    if (geo != NULL)
+        *geo = d->grid.geo;
+    return gdt_dem_build(d->w, stats, err);
+}
+
+gdt_status tr_dem_commit(tr_dem *d, gdt_error *err)
+{
+    gdt_status st = gdt_dem_commit(d->w, err);
+    d->w = NULL;
+    tr_dem_abort(d);
+    return st;
+}
+
 void tr_dem_abort(tr_dem *d)
 {
     if (d == NULL)

@@ -53,7 +53,15 @@ struct tr_out {
                                   * copied (24 bytes a point, not the 32 of a record) */
     size_t cap_tile_pts;
     unsigned char *mdem;  /* with a DEM: MD_RECORD TR_CHUNK bytes of merge.dem */
+    void (*on_complete)(void *); /* tr_out_on_complete: called once, or never */
+    void *on_complete_ctx;
 };
+
+void tr_out_on_complete(tr_out *o, void (*fn)(void *), void *ctx)
+{
+    o->on_complete = fn;
+    o->on_complete_ctx = ctx;
+}
 
 static int stopped(const tr_out *o)
 {
@@ -740,6 +748,8 @@ gdt_status tr_out_finish(tr_out *o, const char *merge_path, const char *merge_de
     if (st == GDT_OK)
         st = stopped(o) ? tr_interrupted(o->src.job, "the output", err)
                         : copy_merge_faces(o, merge_path, merge_dem, merge_faces, err);
+    if (st == GDT_OK && o->on_complete != NULL)
+        o->on_complete(o->on_complete_ctx);
     if (st == GDT_OK && o->cw != NULL) {
         st = gdt_ply_finish(o->cw, err);
         o->cw = NULL;

@@ -1,7 +1,9 @@
 /* fail_write — an LD_PRELOAD library for tests: positional writes (pwrite,
  * pwrite64) to a file whose path contains GDT_TEST_FAIL_WRITE_MATCH fail
  * with ENOSPC, as on a full disk, after the first GDT_TEST_FAIL_WRITE_AFTER
- * of them (0 when unset) have succeeded.  Other writes are untouched.  When
+ * of them (0 when unset) have succeeded; fsync of a file whose path
+ * contains GDT_TEST_FAIL_FSYNC_MATCH fails with EIO, as when the disk
+ * reports a lost write.  Other calls are untouched.  When
  * GDT_TEST_FAIL_WRITE_LOG names a file, each refusal appends a line to it,
  * so a test can tell that the shim was in effect.
  *
@@ -20,36 +22,48 @@
 #include <unistd.h>
 
 typedef ssize_t (*pwrite_fn)(int, const void *, size_t, off_t);
+typedef int (*fsync_fn)(int);
 
 static atomic_long matched;
 
-/* Whether this write to fd is to be refused. */
-static int refuse(int fd)
+/* Whether fd is a file whose path contains the value of the variable var. */
+static int matches(int fd, const char *var, char *path, size_t size)
 {
-    const char *match = getenv("GDT_TEST_FAIL_WRITE_MATCH");
-    const char *after = getenv("GDT_TEST_FAIL_WRITE_AFTER");
-    char link[64], path[PATH_MAX];
+    const char *match = getenv(var);
+    char link[64];
     ssize_t n;
 
     if (match == NULL || *match == '\0')
         return 0;
     snprintf(link, sizeof link, "/proc/self/fd/%d", fd);
-    n = readlink(link, path, sizeof path - 1);
+    n = readlink(link, path, size - 1);
     if (n <= 0)
         return 0;
     path[n] = '\0';
-    if (strstr(path, match) == NULL)
+    return strstr(path, match) != NULL;
+}
+
+static void log_refusal(const char *path)
+{
+    const char *log = getenv("GDT_TEST_FAIL_WRITE_LOG");
+    FILE *f = log != NULL ? fopen(log, "a") : NULL;
+    if (f != NULL) {
+        fprintf(f, "refused %s\n", path);
+        fclose(f);
+    }
+}
+
+/* Whether this write to fd is to be refused. */
+static int refuse(int fd)
+{
+    const char *after = getenv("GDT_TEST_FAIL_WRITE_AFTER");
+    char path[PATH_MAX];
+
+    if (!matches(fd, "GDT_TEST_FAIL_WRITE_MATCH", path, sizeof path))
         return 0;
     if (atomic_fetch_add(&matched, 1) < (after != NULL ? strtol(after, NULL, 10) : 0))
         return 0;
-    {
-        const char *log = getenv("GDT_TEST_FAIL_WRITE_LOG");
-        FILE *f = log != NULL ? fopen(log, "a") : NULL;
-        if (f != NULL) {
-            fprintf(f, "refused %s\n", path);
-            fclose(f);
-        }
-    }
+    log_refusal(path);
     return 1;
 }
 
@@ -76,4 +90,21 @@ ssize_t pwrite(int fd, const void *buf, size_t n, off_t off)
 ssize_t pwrite64(int fd, const void *buf, size_t n, off_t off)
 {
     return forward("pwrite64", fd, buf, n, off);
+}
+
+int fsync(int fd)
+{
+    char path[PATH_MAX];
+    fsync_fn real;
+    if (matches(fd, "GDT_TEST_FAIL_FSYNC_MATCH", path, sizeof path)) {
+        log_refusal(path);
+        errno = EIO;
+        return -1;
+    }
+    real = (fsync_fn)dlsym(RTLD_NEXT, "fsync");
+    if (real == NULL) {
+        errno = ENOSYS;
+        return -1;
+    }
+    return real(fd);
 }

@@ -80,6 +80,12 @@ gdt_status tr_out_finish(tr_out *o, const char *merge_path, const char *merge_de
                          uint64_t merge_faces,
                          gdt_trim_counts *tc, gdt_error *err);
 
+/* fn(ctx) is called once by tr_out_finish, on the caller's thread, when
+ * every face is written (and rasterised, with a DEM), before the mesh is
+ * synced and renamed; not when the output failed before that.  Set it
+ * before tr_out_finish. */
+void tr_out_on_complete(tr_out *o, void (*fn)(void *), void *ctx);
+
 /* ---- A PLY written in parts by the tiles' owners (src.parts) ----
  *
  * Under mpirun every rank writes the vertex and face blocks of its own
