@@ -208,11 +208,11 @@ gdt_status gcd_radix_sort(gdt_core *c, gcd_buf *keys, gcd_buf *vals, size_t n, u
     for (unsigned shift = 0; shift < bits; shift += 8) {
         if (gcd_args(c->k.radix_hist, err, "buuuub", keys, (unsigned)n, shift, chunk,
                      (unsigned)nchunks, &c->d_rhist) != GDT_OK ||
-            gcd_launch_wg(c, c->k.radix_hist, nchunks, 16, err) != GDT_OK ||
+            gcd_launch_wg(c, c->k.radix_hist, nchunks, c->small_wg, err) != GDT_OK ||
             gcd_scan(c, &c->d_rhist, 256 * nchunks, &total, err) != GDT_OK ||
             gcd_args(c->k.radix_scatter, err, "bbuuuubbb", keys, vals, (unsigned)n, shift, chunk,
                      (unsigned)nchunks, &c->d_rhist, &c->d_rk, &c->d_rv) != GDT_OK ||
-            gcd_launch_wg(c, c->k.radix_scatter, nchunks, 16, err) != GDT_OK)
+            gcd_launch_wg(c, c->k.radix_scatter, nchunks, c->small_wg, err) != GDT_OK)
             return err->status;
         gcd_buf tmp = *keys;
         *keys = c->d_rk;
@@ -340,11 +340,24 @@ gdt_status gdt_core_create(gdt_core **out, const gdt_core_opts *opts, gdt_error 
     st = gdt_ocl_create(&c->ocl, &oo, err);
     if (st != GDT_OK)
         goto fail;
-    /* CPU devices run one work-item per core stretch: give each column-pass
-     * work-item a strip of columns so it walks memory row by row. */
-    c->strip = gdt_ocl_is_cpu(c->ocl) ? 16 : 1;
-    c->bands = gdt_ocl_is_cpu(c->ocl) ? 1 : 8;
-    c->wg = 256;
+    /* Sizes from the device's type and limits.  CPU devices run one
+     * work-item per core stretch: each column-pass work-item gets a strip of
+     * columns so it walks memory row by row, and small work-groups.  A GPU
+     * wants one column per work-item, row bands for more of them, and
+     * work-groups of whole warps or wavefronts.  Every launch is further
+     * held to what the device allows for its kernel (gcd_launch_wg). */
+    {
+        const int gpu = !gdt_ocl_is_cpu(c->ocl) || c->opts.gpu_layout;
+        size_t dmax = gdt_ocl_device_max_wg(c->ocl);
+        c->strip = gpu ? 1 : 16;
+        c->bands = gpu ? 8 : 1;
+        c->wg = 256;
+        while (c->wg > 1 && c->wg > dmax)
+            c->wg /= 2;
+        c->small_wg = gpu ? 64 : 16;
+        while (c->small_wg > 1 && c->small_wg > dmax)
+            c->small_wg /= 2;
+    }
     gcd_test_set_flip_blocks(c, SIZE_MAX, 0, 0);
     snprintf(extra, sizeof extra, "-DSTRIP=%u", c->strip);
     for (size_t p = 0; p < sizeof PROGRAMS / sizeof PROGRAMS[0]; p++) {

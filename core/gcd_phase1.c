@@ -342,7 +342,7 @@ gdt_status gcd_voronoi_from_seeds(gdt_core *c, gcd_run *r, gdt_error *err)
     } else {
         if (gcd_args(c->k.p1_cols_band, err, "buuubb", &c->d_seed, r->W, r->H, bands,
                      &c->d_band_lo, &c->d_band_hi) != GDT_OK ||
-            gcd_launch_wg(c, c->k.p1_cols_band, nstrips * bands, 16, err) != GDT_OK ||
+            gcd_launch_wg(c, c->k.p1_cols_band, nstrips * bands, c->small_wg, err) != GDT_OK ||
             gcd_args(c->k.p1_cols_link, err, "uubbbb", r->W, bands, &c->d_band_lo,
                      &c->d_band_hi, &c->d_band_below, &c->d_band_above) != GDT_OK ||
             gcd_launch(c, c->k.p1_cols_link, r->W, err) != GDT_OK)
@@ -350,9 +350,9 @@ gdt_status gcd_voronoi_from_seeds(gdt_core *c, gcd_run *r, gdt_error *err)
     }
     if (gcd_args(c->k.p1_cols, err, "buuubbb", &c->d_seed, r->W, r->H, bands, &c->d_band_below,
                  &c->d_band_above, GCD_NEAR(c)) != GDT_OK ||
-        gcd_launch_wg(c, c->k.p1_cols, nstrips * bands, 16, err) != GDT_OK ||
+        gcd_launch_wg(c, c->k.p1_cols, nstrips * bands, c->small_wg, err) != GDT_OK ||
         gcd_args(c->k.p1_rows, err, "buub", GCD_NEAR(c), r->W, r->H, GCD_COLOUR(c)) != GDT_OK ||
-        gcd_launch_wg(c, c->k.p1_rows, r->H, 16, err) != GDT_OK)
+        gcd_launch_wg(c, c->k.p1_rows, r->H, c->small_wg, err) != GDT_OK)
         return err->status;
 
     /* Debris seeds; the list capacity grows until it holds them all. */
@@ -361,7 +361,7 @@ gdt_status gcd_voronoi_from_seeds(gdt_core *c, gcd_run *r, gdt_error *err)
             gcd_fill(c, &c->d_small, 1, 0, err) != GDT_OK ||
             gcd_args(c->k.p1_debris, err, "buubub", GCD_COLOUR(c), r->W, r->H, &c->d_list2, cap,
                      &c->d_small) != GDT_OK ||
-            gcd_launch_wg(c, c->k.p1_debris, r->H, 16, err) != GDT_OK ||
+            gcd_launch_wg(c, c->k.p1_debris, r->H, c->small_wg, err) != GDT_OK ||
             gcd_read_u32(c, &c->d_small, 0, &ndebris, err) != GDT_OK)
             return err->status;
         if (ndebris <= cap)

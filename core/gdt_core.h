@@ -93,6 +93,9 @@ typedef struct gdt_core_opts {
                                 and read back, as on devices with memory of
                                 their own (default on a CPU device: the
                                 kernels write the caller's mesh directly) */
+    int gpu_layout;          /* test: the launch sizes and the phase-1 column
+                                layout chosen for a GPU, on any device (the
+                                result is the same bytes whatever the layout) */
 } gdt_core_opts;
 
 /* Per-phase figures of one gdt_core_triangulate call (cf. Fig. 11 of the

@@ -104,6 +104,8 @@ int gdt_ocl_has_fp64(const gdt_ocl *ocl);
 int gdt_ocl_is_cpu(const gdt_ocl *ocl);
 /* Number of compute units of the device. */
 unsigned gdt_ocl_compute_units(const gdt_ocl *ocl);
+/* The device's largest work-group (CL_DEVICE_MAX_WORK_GROUP_SIZE), >= 1. */
+size_t gdt_ocl_device_max_wg(const gdt_ocl *ocl);
 /* Largest single buffer the device accepts, in bytes. */
 uint64_t gdt_ocl_max_alloc(const gdt_ocl *ocl);
 /* The kernel directory programs are read from (owned by ocl). */

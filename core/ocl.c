@@ -61,6 +61,7 @@ struct gdt_ocl {
     int is_cpu;
     int huge_pages; /* $GDT_THP is "1": big CPU buffers on transparent huge pages */
     unsigned compute_units;
+    size_t device_max_wg; /* CL_DEVICE_MAX_WORK_GROUP_SIZE, at least 1 */
     uint64_t max_alloc;
     char name[OCL_NAME_MAX];
     char *kernel_dir;
@@ -592,6 +593,11 @@ gdt_status gdt_ocl_create(gdt_ocl **out, const gdt_ocl_opts *opts, gdt_error *er
     clGetDeviceInfo(ocl->device, CL_DEVICE_MAX_MEM_ALLOC_SIZE, sizeof maxalloc, &maxalloc, NULL);
     ocl->compute_units = cu ? cu : 1;
     ocl->max_alloc = maxalloc;
+    ocl->device_max_wg = 1;
+    clGetDeviceInfo(ocl->device, CL_DEVICE_MAX_WORK_GROUP_SIZE, sizeof ocl->device_max_wg,
+                    &ocl->device_max_wg, NULL);
+    if (ocl->device_max_wg < 1)
+        ocl->device_max_wg = 1;
 
     ocl->ctx = clCreateContext(NULL, 1, &ocl->device, NULL, NULL, &rc);
     if (rc != CL_SUCCESS) {
@@ -650,6 +656,7 @@ const char *gdt_ocl_device_name(const gdt_ocl *ocl) { return ocl->name; }
 int gdt_ocl_has_fp64(const gdt_ocl *ocl) { return ocl->fp64; }
 int gdt_ocl_is_cpu(const gdt_ocl *ocl) { return ocl->is_cpu; }
 unsigned gdt_ocl_compute_units(const gdt_ocl *ocl) { return ocl->compute_units; }
+size_t gdt_ocl_device_max_wg(const gdt_ocl *ocl) { return ocl->device_max_wg; }
 uint64_t gdt_ocl_max_alloc(const gdt_ocl *ocl) { return ocl->max_alloc; }
 const char *gdt_ocl_kernel_dir(const gdt_ocl *ocl) { return ocl->kernel_dir; }
 

@@ -113,7 +113,10 @@ struct gdt_core {
     size_t scan_levels_cap;
     unsigned strip;  /* columns per work-item in the column pass */
     unsigned bands;  /* row bands of the column pass */
-    size_t wg;       /* work-group size of every launch */
+    size_t wg;       /* work-group size of the launches over elements */
+    size_t small_wg; /* of the launches over columns, rows and chunks (a few
+                      * thousand work-items): 16 on a CPU, 64 on a GPU (two
+                      * NVIDIA warps, one AMD wavefront) */
     size_t flip_blocks; /* Phase 5 starts with block-local Lawson passes over
                            about this many blocks (0: parallel rounds only;
                            CPU devices: 32 per compute unit) */

@@ -228,12 +228,16 @@ int main(int argc, char **argv)
         gdt_error_print(&err, stderr);
         return err.status == GDT_EDEVICE && err.code == 5101 ? 77 : 1;
     }
-    o.copy_out = 1; /* the rounds core also reads its result back as on a GPU */
+    /* the rounds core also reads its result back, with the launch sizes and
+     * the column layout of a GPU */
+    o.copy_out = 1;
+    o.gpu_layout = 1;
     if (gdt_core_create(&alt.rounds, &o, &err) != GDT_OK) {
         gdt_error_print(&err, stderr);
         return 1;
     }
     o.copy_out = 0;
+    o.gpu_layout = 0;
     if (gdt_core_create(&alt.tiny, &o, &err) != GDT_OK) {
         gdt_error_print(&err, stderr);
         return 1;

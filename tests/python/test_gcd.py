@@ -143,8 +143,10 @@ def test_permuted_input_same_triangles(device_ok, single_tile, runner, tmp_path)
 
 @pytest.mark.parametrize("kind", ["lidar", "grid", "uniform"])
 def test_core_runner_against_reference(device_ok, gcd_run, runner, kind):
-    """Both paths and the integer-only predicates, compared inside gcd_run."""
-    for extra in (["--path", "gcd"], ["--path", "insert"], ["--no-fp64"]):
+    """Both paths, the integer-only predicates and a GPU's launch sizes and column
+    layout, compared inside gcd_run."""
+    for extra in (["--path", "gcd"], ["--path", "insert"], ["--no-fp64"],
+                  ["--path", "gcd", "--gpu-layout"]):
         r = runner([gcd_run, "--gen", kind, "40000", "3", "--grid", "512", "--reference",
                     "--check", "--json", *extra])
         assert r.returncode == 0, r.stderr

@@ -3,6 +3,7 @@
  *
  *   gcd_run [--device SPEC] [--grid N] [--path auto|gcd|insert] [--repeat K]
  *           [--check] [--reference] [--no-fp64] [--check-phases] [--profile]
+ *           [--gpu-layout]
  *           (--gen uniform|lidar|grid COUNT SEED | --points FILE | --cloud LAS/PCD)
  *           [--dump-points FILE] [--json]
  *
@@ -14,6 +15,8 @@
  * relative to the lower-left corner).
  * --check verifies the output exactly (gdt_check_mesh, gdt_check_delaunay);
  * --reference also runs the CPU reference and compares the triangle sets.
+ * --gpu-layout uses the launch sizes and column layout chosen for a GPU on
+ * whatever device runs (gdt_core_opts.gpu_layout).
  * --repeat K runs K times and reports the fastest total (with its phases).
  * Output: one line of figures, or one JSON object with --json.
  * Exit: 0 ok, 1 failure, 2 usage, 77 no OpenCL device. */
@@ -148,6 +151,7 @@ static void usage(void)
 {
     fprintf(stderr, "usage: gcd_run [--device SPEC] [--grid N] [--path auto|gcd|insert] "
                     "[--repeat K] [--check] [--reference] [--no-fp64] [--check-phases] [--profile] "
+                    "[--gpu-layout] "
                     "(--gen uniform|lidar|grid COUNT SEED | --points FILE | --cloud LAS/PCD) "
                     "[--dump-points FILE] [--json]\n");
 }
@@ -156,7 +160,7 @@ int main(int argc, char **argv)
 {
     const char *device = NULL, *gen = NULL, *in = NULL, *dump = NULL, *cloud = NULL;
     int grid = 4096, repeat = 1, check = 0, reference = 0, json = 0, nofp64 = 0, check_phases = 0,
-        profile = 0;
+        profile = 0, gpu_layout = 0;
     gdt_core_path_choice path = GDT_CORE_PATH_AUTO;
     size_t count = 0, n = 0;
     uint64_t seed = 1;
@@ -186,6 +190,8 @@ int main(int argc, char **argv)
             reference = 1;
         else if (strcmp(argv[i], "--no-fp64") == 0)
             nofp64 = 1;
+        else if (strcmp(argv[i], "--gpu-layout") == 0)
+            gpu_layout = 1;
         else if (strcmp(argv[i], "--check-phases") == 0)
             check_phases = 1;
         else if (strcmp(argv[i], "--profile") == 0)
@@ -254,6 +260,7 @@ int main(int argc, char **argv)
     o.device = device;
     o.path = path;
     o.force_no_fp64 = nofp64;
+    o.gpu_layout = gpu_layout;
     o.check_phases = check_phases;
     o.profile = profile;
     if (gdt_core_create(&core, &o, &err) != GDT_OK) {
