@@ -475,7 +475,7 @@ gdt_status gdt_dem_build(gdt_dem *w, gdt_dem_stats *stats, gdt_error *err)
     void *mem_ds = NULL;
 
     if (w->cells == NULL || w->built)
-        return gdt_error_set(err, GDT_EINTERNAL, 7664, "%s: the DEM was built already",
+        return gdt_error_set(err, GDT_EINTERNAL, 7664, "%s: the DEM was built (or failed to build) already",
                              w->path);
     w->xfer = malloc(BLOCK_BYTES);
     if (w->xfer == NULL) {

@@ -320,18 +320,6 @@ gdt_status tr_dem_faces(tr_dem *d, const gdt_raster_vertex *v, size_t m, gdt_err
     return GDT_OK;
 }
 
-gdt_status tr_dem_finish(tr_dem *d, gdt_dem_geo *geo, gdt_dem_stats *stats, gdt_error *err)
-{
-    gdt_status st;
-    stop_helpers(d); /* the rasterising is over */
-    st = gdt_dem_finish(d->w, stats, err);
-    d->w = NULL;
-    if (geo != NULL)
-        *geo = d->grid.geo;
-    tr_dem_abort(d);
-    return st;
-}
-
 gdt_status tr_dem_build(tr_dem *d, gdt_dem_geo *geo, gdt_dem_stats *stats, gdt_error *err)
 {
     stop_helpers(d); /* the rasterising is over */

@@ -742,36 +742,46 @@ def test_killed_run_resumes_to_the_same_dem_bytes(gdt_bin, runner, tmp_path, sta
     assert out.read_bytes() == (tmp_path / "want" / "d.ply").read_bytes()
 
 
-@pytest.mark.parametrize("fails", ["mesh", "dem"])
+@pytest.mark.parametrize("fails", ["mesh", "dem", "preview"])
 def test_a_failed_sync_publishes_neither_a_new_dem_nor_a_new_mesh(gdt_bin, runner, tools_dir,
                                                                   tmp_path, fails):
     """The DEM is built beside the mesh's sync and put in place only after the
     mesh: when the mesh's fsync fails (an LD_PRELOAD shim), the run exits 4
     and the DEM already at the path is not replaced; when the DEM's fails,
     the run exits 4 too, the complete mesh is in place and the old DEM
-    stays.  No temporary is left, and a rerun resumes to the bytes of an
-    undisturbed run."""
+    stays; when only the preview's fails, the mesh and the new DEM are in
+    place and the old preview stays.  No temporary is left, and a rerun
+    resumes to the bytes of an undisturbed run."""
     shim = tools_dir / "libgdt_fail_write.so"
     if not shim.exists():
         pytest.fail(f"libgdt_fail_write.so not built at {shim}")
     cloud = gen(runner, tmp_path / "c.las", 20000, 23, "lidar")
     out, tif, job, log = tmp_path / "o.ply", tmp_path / "x.tif", tmp_path / "job", tmp_path / "log"
+    png = tmp_path / "p.png"
     tif.write_bytes(b"an older DEM")
-    args = [gdt_bin, cloud, "--tile", "64", "-q", "-o", out, "--dem", tif, "--job", job]
+    png.write_bytes(b"an older preview")
+    args = [gdt_bin, cloud, "--tile", "64", "-q", "-o", out, "--dem", tif, "--preview", png,
+            "--job", job]
+    match = {"mesh": "o.ply.tmp-", "dem": "x.tif.tmp-", "preview": "p.png.tmp-"}[fails]
     env = dict(os.environ, LD_PRELOAD=str(shim), GDT_TEST_FAIL_WRITE_LOG=str(log),
-               GDT_TEST_FAIL_FSYNC_MATCH="o.ply.tmp-" if fails == "mesh" else "x.tif.tmp-")
+               GDT_TEST_FAIL_FSYNC_MATCH=match)
     r = subprocess.run([str(a) for a in args], capture_output=True, text=True, env=env,
                        timeout=300)
     assert log.exists(), r.stderr  # the shim refused an fsync
     assert r.returncode == 4, r.stderr
     assert "fsync" in r.stderr and "Input/output error" in r.stderr, r.stderr
-    assert tif.read_bytes() == b"an older DEM"
-    assert out.exists() == (fails == "dem")
+    assert png.read_bytes() == b"an older preview"
+    assert (tif.read_bytes() == b"an older DEM") == (fails != "preview")
+    assert out.exists() == (fails != "mesh")
     assert [p.name for p in tmp_path.iterdir() if ".tmp-" in p.name] == []
-    r = runner([*args, "--json", tmp_path / "j.json"])
-    assert r.returncode == 0, r.stderr
     ref = tmp_path / "ref"
     ref.mkdir()
-    _, rtif, _ = run_dem(runner, gdt_bin, cloud, ref, ("--tile", "64"))
+    _, rtif, _ = run_dem(runner, gdt_bin, cloud, ref, ("--tile", "64"),
+                         ("--preview", ref / "p.png"))
+    if fails == "preview":  # the DEM in place is already the complete one
+        assert tif.read_bytes() == rtif.read_bytes()
+    r = runner([*args, "--json", tmp_path / "j.json"])
+    assert r.returncode == 0, r.stderr
     assert tif.read_bytes() == rtif.read_bytes()
+    assert png.read_bytes() == (ref / "p.png").read_bytes()
     assert out.read_bytes() == (ref / "d.ply").read_bytes()

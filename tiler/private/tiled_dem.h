@@ -37,7 +37,7 @@ typedef struct tr_dem tr_dem;
 
 /* Defines the grid and starts the writer at opts->dem (preview: opts->preview).
  * returns: gdt_raster_grid_define's and gdt_dem_create's errors; 7001.
- * Ownership: release with tr_dem_finish, tr_dem_commit or tr_dem_abort. */
+ * Ownership: release with tr_dem_commit or tr_dem_abort. */
 gdt_status tr_dem_create(tr_dem **out, const gdt_options *opts, const gdt_cloud_info *ci,
                          const gdt_tile_plan *pl, uint64_t vertices, const char *scratch_dir,
                          gdt_error *err);
@@ -54,14 +54,11 @@ gdt_status tr_dem_tile_faces(tr_dem *d, const gdt_raster_vertex *pts, size_t n, 
  * Thread-safe.  returns: GDT_OK; the writer's errors. */
 gdt_status tr_dem_faces(tr_dem *d, const gdt_raster_vertex *v, size_t m, gdt_error *err);
 
-/* Writes the DEM (gdt_dem_finish) and releases d.  geo and stats (may be
- * NULL) receive what was written. */
-gdt_status tr_dem_finish(tr_dem *d, gdt_dem_geo *geo, gdt_dem_stats *stats, gdt_error *err);
-
-/* tr_dem_finish in two steps (gdt_dem_build, gdt_dem_commit): the build
- * stops the helpers and writes the temporaries, once every face is in; it
- * may run on another thread than the rest.  The commit (only after a
- * successful build) puts them in place and releases d; else tr_dem_abort. */
+/* Writes the DEM in two steps (gdt_dem_build, gdt_dem_commit): the build
+ * stops the helpers and writes the temporaries, once every face is in (geo
+ * and stats, may be NULL, receive what was written); it may run on another
+ * thread than the rest.  The commit (only after a successful build) puts
+ * them in place and releases d; else tr_dem_abort. */
 gdt_status tr_dem_build(tr_dem *d, gdt_dem_geo *geo, gdt_dem_stats *stats, gdt_error *err);
 gdt_status tr_dem_commit(tr_dem *d, gdt_error *err);
 
