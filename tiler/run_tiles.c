@@ -405,6 +405,13 @@ static void *post_main(void *arg)
 {
     tr_post *q = arg;
     q->st = post_tile(q->c, q->slot, &q->err);
+    /* the writer and the merge may read the tile's file now, while the
+     * core still works on the next tile */
+    if (q->st == GDT_OK && q->announce) {
+        if (q->c->out != NULL)
+            tr_out_ready(q->c->out, q->slot->k + 1);
+        tr_merge_ready(q->c, q->slot->k + 1);
+    }
     return NULL;
 }
 
@@ -422,11 +429,12 @@ gdt_status tr_post_join(tr_run *c, gdt_error *err)
 
 /* Starts the post stage of sl; the caller has joined the previous one.  If
  * no thread can be started it runs here. */
-static gdt_status post_start(tr_run *c, tr_slot *sl, gdt_error *err)
+static gdt_status post_start(tr_run *c, tr_slot *sl, int announce, gdt_error *err)
 {
     tr_post *q = &c->post;
     q->c = c;
     q->slot = sl;
+    q->announce = announce;
     q->st = GDT_OK;
     gdt_error_clear(&q->err);
     if (pthread_create(&q->tid, NULL, post_main, q) != 0)
@@ -599,7 +607,7 @@ gdt_status tr_run_tiles(tr_run *c, const tr_tile_set *set, gdt_error *err)
         if (st == GDT_OK)
             st = record_synced(c, set, err);
         if (st == GDT_OK && !ok)
-            st = post_start(c, &c->slot[i & 1], err);
+            st = post_start(c, &c->slot[i & 1], set->k == NULL, err);
         if (st != GDT_OK)
             return st;
         if (ok && set->done != NULL)

@@ -155,6 +155,7 @@ typedef struct tr_post {
     int running;        /* a thread was started and not yet joined */
     tr_run *c;
     tr_slot *slot;
+    int announce;       /* a whole run's tile stage: the tile is announced as done */
     gdt_status st;
     gdt_error err;
 } tr_post;
