@@ -10,8 +10,10 @@
 # gcd_run (tests/tools/gcd_run.c) with every shared library it loads (the
 # OpenCL ICD loader, GeographicLib, libstdc++ ... and the C library and its
 # dynamic loader, used when the machine's glibc is older than this one's, or
-# with --own-libc), the kernel sources and this script.  Nothing is
-# installed anywhere.
+# with --own-libc), CGAL's triangulation as a static program
+# (tests/tools/cgal_bench.cpp, target cgal_bench_static, built when CGAL and
+# the static GMP and MPFR are installed), the kernel sources and this
+# script.  Nothing is installed anywhere.
 #
 # Run from a bundle, on a machine with an NVIDIA driver: it finds the
 # driver's OpenCL library (libnvidia-opencl.so.1) and writes an ICD file
@@ -21,7 +23,9 @@
 #     each of --sizes (default 1M 4M): the core's triangles checked exactly
 #     (Delaunay, every point a vertex) and equal to the CPU reference's;
 #   - per-phase times (best of 2) of lidar points at --perf-sizes (default
-#     1M 4M 16M 64M);
+#     1M 4M 16M 64M), and CGAL's time (Delaunay_triangulation_2, Epick, one
+#     thread, best of 1) on the same points on this machine's CPU, with the
+#     ratio CGAL / core (above 1: the core is faster);
 #   - the device's name and memory;
 # as one table.  The sizes are meant to finish within 8 minutes on an
 # H100/H200-class machine; each gcd_run is cut at --timeout (420 s).
@@ -61,6 +65,12 @@ make_bundle() {
     done
   done
   getconf GNU_LIBC_VERSION | awk '{print $2}' > "$dir/libc/VERSION"
+  if [ -x "$build/tests/cgal_bench_static" ]; then
+    cp "$build/tests/cgal_bench_static" "$dir/cgal_bench"
+  else
+    echo "gpu_check: no static CGAL harness in $build (needs libcgal-dev and the static" \
+         "GMP and MPFR): the table will have no CGAL times" >&2
+  fi
   cp "$HERE/../kernels/"*.cl "$HERE/../kernels/"*.clh "$dir/kernels/"
   cp "${BASH_SOURCE[0]}" "$dir/gpu_check.sh"
   chmod +x "$dir/gpu_check.sh"
@@ -128,11 +138,16 @@ else
     exit 3
   fi
   ICD=$(mktemp -d)
-  trap 'rm -rf "$ICD"' EXIT
   echo "$NV" > "$ICD/nvidia.icd"
   export OCL_ICD_VENDORS=$ICD
 fi
 export GDT_KERNEL_DIR=$HERE/kernels
+# the perf sizes' points, for CGAL (16 bytes a point)
+PTS=$(mktemp -d)
+trap 'rm -rf "$PTS" ${ICD:+"$ICD"}' EXIT
+CGAL=0
+[ -x "$HERE/cgal_bench" ] && CGAL=1
+T_START=$(date +%s)
 # The machine's C library when it is at least the bundle's (a vendor driver
 # is built for the machine's), else the bundle's own with its loader.
 ver_ge() { [ "$(printf '%s\n%s\n' "$1" "$2" | sort -V | head -1)" = "$2" ]; }
@@ -174,14 +189,30 @@ done
 prow=()
 for s in $PERF; do
   n=$(count_of "$s")
-  if out=$(run_core --grid "$(grid_of "$n")" --gen lidar "$n" 7 --repeat 2 --json 2>&1); then
+  dump=()
+  [ "$CGAL" -eq 1 ] && dump=(--dump-points "$PTS/lidar-$n.pts")
+  if out=$(run_core --grid "$(grid_of "$n")" --gen lidar "$n" 7 --repeat 2 "${dump[@]}" \
+             --json 2>&1); then
     j=$(grep '^{' <<< "$out" | tail -1)
     devname=$(sed -n 's/.*"device": "\([^"]*\)".*/\1/p' <<< "$j")
     t() { sed -n "s/.*\"$1\": \\([0-9.]*\\).*/\\1/p" <<< "$j"; }
-    prow+=("$(printf '%10s %6s %8.3f %8.3f %8.3f %8.3f %8.3f %8.3f %8.3f %8.3f %6.1f' "$n" \
+    row="$(printf '%10s %6s %8.3f %8.3f %8.3f %8.3f %8.3f %8.3f %8.3f %8.3f %6.1f' "$n" \
       "$(grid_of "$n")" "$(t upload)" "$(t phase1)" "$(t phase2)" "$(t phase3)" "$(t phase4)" \
       "$(t phase5)" "$(t download)" "$(t total)" \
-      "$(awk -v n="$n" -v s="$(t total)" 'BEGIN { print (s > 0 ? n / s / 1e6 : 0) }')")")
+      "$(awk -v n="$n" -v s="$(t total)" 'BEGIN { print (s > 0 ? n / s / 1e6 : 0) }')")"
+    if [ "$CGAL" -eq 1 ]; then
+      # CGAL on the same points, the statically linked harness (no libraries)
+      if cg=$(timeout "$TIMEOUT" "$HERE/cgal_bench" "$PTS/lidar-$n.pts" 2>&1); then
+        cs=$(sed -n 's/.*"seconds": \([0-9.e-]*\).*/\1/p' <<< "$cg")
+        row+="$(awk -v c="$cs" -v s="$(t total)" \
+          'BEGIN { printf " %8.3f %7.1f", c, (s > 0 ? c / s : 0) }')"
+      else
+        row+=" CGAL FAILED $(tail -1 <<< "$cg")"
+        fail=1
+      fi
+      rm -f "$PTS/lidar-$n.pts"
+    fi
+    prow+=("$row")
   else
     prow+=("$(printf '%10s FAILED %s' "$n" "$(tail -1 <<< "$out")")")
     fail=1
@@ -199,8 +230,16 @@ echo "gpu_check: ${devname:-unknown device}, $mem; $LIBC_NOTE"
 echo "exactness (gcd_run --check --reference), seconds (one run each: the first may include compiling kernel variants)"
 printf '%-8s %10s  %-9s %9s %9s\n' kind points result core reference
 printf '%s\n' "${rows[@]}"
-echo "phases, lidar points, best of 2, seconds"
-printf '%10s %6s %8s %8s %8s %8s %8s %8s %8s %8s %6s\n' points grid upload p1 p2 p3 p4 p5 \
-  download total Mpt/s
+if [ "$CGAL" -eq 1 ]; then
+  echo "phases, lidar points, best of 2, seconds; CGAL on the same points (one CPU thread)," \
+    "x = CGAL / core total"
+  printf '%10s %6s %8s %8s %8s %8s %8s %8s %8s %8s %6s %8s %7s\n' points grid upload p1 p2 p3 \
+    p4 p5 download total Mpt/s cgal x
+else
+  echo "phases, lidar points, best of 2, seconds (no CGAL harness in the bundle)"
+  printf '%10s %6s %8s %8s %8s %8s %8s %8s %8s %8s %6s\n' points grid upload p1 p2 p3 p4 p5 \
+    download total Mpt/s
+fi
 printf '%s\n' "${prow[@]}"
+echo "gpu_check: $(( $(date +%s) - T_START )) s"
 exit "$fail"

@@ -87,6 +87,23 @@ if(CGAL_FOUND)
   gdt_target_flags(cgal_bench)
   # The benchmark compares optimised code whatever the build type.
   target_compile_options(cgal_bench PRIVATE -O3 -DNDEBUG)
+  # The same program linked statically, for the bundle of scripts/gpu_check.sh:
+  # it runs on a machine without CGAL, GMP or MPFR, whatever its C library.
+  # CGAL::CGAL names the shared GMP and MPFR, so only its headers are used.
+  # (Not with the sanitizers: their run-time libraries cannot link statically.)
+  find_library(GDT_GMP_STATIC NAMES libgmp.a)
+  find_library(GDT_MPFR_STATIC NAMES libmpfr.a)
+  if(GDT_GMP_STATIC AND GDT_MPFR_STATIC AND NOT GDT_SANITIZE)
+    add_executable(cgal_bench_static ${CMAKE_CURRENT_SOURCE_DIR}/tools/cgal_bench.cpp)
+    target_include_directories(cgal_bench_static PRIVATE
+      $<TARGET_PROPERTY:CGAL::CGAL,INTERFACE_INCLUDE_DIRECTORIES>)
+    target_compile_definitions(cgal_bench_static PRIVATE
+      $<TARGET_PROPERTY:CGAL::CGAL,INTERFACE_COMPILE_DEFINITIONS>)
+    gdt_target_flags(cgal_bench_static)
+    target_compile_options(cgal_bench_static PRIVATE -O3 -DNDEBUG)
+    target_link_options(cgal_bench_static PRIVATE -static)
+    target_link_libraries(cgal_bench_static PRIVATE ${GDT_MPFR_STATIC} ${GDT_GMP_STATIC})
+  endif()
 endif()
 
 # The single-tile command (tiler/single_tile.c) for tests/python/test_gcd.py.

@@ -49,12 +49,32 @@ def test_cpu_run_prints_the_table(bundle, libc):
     assert [(k, n, res) for k, n, res, *_ in rows] == [
         ("uniform", "8000", "equal"), ("lidar", "8000", "equal"), ("grid", "8000", "equal")]
     perf = [ln.split() for ln in lines if ln.split()[:1] in (["20000"], ["30000"])]
-    assert len(perf) == 2 and all(len(p) == 11 for p in perf), r.stdout
+    # with the static CGAL harness in the bundle: its seconds and the ratio
+    cgal = (bundle / "cgal_bench").exists()
+    assert len(perf) == 2 and all(len(p) == (13 if cgal else 11) for p in perf), r.stdout
+    assert lines[-1].startswith("gpu_check: ") and lines[-1].endswith(" s"), lines[-1]
     for p in perf:
+        if cgal:
+            assert float(p[11]) > 0 and float(p[12]) > 0, p
+            assert abs(float(p[12]) - float(p[11]) / float(p[9])) <= 0.05 + 0.01 * float(p[12]), p
         phases = [float(v) for v in p[2:9]]
         # Each of the seven phases and the total is printed rounded to 1 ms, so the
         # printed phases may exceed the printed total by up to 8 half-milliseconds.
         assert float(p[9]) > 0 and sum(phases) <= float(p[9]) * 1.01 + 8 * 5e-4, p
+
+
+def test_the_cgal_harness_is_static(bundle, tools_dir):
+    """The bundle's CGAL program loads no library: it runs where CGAL, GMP and
+    MPFR are not installed, whatever the C library."""
+    if not (tools_dir / "cgal_bench").exists():
+        pytest.skip("CGAL is not installed here")
+    exe = bundle / "cgal_bench"
+    assert exe.exists(), "CGAL is installed but the bundle has no static harness"
+    r = subprocess.run(["ldd", exe], capture_output=True, text=True)
+    assert "not a dynamic executable" in r.stdout + r.stderr, r.stdout
+    with open(exe, "rb") as f:
+        head = f.read(4096)
+    assert b"ld-linux" not in head  # no program interpreter (.interp)
 
 
 def test_a_failing_run_fails_the_check(bundle):
