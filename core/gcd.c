@@ -462,6 +462,49 @@ const char *gdt_core_device_name(const gdt_core *core)
     return gdt_ocl_device_name(core->ocl);
 }
 
+/* Bytes per texel and per point of the core's buffers: the texel arrays of
+ * phase 1 (colours, nearest sites, seeds, flags) and, per point, its
+ * coordinates and ranks, about two triangles with their opposite links and
+ * the sort and compaction scratch of phases 2-5.  Measured peaks (GPU
+ * layout, result read back, 1024^2 and 2048^2 grids, N^2/4 and N^2/2
+ * uniform and lidar points): 95-203 B per texel, 356-444 B per point,
+ * every one under this bound (test_gcd.py). */
+#define CORE_TEXEL_BYTES 24u
+#define CORE_POINT_BYTES 400u
+/* the largest single buffer: the triangles (12 B, two per point and two
+ * slots per missing point) and the texel arrays */
+#define CORE_BUFFER_POINT_BYTES 48u
+#define CORE_BUFFER_TEXEL_BYTES 4u
+
+uint64_t gdt_core_tile_bytes(int grid_n, uint64_t points)
+{
+    uint64_t texels = grid_n > 0 ? (uint64_t)grid_n * (uint64_t)grid_n : 0;
+    return CORE_TEXEL_BYTES * texels + CORE_POINT_BYTES * points + ((uint64_t)16 << 20);
+}
+
+int gdt_core_auto_tile(int is_cpu, uint64_t device_mem, uint64_t max_alloc, uint64_t host_mem)
+{
+    if (is_cpu)
+        return GDT_CORE_CPU_TILE;
+    for (int n = 16384; n > GDT_CORE_CPU_TILE; n /= 2) {
+        uint64_t texels = (uint64_t)n * (uint64_t)n, points = texels / 2;
+        uint64_t largest = CORE_BUFFER_POINT_BYTES * points + CORE_BUFFER_TEXEL_BYTES * texels;
+        if (device_mem != 0 && gdt_core_tile_bytes(n, points) > device_mem / 4 * 3)
+            continue;
+        if (max_alloc != 0 && largest > max_alloc)
+            continue;
+        if (host_mem != 0 && GDT_CORE_HOST_BYTES_PER_POINT * points > host_mem / 2)
+            continue;
+        return n;
+    }
+    return GDT_CORE_CPU_TILE;
+}
+
+uint64_t gdt_core_device_peak(const gdt_core *core)
+{
+    return gdt_ocl_peak_bytes(core->ocl);
+}
+
 void gdt_core_profile_dump(gdt_core *core, FILE *f)
 {
     gdt_ocl_profile_dump(core->ocl, f);

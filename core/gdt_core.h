@@ -161,6 +161,31 @@ const char *gdt_core_device_name(const gdt_core *core);
 gdt_status gdt_core_triangulate(gdt_core *core, const gdt_ipt *pts, size_t n, int grid_n,
                                 gdt_mesh *out, gdt_core_stats *stats, gdt_error *err);
 
+/* The most bytes the core's device buffers have held at once since it was
+ * created (on a CPU device those that wrap the caller's memory included:
+ * a device with memory of its own holds them too). */
+uint64_t gdt_core_device_peak(const gdt_core *core);
+
+/* An upper bound of the device memory a core needs for one tile of
+ * grid_n x grid_n texels holding points points, in bytes: what
+ * gdt_core_device_peak reports on a device with memory of its own (tested
+ * with the GPU layout and the result read back, opts.gpu_layout and
+ * opts.copy_out), with a margin. */
+uint64_t gdt_core_tile_bytes(int grid_n, uint64_t points);
+
+/* The tile side (texels) for a run that does not choose one.  A CPU device
+ * gets GDT_CORE_CPU_TILE (there the core's buffers are host memory, and
+ * larger tiles only add memory).  Any other device gets the largest power
+ * of two of GDT_CORE_CPU_TILE..16384 whose densest tile, N^2/2 points (the
+ * planner keeps tiles to about N^2/4), needs at most three quarters of
+ * device_mem (gdt_core_tile_bytes), no buffer beyond max_alloc, and, on
+ * the host, at most half of host_mem (GDT_CORE_HOST_BYTES_PER_POINT a
+ * point: the tile stage's two slots of points, triangles and faces);
+ * device_mem, max_alloc and host_mem 0 mean unknown (not a limit). */
+#define GDT_CORE_CPU_TILE 4096
+#define GDT_CORE_HOST_BYTES_PER_POINT 200u
+int gdt_core_auto_tile(int is_cpu, uint64_t device_mem, uint64_t max_alloc, uint64_t host_mem);
+
 /* With opts.profile: the device time of every kernel so far, to f. */
 void gdt_core_profile_dump(gdt_core *core, FILE *f);
 

@@ -91,6 +91,20 @@ gdt_status gdt_ocl_check_device_spec(const char *spec, gdt_error *err);
  * GDT_EINTERNAL 7001 (out of memory). */
 gdt_status gdt_ocl_create(gdt_ocl **out, const gdt_ocl_opts *opts, gdt_error *err);
 
+/* What gdt_ocl_probe reports of a device. */
+typedef struct gdt_ocl_device_info {
+    int is_cpu;          /* CL_DEVICE_TYPE_CPU */
+    uint64_t global_mem; /* CL_DEVICE_GLOBAL_MEM_SIZE (0: not reported) */
+    uint64_t max_alloc;  /* CL_DEVICE_MAX_MEM_ALLOC_SIZE (0: not reported) */
+    char name[128];      /* CL_DEVICE_NAME */
+} gdt_ocl_device_info;
+
+/* The device gdt_ocl_create would select for opts, described without
+ * creating a context or building anything (opts->kernel_dir, force_no_fp64
+ * and profile are not used).  Errors as gdt_ocl_create's selection:
+ * GDT_EUSAGE 2110, GDT_EDEVICE 5101, 5102, GDT_EINTERNAL 7001. */
+gdt_status gdt_ocl_probe(const gdt_ocl_opts *opts, gdt_ocl_device_info *info, gdt_error *err);
+
 /* Releases every kernel, program and buffer of the context, then the
  * context itself.  ocl may be NULL. */
 void gdt_ocl_destroy(gdt_ocl *ocl);
@@ -108,6 +122,12 @@ unsigned gdt_ocl_compute_units(const gdt_ocl *ocl);
 size_t gdt_ocl_device_max_wg(const gdt_ocl *ocl);
 /* Largest single buffer the device accepts, in bytes. */
 uint64_t gdt_ocl_max_alloc(const gdt_ocl *ocl);
+/* The device's memory (CL_DEVICE_GLOBAL_MEM_SIZE), in bytes (0: unknown). */
+uint64_t gdt_ocl_global_mem(const gdt_ocl *ocl);
+/* The most bytes the context's buffers have held at once, those wrapping
+ * host memory included (on a device with memory of its own they would be
+ * device buffers). */
+uint64_t gdt_ocl_peak_bytes(const gdt_ocl *ocl);
 /* The kernel directory programs are read from (owned by ocl). */
 const char *gdt_ocl_kernel_dir(const gdt_ocl *ocl);
 

@@ -63,6 +63,9 @@ struct gdt_ocl {
     unsigned compute_units;
     size_t device_max_wg; /* CL_DEVICE_MAX_WORK_GROUP_SIZE, at least 1 */
     uint64_t max_alloc;
+    uint64_t global_mem;  /* CL_DEVICE_GLOBAL_MEM_SIZE */
+    uint64_t live_bytes;  /* bytes of the buffers in bufs */
+    uint64_t peak_bytes;  /* the most live_bytes has been */
     char name[OCL_NAME_MAX];
     char *kernel_dir;
     gdt_log *log;
@@ -519,6 +522,33 @@ gdt_status gdt_ocl_list_devices(char *buf, size_t len, gdt_error *err)
     return GDT_OK;
 }
 
+gdt_status gdt_ocl_probe(const gdt_ocl_opts *opts, gdt_ocl_device_info *info, gdt_error *err)
+{
+    dev_entry *devs = NULL;
+    size_t n = 0, pick = 0;
+    cl_ulong v = 0;
+    gdt_status st;
+
+    memset(info, 0, sizeof *info);
+    gdt_ocl_prepare_env(opts->cache_dir, opts->log);
+    st = enumerate(&devs, &n, err);
+    if (st == GDT_OK)
+        st = select_device(devs, n, opts->device, opts->local_rank, &pick, err);
+    if (st == GDT_OK) {
+        info->is_cpu = (devs[pick].type & CL_DEVICE_TYPE_CPU) != 0;
+        if (clGetDeviceInfo(devs[pick].device, CL_DEVICE_GLOBAL_MEM_SIZE, sizeof v, &v, NULL) ==
+            CL_SUCCESS)
+            info->global_mem = v;
+        v = 0;
+        if (clGetDeviceInfo(devs[pick].device, CL_DEVICE_MAX_MEM_ALLOC_SIZE, sizeof v, &v,
+                            NULL) == CL_SUCCESS)
+            info->max_alloc = v;
+        dev_string(devs[pick].device, CL_DEVICE_NAME, info->name, sizeof info->name);
+    }
+    free(devs);
+    return st;
+}
+
 gdt_status gdt_ocl_create(gdt_ocl **out, const gdt_ocl_opts *opts, gdt_error *err)
 {
     gdt_ocl_opts defaults;
@@ -593,6 +623,9 @@ gdt_status gdt_ocl_create(gdt_ocl **out, const gdt_ocl_opts *opts, gdt_error *er
     clGetDeviceInfo(ocl->device, CL_DEVICE_MAX_MEM_ALLOC_SIZE, sizeof maxalloc, &maxalloc, NULL);
     ocl->compute_units = cu ? cu : 1;
     ocl->max_alloc = maxalloc;
+    ocl->global_mem = 0;
+    clGetDeviceInfo(ocl->device, CL_DEVICE_GLOBAL_MEM_SIZE, sizeof ocl->global_mem,
+                    &ocl->global_mem, NULL);
     ocl->device_max_wg = 1;
     clGetDeviceInfo(ocl->device, CL_DEVICE_MAX_WORK_GROUP_SIZE, sizeof ocl->device_max_wg,
                     &ocl->device_max_wg, NULL);
@@ -658,6 +691,8 @@ int gdt_ocl_is_cpu(const gdt_ocl *ocl) { return ocl->is_cpu; }
 unsigned gdt_ocl_compute_units(const gdt_ocl *ocl) { return ocl->compute_units; }
 size_t gdt_ocl_device_max_wg(const gdt_ocl *ocl) { return ocl->device_max_wg; }
 uint64_t gdt_ocl_max_alloc(const gdt_ocl *ocl) { return ocl->max_alloc; }
+uint64_t gdt_ocl_global_mem(const gdt_ocl *ocl) { return ocl->global_mem; }
+uint64_t gdt_ocl_peak_bytes(const gdt_ocl *ocl) { return ocl->peak_bytes; }
 const char *gdt_ocl_kernel_dir(const gdt_ocl *ocl) { return ocl->kernel_dir; }
 
 /* Reads a whole text file.  *out is malloc'ed and NUL-terminated. */
@@ -893,6 +928,9 @@ static void buf_link(gdt_ocl *ocl, gdt_ocl_buf *b, size_t bytes, const char *wha
 {
     b->bytes = bytes;
     b->what = what;
+    ocl->live_bytes += bytes;
+    if (ocl->live_bytes > ocl->peak_bytes)
+        ocl->peak_bytes = ocl->live_bytes;
     b->next = ocl->bufs;
     if (ocl->bufs)
         ocl->bufs->prev = b;
@@ -962,6 +1000,7 @@ void gdt_ocl_buf_release(gdt_ocl *ocl, gdt_ocl_buf *b)
         ocl->bufs = b->next;
     if (b->next)
         b->next->prev = b->prev;
+    ocl->live_bytes -= b->bytes;
     clReleaseMemObject(b->mem);
     if (!b->borrowed)
         free(b->host);

@@ -47,8 +47,10 @@ typedef struct opt_spec {
 static const opt_spec OPTIONS[] = {
     {OPT_OUTPUT, "--output", "-o", "OUT.ply", "out.ply",
      "output mesh, by its extension (any case): .obj OBJ (+ .prj), .xml LandXML, else PLY"},
-    {OPT_TILE, "--tile", NULL, "N", "4096",
-     "tile size in texels per side: a power of two, 64..16384"},
+    {OPT_TILE, "--tile", NULL, "N", "auto",
+     "tile size in texels per side: a power of two, 64..16384 (auto: 4096 on a CPU "
+     "device; on a GPU the largest of 4096..16384 its memory holds; 4096 with "
+     "--single-tile and --info)"},
     {OPT_CELL, "--cell", NULL, "S", "auto",
      "texel size in CRS units (auto: about N*N/4 points per tile)"},
     {OPT_HALO, "--halo", NULL, "H", "auto", "halo width in texels around each tile (0 is legal)"},

@@ -143,6 +143,7 @@ static gdt_status write_summary(const tr_run *c, gdt_error *err)
     gdt_trim_report_json(&j, &c->opts->trim, &s->trim);
     gdt_json_uint(&j, "tiles", s->tiles);
     gdt_json_uint(&j, "tile", (uint64_t)pl->tile);
+    gdt_json_bool(&j, "tile_auto", c->tile_auto);
     gdt_json_int(&j, "cell", pl->cell);
     gdt_json_int(&j, "halo", pl->halo);
     gdt_json_uint(&j, "gcd_tiles", s->gcd_tiles);

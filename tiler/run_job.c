@@ -49,6 +49,7 @@ gdt_status tr_run_init(tr_run *c, const gdt_options *opts, gdt_error *err)
     memset(c, 0, sizeof *c);
     c->t_start = gdt_now();
     c->opts = opts;
+    c->tile = opts->tile;
     c->lock_fd = -1;
     c->t_flushed = gdt_now();
     c->filter_comments[0] = c->filter_comment;
@@ -113,11 +114,11 @@ static void text_abs(tr_text *t, const char *key, const char *path)
 
 /* The options and inputs that fix the output, one "key=value" per line
  * (not the output path: finished work serves any -o). */
-static gdt_status build_params(const gdt_options *o, char **out, gdt_error *err)
+static gdt_status build_params(const gdt_options *o, int tile, char **out, gdt_error *err)
 {
     tr_text t = {NULL, 0, 0, 0};
     char filter[GDT_FILTER_COMMENT_MAX];
-    text_add(&t, "tile=%d\ncell=%.17g\nhalo=%ld\ndup=%d\nquantum=%.17g\n", o->tile, o->cell,
+    text_add(&t, "tile=%d\ncell=%.17g\nhalo=%ld\ndup=%d\nquantum=%.17g\n", tile, o->cell,
              o->halo, (int)o->dup, o->quantum);
     gdt_filter_describe(&o->filter, filter, sizeof filter);
     text_add(&t, "filter=%s\n", filter);
@@ -257,7 +258,7 @@ static gdt_status open_journal(tr_run *c, gdt_error *err)
     char diff[512];
     int is_new = 0, has_work = 0;
     tr_text out = {NULL, 0, 0, 0}, products = {NULL, 0, 0, 0};
-    gdt_status st = build_params(c->opts, &params, err);
+    gdt_status st = build_params(c->opts, c->tile, &params, err);
 
     if (st == GDT_OK)
         st = build_fingerprint(c->opts, &fp, err);
@@ -449,6 +450,7 @@ gdt_status gdt_cli_resume(const gdt_options *opts, gdt_error *err)
     } while (0)
     NEED("tile");
     o.tile = atoi(v);
+    o.tile_set = 1; /* the job's, whatever the device */
     NEED("cell");
     o.cell = strtod(v, NULL);
     NEED("halo");

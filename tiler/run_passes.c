@@ -11,6 +11,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "gdt_ocl.h"
 #include "private/cli_modes.h"
@@ -184,12 +185,46 @@ gdt_status tr_core_start_join(tr_core_start *cs, gdt_core **core, gdt_error *err
     return cs->st;
 }
 
+/* Without --tile: the tile side for the device the core will use
+ * (gdt_core_auto_tile), from a look at the device that builds nothing.
+ * When the device cannot be looked at, the CPU's side: the core's own
+ * start-up then reports why. */
+static void choose_tile(tr_run *c)
+{
+    gdt_ocl_opts oo;
+    gdt_ocl_device_info info;
+    gdt_error e;
+    uint64_t host = c->opts->mem_budget;
+    long pages = sysconf(_SC_PHYS_PAGES), psize = sysconf(_SC_PAGESIZE);
+
+    if (host == 0 && pages > 0 && psize > 0)
+        host = (uint64_t)pages * (uint64_t)psize;
+    memset(&oo, 0, sizeof oo);
+    oo.device = c->cstart.opts.device;
+    oo.local_rank = c->cstart.opts.local_rank;
+    oo.log = &c->log;
+    gdt_error_clear(&e);
+    c->tile_auto = 1;
+    if (gdt_ocl_probe(&oo, &info, &e) != GDT_OK) {
+        c->tile = GDT_CORE_CPU_TILE;
+        return;
+    }
+    c->tile = gdt_core_auto_tile(info.is_cpu, info.global_mem, info.max_alloc, host);
+    gdt_log_note(&c->log, "--tile %d for %s (%s, %.1f GiB of device memory)", c->tile,
+                 info.name, info.is_cpu ? "a CPU device" : "not a CPU device",
+                 (double)info.global_mem / (double)((uint64_t)1 << 30));
+}
+
 gdt_status tr_run_start_core(tr_run *c, gdt_error *err)
 {
     /* the device while pass 1 runs */
     c->cstart.opts.device = c->opts->device;
     c->cstart.opts.local_rank = gdt_comm_local_rank(c->opts->comm);
     c->cstart.opts.log = &c->log;
+    /* the environment first: the look at the device starts OpenCL */
+    gdt_ocl_prepare_env(c->cstart.opts.cache_dir, c->cstart.opts.log);
+    if (!c->opts->tile_set)
+        choose_tile(c);
     core_start_begin(&c->cstart);
     return gdt_certifier_create(&c->certifier, gdt_cli_threads(c->opts->threads), err);
 }
@@ -214,7 +249,7 @@ static void tiler_opts(tr_run *c, const gdt_cloud *cloud, gdt_tiler_opts *to)
 {
     const gdt_options *opts = c->opts;
     memset(to, 0, sizeof *to);
-    to->tile = opts->tile;
+    to->tile = c->tile;
     to->cell = opts->cell;
     to->halo = opts->halo;
     to->mem_budget = opts->mem_budget;
@@ -473,6 +508,13 @@ gdt_status tr_run_attach(tr_run *c, const uint64_t job_id[2], const unsigned cha
     if (gdt_tiler_get_plan(c->tiler) == NULL || c->base != NULL)
         return gdt_error_set(err, GDT_EINTERNAL, 7954, "a rank attached twice after pass 2");
     c->plan = gdt_tiler_get_plan(c->tiler);
+    /* rank 0 planned with its tile side: a rank whose own device chose
+     * another would run the core on a grid of the wrong size */
+    if (c->plan->tile != c->tile)
+        return gdt_error_set(err, GDT_EUSAGE, 2953,
+                             "rank %d chose --tile %d for its OpenCL device, rank 0 chose %d for "
+                             "its own: give --tile to every rank",
+                             gdt_comm_rank(c->opts->comm), c->tile, c->plan->tile);
     c->s.points_read = c->plan->points;
     if (!gdt_tiler_pass2_done(c->tiler))
         return GDT_OK; /* the state after pass 1: for the shared pass 2 */

@@ -204,7 +204,7 @@ static gdt_status core_tile(tr_run *c, uint64_t k, tr_slot *sl, gdt_error *err)
 
     t0 = gdt_now();
     memset(&cs, 0, sizeof cs);
-    st = gdt_core_triangulate(c->core, sl->mesh.pts, n, c->opts->tile, &sl->mesh, &cs, err);
+    st = gdt_core_triangulate(c->core, sl->mesh.pts, n, c->tile, &sl->mesh, &cs, err);
     if (st != GDT_OK)
         return st;
     if (strcmp(cs.path, "insert") == 0)

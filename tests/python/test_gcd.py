@@ -154,6 +154,21 @@ def test_core_runner_against_reference(device_ok, gcd_run, runner, kind):
         assert rep["reference_equal"] and rep["checked"]
 
 
+@pytest.mark.parametrize("kind", ["lidar", "grid", "uniform"])
+@pytest.mark.parametrize("grid,per_point", [(512, 2), (1024, 4), (1024, 2)])
+def test_the_tile_memory_bound_holds(device_ok, gcd_run, runner, kind, grid, per_point):
+    """gdt_core_tile_bytes, which the automatic --tile of a GPU trusts, bounds what
+    the core's buffers hold at once with the GPU's layout and the result read back
+    from device buffers (as on a GPU), and is not far above it."""
+    n = grid * grid // per_point
+    r = runner([gcd_run, "--gen", kind, str(n), "5", "--grid", str(grid), "--gpu-layout",
+                "--copy-out", "--json"])
+    assert r.returncode == 0, r.stderr
+    rep = json.loads(r.stdout)
+    peak, bound = rep["device_peak_bytes"], rep["tile_bytes_bound"]
+    assert 0 < peak <= bound <= 1.5 * peak + (16 << 20), (peak, bound)
+
+
 @pytest.mark.parametrize("spec,name", [("99", "CL_DEVICE_NOT_FOUND"),
                                        ("7:3", "CL_DEVICE_NOT_FOUND")])
 def test_device_errors_exit_5(device_ok, single_tile, runner, data_dir, tmp_path, spec, name):

@@ -656,3 +656,30 @@ def test_summary_against_job_and_output_header(gdt_bin, tmp_path):
     assert checked.read_bytes() == out.read_bytes(), "--check changes the output"
     assert os.path.getsize(out) == len(head.encode("latin-1")) + len(b"end_header\n") + \
         24 * mesh.nvert + 13 * mesh.nface
+
+
+def test_without_tile_the_device_chooses(gdt_bin, tmp_path):
+    """Without --tile the run chooses the side for its device (a CPU device here:
+    4096), says so with -v and in --json, records it in the job, and a --resume
+    keeps it; a given --tile is not a choice."""
+    import json
+    cloud = tu.gen_cloud(tmp_path / "c.las", 3000, 5, "lidar")
+    out, js, job = tmp_path / "a.ply", tmp_path / "a.json", tmp_path / "a.job"
+    r = tu.run([gdt_bin, cloud, "-o", out, "--json", js, "--job", job, "--keep-job", "-v"])
+    assert r.returncode == 0, r.stderr
+    s = json.loads(js.read_text())
+    assert s["tile"] == 4096 and s["tile_auto"] is True, (s["tile"], s["tile_auto"])
+    assert "--tile 4096 for " in r.stderr and "a CPU device" in r.stderr, r.stderr
+    first = out.read_bytes()
+    out.unlink()
+    r = tu.run([gdt_bin, "--resume", job, "--json", tmp_path / "b.json", "-v"])
+    assert r.returncode == 0, r.stderr
+    b = json.loads((tmp_path / "b.json").read_text())
+    assert b["tile"] == 4096 and b["tile_auto"] is False and "--tile 4096 for" not in r.stderr
+    assert b["reused"]["tiles"] == b["tiles"], b["reused"]
+    assert out.read_bytes() == first
+    r = tu.run([gdt_bin, cloud, "-o", tmp_path / "c.ply", "--json", tmp_path / "c.json",
+                "--tile", "1024", "-v"])
+    assert r.returncode == 0, r.stderr
+    c = json.loads((tmp_path / "c.json").read_text())
+    assert c["tile"] == 1024 and c["tile_auto"] is False and "--tile 1024 for" not in r.stderr

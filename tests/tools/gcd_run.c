@@ -3,7 +3,7 @@
  *
  *   gcd_run [--device SPEC] [--grid N] [--path auto|gcd|insert] [--repeat K]
  *           [--check] [--reference] [--no-fp64] [--check-phases] [--profile]
- *           [--gpu-layout]
+ *           [--gpu-layout] [--copy-out]
  *           (--gen uniform|lidar|grid COUNT SEED | --points FILE | --cloud LAS/PCD)
  *           [--dump-points FILE] [--json]
  *
@@ -16,7 +16,11 @@
  * --check verifies the output exactly (gdt_check_mesh, gdt_check_delaunay);
  * --reference also runs the CPU reference and compares the triangle sets.
  * --gpu-layout uses the launch sizes and column layout chosen for a GPU on
- * whatever device runs (gdt_core_opts.gpu_layout).
+ * whatever device runs (gdt_core_opts.gpu_layout); --copy-out reads the
+ * result back from device buffers, as on a device with memory of its own
+ * (gdt_core_opts.copy_out).  The JSON's device_peak_bytes is the most the
+ * core's device buffers held at once (gdt_core_device_peak), and
+ * tile_bytes_bound what gdt_core_tile_bytes allows for it.
  * --repeat K runs K times and reports the fastest total (with its phases).
  * Output: one line of figures, or one JSON object with --json.
  * Exit: 0 ok, 1 failure, 2 usage, 77 no OpenCL device. */
@@ -151,7 +155,7 @@ static void usage(void)
 {
     fprintf(stderr, "usage: gcd_run [--device SPEC] [--grid N] [--path auto|gcd|insert] "
                     "[--repeat K] [--check] [--reference] [--no-fp64] [--check-phases] [--profile] "
-                    "[--gpu-layout] "
+                    "[--gpu-layout] [--copy-out] "
                     "(--gen uniform|lidar|grid COUNT SEED | --points FILE | --cloud LAS/PCD) "
                     "[--dump-points FILE] [--json]\n");
 }
@@ -160,7 +164,7 @@ int main(int argc, char **argv)
 {
     const char *device = NULL, *gen = NULL, *in = NULL, *dump = NULL, *cloud = NULL;
     int grid = 4096, repeat = 1, check = 0, reference = 0, json = 0, nofp64 = 0, check_phases = 0,
-        profile = 0, gpu_layout = 0;
+        profile = 0, gpu_layout = 0, copy_out = 0;
     gdt_core_path_choice path = GDT_CORE_PATH_AUTO;
     size_t count = 0, n = 0;
     uint64_t seed = 1;
@@ -192,6 +196,8 @@ int main(int argc, char **argv)
             nofp64 = 1;
         else if (strcmp(argv[i], "--gpu-layout") == 0)
             gpu_layout = 1;
+        else if (strcmp(argv[i], "--copy-out") == 0)
+            copy_out = 1;
         else if (strcmp(argv[i], "--check-phases") == 0)
             check_phases = 1;
         else if (strcmp(argv[i], "--profile") == 0)
@@ -261,6 +267,7 @@ int main(int argc, char **argv)
     o.path = path;
     o.force_no_fp64 = nofp64;
     o.gpu_layout = gpu_layout;
+    o.copy_out = copy_out;
     o.check_phases = check_phases;
     o.profile = profile;
     if (gdt_core_create(&core, &o, &err) != GDT_OK) {
@@ -317,6 +324,7 @@ int main(int argc, char **argv)
                ", \"delete_iterations\": %" PRIu64 ", \"insert_iterations\": %" PRIu64
                ", \"walk_steps\": %" PRIu64 ", \"flips\": %" PRIu64 ", \"flip_iterations\": %" PRIu64
                ", \"exact_escalations\": %" PRIu64 ", \"tiebreaks\": %" PRIu64
+               ", \"device_peak_bytes\": %" PRIu64 ", \"tile_bytes_bound\": %" PRIu64
                ", \"checked\": %s, \"reference_equal\": %s}\n",
                gdt_core_device_name(core), n, grid, best.path, best.path_reason, best.triangles,
                best.t_upload, best.t_phase1, best.t_phase2, best.t_phase3, best.t_phase4,
@@ -324,7 +332,9 @@ int main(int argc, char **argv)
                t_ref, best.kept, best.missing_phase1, best.debris_texels, best.bad_cases,
                best.shift_iterations, best.delete_iterations, best.insert_iterations,
                best.walk_steps, best.flips + best.insert_flips, best.flip_iterations,
-               best.exact_escalations, best.tiebreaks, check ? "true" : "false",
+               best.exact_escalations, best.tiebreaks, gdt_core_device_peak(core),
+               gdt_core_tile_bytes(grid, n),
+               check ? "true" : "false",
                reference ? "true" : "false");
     } else {
         printf("%zu points grid %d path %s (%s): total %.3fs = upload %.3f + p1 %.3f + p2 %.3f + "

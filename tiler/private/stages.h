@@ -208,6 +208,9 @@ typedef struct tr_core_start {
  * tr_run_close.  Owns everything it points to except opts. */
 struct tr_run {
     const gdt_options *opts;
+    int tile;           /* the tile side: --tile, or chosen for the device
+                           (tr_run_start_core) */
+    int tile_auto;      /* tile was chosen, not given */
     gdt_log log;
     double t_start;     /* gdt_now() at tr_run_init */
     char *job;          /* owned */
