@@ -287,9 +287,16 @@ static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
         if (st == GDT_OK)
             st = put_face_records(o, m, o->src.trim ? o->drop : NULL, &kept, err);
         /* the DEM takes the faces the mesh keeps (o->tri holds them) */
-        if (st == GDT_OK && o->src.dem != NULL)
+        if (st == GDT_OK && o->src.dem != NULL) {
+            /* while tiles are still coming, the cores are busy with them:
+             * helper threads would only take turns with the core */
+            int alone;
+            pthread_mutex_lock(&o->mu);
+            alone = o->ready < o->src.ntiles;
+            pthread_mutex_unlock(&o->mu);
             st = tr_dem_tile_faces(o->src.dem, o->tile_pts, (size_t)d.points, o->src.base[k],
-                                   o->tri, kept, err);
+                                   o->tri, kept, alone, err);
+        }
         done += m;
     }
     if (st == GDT_OK)

@@ -43,12 +43,14 @@ gdt_status tr_dem_create(tr_dem **out, const gdt_options *opts, const gdt_cloud_
                          gdt_error *err);
 
 /* Rasterises m faces tri[3m] (output vertex indices) of a tile whose points
- * pts[0..n) (global lattice, z) have the output indices base..base+n-1.
+ * pts[0..n) (global lattice, z) have the output indices base..base+n-1;
+ * alone: on the caller's thread only (the helpers stay idle), else split
+ * with the helper threads.  The DEM is the same either way.
  * Thread-safe.
  * returns: GDT_OK; GDT_EINTERNAL 7663 (an index outside the tile); the
  * writer's errors. */
 gdt_status tr_dem_tile_faces(tr_dem *d, const gdt_raster_vertex *pts, size_t n, uint64_t base,
-                             const int32_t *tri, size_t m, gdt_error *err);
+                             const int32_t *tri, size_t m, int alone, gdt_error *err);
 
 /* Rasterises m faces given by their vertices v[3 m] (global lattice, z).
  * Thread-safe.  returns: GDT_OK; the writer's errors. */
