@@ -79,10 +79,29 @@ typedef struct gdt_ocl_opts {
  * own calls this first, before it starts that thread.  Thread-safe. */
 void gdt_ocl_prepare_env(const char *cache_dir, gdt_log *log);
 
-/* Checks the syntax of a device SPEC (above) without touching OpenCL, so a
- * malformed one is a usage error before any work.  NULL and "" are valid.
+/* Several devices (the tiled run's --device): a comma-separated list of
+ * SPECs ("0,1"; the same device may be named twice, each name is one
+ * context), or an element "all", "cpu:all" or "gpu:all" (every device, or
+ * every one of that type, in enumeration order).  At most
+ * GDT_OCL_MAX_DEVICES. */
+#define GDT_OCL_MAX_DEVICES 64
+
+/* Checks the syntax of a device SPEC (above), or of a list of them,
+ * without touching OpenCL, so a malformed one is a usage error before any
+ * work.  NULL and "" are valid.
  * returns: GDT_OK; GDT_EUSAGE 2110 (malformed). */
 gdt_status gdt_ocl_check_device_spec(const char *spec, gdt_error *err);
+
+/* 1 when value names more than one SPEC: a list, or an "all" element. */
+int gdt_ocl_spec_is_list(const char *value);
+
+/* The single SPECs of value (a SPEC or a list, above), "all" elements
+ * expanded to "P:D" by enumerating the devices.  *specs (n of them) is
+ * allocated here: release with gdt_ocl_device_list_free.
+ * Errors: GDT_EUSAGE 2110; GDT_EDEVICE 5101 (an "all" element finds no
+ * device), 5102; GDT_EINTERNAL 7001. */
+gdt_status gdt_ocl_device_list(const char *value, char ***specs, size_t *n, gdt_error *err);
+void gdt_ocl_device_list_free(char **specs, size_t n);
 
 /* Creates a context on the selected device.
  * Ownership: *out is allocated here; release with gdt_ocl_destroy.

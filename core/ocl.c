@@ -373,14 +373,156 @@ static gdt_status parse_spec(const char *spec, dev_spec *out, gdt_error *err)
         return GDT_OK;
     return gdt_error_set(err, GDT_EUSAGE, 2110,
                          "--device %s: expected an index N, PLATFORM:DEVICE, 'cpu', 'gpu', "
-                         "'local', 'cpu/local' or 'gpu/local' (numbers up to 100000)",
+                         "'local', 'cpu/local' or 'gpu/local' (numbers up to 100000); the "
+                         "tiled run also takes a comma-separated list of them, 'all', "
+                         "'cpu:all' and 'gpu:all'",
                          spec);
 }
 
-gdt_status gdt_ocl_check_device_spec(const char *spec, gdt_error *err)
+/* The device type of an "every device" element ("all", "cpu:all",
+ * "gpu:all", lengths len) in *type (0: any); 0 when it is not one. */
+static int all_spec(const char *s, size_t len, cl_device_type *type)
+{
+    if (len == 3 && strncmp(s, "all", 3) == 0) {
+        *type = 0;
+        return 1;
+    }
+    if (len == 7 && (strncmp(s, "cpu:all", 7) == 0 || strncmp(s, "gpu:all", 7) == 0)) {
+        *type = s[0] == 'c' ? CL_DEVICE_TYPE_CPU : CL_DEVICE_TYPE_GPU;
+        return 1;
+    }
+    return 0;
+}
+
+int gdt_ocl_spec_is_list(const char *value)
+{
+    cl_device_type t;
+    return value != NULL &&
+           (strchr(value, ',') != NULL || all_spec(value, strlen(value), &t));
+}
+
+gdt_status gdt_ocl_check_device_spec(const char *value, gdt_error *err)
 {
     dev_spec ds;
-    return parse_spec(spec, &ds, err);
+    const char *p = value;
+    char one[64];
+
+    if (value == NULL || strchr(value, ',') == NULL) {
+        cl_device_type t;
+        if (value != NULL && all_spec(value, strlen(value), &t))
+            return GDT_OK;
+        return parse_spec(value, &ds, err);
+    }
+    for (;;) {
+        const char *e = strchr(p, ',');
+        size_t len = e != NULL ? (size_t)(e - p) : strlen(p);
+        cl_device_type t;
+        gdt_status st;
+        if (len == 0 || len >= sizeof one)
+            return gdt_error_set(err, GDT_EUSAGE, 2110,
+                                 "--device %s: an empty or overlong element in the list", value);
+        memcpy(one, p, len);
+        one[len] = '\0';
+        if (!all_spec(one, len, &t)) {
+            gdt_error e1;
+            gdt_error_clear(&e1);
+            st = parse_spec(one, &ds, &e1);
+            if (st != GDT_OK)
+                return gdt_error_set(err, GDT_EUSAGE, 2110,
+                                     "--device %s: the element '%s' is not a device: expected "
+                                     "an index N, PLATFORM:DEVICE, 'cpu', 'gpu', 'local', "
+                                     "'cpu/local', 'gpu/local', 'all', 'cpu:all' or 'gpu:all'",
+                                     value, one);
+        }
+        if (e == NULL)
+            return GDT_OK;
+        p = e + 1;
+    }
+}
+
+gdt_status gdt_ocl_device_list(const char *value, char ***out, size_t *n_out, gdt_error *err)
+{
+    char **specs = NULL;
+    size_t n = 0, cap = 0;
+    dev_entry *devs = NULL;
+    size_t ndev = 0;
+    const char *p = value != NULL ? value : "";
+    gdt_status st = gdt_ocl_check_device_spec(value, err);
+
+    *out = NULL;
+    *n_out = 0;
+    while (st == GDT_OK) {
+        const char *e = strchr(p, ',');
+        size_t len = e != NULL ? (size_t)(e - p) : strlen(p);
+        cl_device_type t = 0;
+        if (all_spec(p, len, &t)) {
+            size_t before = n;
+            if (devs == NULL)
+                st = enumerate(&devs, &ndev, err);
+            for (size_t i = 0; st == GDT_OK && i < ndev; i++) {
+                char buf[32];
+                if (t != 0 && (devs[i].type & t) == 0)
+                    continue;
+                snprintf(buf, sizeof buf, "%u:%u", devs[i].pi, devs[i].di);
+                if (n == cap) {
+                    char **g = realloc(specs, (cap = cap ? 2 * cap : 8) * sizeof *g);
+                    if (g == NULL) {
+                        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+                        break;
+                    }
+                    specs = g;
+                }
+                specs[n] = dup_str(buf);
+                if (specs[n] == NULL)
+                    st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+                else
+                    n++;
+            }
+            if (st == GDT_OK && n == before)
+                st = gdt_error_set(err, GDT_EDEVICE, 5101,
+                                   "--device %.*s: no OpenCL device of that type among the "
+                                   "%zu found (%s)",
+                                   (int)len, p, ndev, gdt_ocl_error_name(CL_DEVICE_NOT_FOUND));
+        } else {
+            if (n == cap) {
+                char **g = realloc(specs, (cap = cap ? 2 * cap : 8) * sizeof *g);
+                if (g == NULL) {
+                    st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+                    break;
+                }
+                specs = g;
+            }
+            specs[n] = malloc(len + 1);
+            if (specs[n] == NULL) {
+                st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+                break;
+            }
+            memcpy(specs[n], p, len);
+            specs[n][len] = '\0';
+            n++;
+        }
+        if (e == NULL)
+            break;
+        p = e + 1;
+    }
+    free(devs);
+    if (st == GDT_OK && n > GDT_OCL_MAX_DEVICES)
+        st = gdt_error_set(err, GDT_EUSAGE, 2110, "--device %s: %zu devices, at most %d",
+                           value, n, GDT_OCL_MAX_DEVICES);
+    if (st != GDT_OK) {
+        gdt_ocl_device_list_free(specs, n);
+        return st;
+    }
+    *out = specs;
+    *n_out = n;
+    return GDT_OK;
+}
+
+void gdt_ocl_device_list_free(char **specs, size_t n)
+{
+    for (size_t i = 0; specs != NULL && i < n; i++)
+        free(specs[i]);
+    free(specs);
 }
 
 /* Picks the device SPEC designates among devs[0..n). */

@@ -62,7 +62,8 @@ static const opt_spec OPTIONS[] = {
     {OPT_RESUME, "--resume", NULL, "DIR", NULL, "resume the job in DIR (needs nothing else)"},
     {OPT_DEVICE, "--device", NULL, "SPEC", "first device",
      "OpenCL device: index, PLATFORM:DEVICE, 'cpu' or 'gpu'; under mpirun 'gpu/local' "
-     "(or 'cpu/local', 'local') gives a node's ranks its devices in turn"},
+     "(or 'cpu/local', 'local') gives a node's ranks its devices in turn; the tiled run "
+     "takes several: a comma-separated list ('0,1') or 'gpu:all' ('cpu:all', 'all')"},
     {OPT_THREADS, "--threads", NULL, "K", "all cores", "host worker threads, 1..1024"},
     {OPT_MEM, "--mem-budget", NULL, "SIZE", "auto",
      "memory budget, at least 16M, e.g. 512M or 4G (binary units)"},
@@ -557,6 +558,11 @@ static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
     if (opts->single_tile && opts->mode != GDT_MODE_RUN)
         return gdt_error_set(err, GDT_EUSAGE, 2105,
                              "--single-tile only applies to a triangulation run");
+    if (opts->single_tile && gdt_ocl_spec_is_list(opts->device))
+        return gdt_error_set(err, GDT_EUSAGE, 2103,
+                             "--device %s: several devices share the tiled run's tiles; "
+                             "--single-tile runs one tile on one device",
+                             opts->device);
     if (gdt_trim_on(&opts->trim) && opts->mode == GDT_MODE_RESUME)
         return gdt_error_set(err, GDT_EUSAGE, 2802,
                              "--resume DIR trims the mesh as its job recorded (no --max-edge "

@@ -12,6 +12,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "gdt_ocl.h"
 #include "gdt_plycheck.h"
 #include "private/dem_report.h"
 #include "private/ground_report.h"
@@ -431,6 +432,10 @@ gdt_status tr_run_close(tr_run *c, gdt_status st)
     free(c->base);
     gdt_certifier_destroy(c->certifier);
     gdt_core_destroy(c->core);
+    for (size_t j = 0; j < c->cstart.nmore; j++)
+        gdt_core_destroy(c->cstart.more[j]);
+    free(c->cstart.more);
+    gdt_ocl_device_list_free(c->cstart.specs, c->cstart.nspecs);
     gdt_tiler_destroy(c->tiler);
     gdt_cloud_close(c->cloud);
     /* A run refused for its input or its options, of a job that holds no

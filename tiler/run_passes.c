@@ -151,6 +151,14 @@ static void *core_start_main(void *arg)
     stack_t ss;
     int have = sigaltstack(NULL, &ss) == 0;
     cs->st = gdt_core_create(&cs->core, &cs->opts, &cs->err);
+    /* several devices: a core on each of the others */
+    for (size_t j = 1; cs->st == GDT_OK && j < cs->nspecs; j++) {
+        gdt_core_opts o = cs->opts;
+        o.device = cs->specs[j];
+        cs->st = gdt_core_create(&cs->more[j - 1], &o, &cs->err);
+        if (cs->st == GDT_OK)
+            cs->nmore = j;
+    }
     /* The compiler inside the OpenCL runtime gives the thread an alternate
      * signal stack of its own; put back the one the thread had, which
      * whoever set it up (a sanitizer's runtime) releases at thread exit. */
@@ -191,28 +199,38 @@ gdt_status tr_core_start_join(tr_core_start *cs, gdt_core **core, gdt_error *err
  * start-up then reports why. */
 static void choose_tile(tr_run *c)
 {
-    gdt_ocl_opts oo;
-    gdt_ocl_device_info info;
-    gdt_error e;
+    const tr_core_start *cs = &c->cstart;
     uint64_t host = c->opts->mem_budget;
     long pages = sysconf(_SC_PHYS_PAGES), psize = sysconf(_SC_PAGESIZE);
+    size_t ndev = cs->nspecs > 0 ? cs->nspecs : 1;
 
     if (host == 0 && pages > 0 && psize > 0)
         host = (uint64_t)pages * (uint64_t)psize;
-    memset(&oo, 0, sizeof oo);
-    oo.device = c->cstart.opts.device;
-    oo.local_rank = c->cstart.opts.local_rank;
-    oo.log = &c->log;
-    gdt_error_clear(&e);
     c->tile_auto = 1;
-    if (gdt_ocl_probe(&oo, &info, &e) != GDT_OK) {
-        c->tile = GDT_CORE_CPU_TILE;
-        return;
+    c->tile = 16384;
+    /* several devices: the side every one of them holds (the host keeps a
+     * tile stage's slots for each) */
+    for (size_t j = 0; j < ndev; j++) {
+        gdt_ocl_opts oo;
+        gdt_ocl_device_info info;
+        gdt_error e;
+        int t;
+        memset(&oo, 0, sizeof oo);
+        oo.device = cs->nspecs > 0 ? cs->specs[j] : cs->opts.device;
+        oo.local_rank = cs->opts.local_rank;
+        oo.log = &c->log;
+        gdt_error_clear(&e);
+        if (gdt_ocl_probe(&oo, &info, &e) != GDT_OK) {
+            c->tile = GDT_CORE_CPU_TILE;
+            return;
+        }
+        t = gdt_core_auto_tile(info.is_cpu, info.global_mem, info.max_alloc, host / ndev);
+        if (t < c->tile)
+            c->tile = t;
+        gdt_log_note(&c->log, "--tile %d for %s (%s, %.1f GiB of device memory)", t, info.name,
+                     info.is_cpu ? "a CPU device" : "not a CPU device",
+                     (double)info.global_mem / (double)((uint64_t)1 << 30));
     }
-    c->tile = gdt_core_auto_tile(info.is_cpu, info.global_mem, info.max_alloc, host);
-    gdt_log_note(&c->log, "--tile %d for %s (%s, %.1f GiB of device memory)", c->tile,
-                 info.name, info.is_cpu ? "a CPU device" : "not a CPU device",
-                 (double)info.global_mem / (double)((uint64_t)1 << 30));
 }
 
 gdt_status tr_run_start_core(tr_run *c, gdt_error *err)
@@ -221,8 +239,22 @@ gdt_status tr_run_start_core(tr_run *c, gdt_error *err)
     c->cstart.opts.device = c->opts->device;
     c->cstart.opts.local_rank = gdt_comm_local_rank(c->opts->comm);
     c->cstart.opts.log = &c->log;
-    /* the environment first: the look at the device starts OpenCL */
+    /* the environment first: a look at the devices starts OpenCL */
     gdt_ocl_prepare_env(c->cstart.opts.cache_dir, c->cstart.opts.log);
+    if (gdt_ocl_spec_is_list(c->opts->device)) {
+        gdt_status st = gdt_ocl_device_list(c->opts->device, &c->cstart.specs,
+                                            &c->cstart.nspecs, err);
+        if (st != GDT_OK)
+            return st;
+        c->cstart.opts.device = c->cstart.specs[0];
+        if (c->cstart.nspecs > 1) {
+            c->cstart.more = calloc(c->cstart.nspecs - 1, sizeof *c->cstart.more);
+            if (c->cstart.more == NULL)
+                return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        }
+        gdt_log_note(&c->log, "--device %s: %zu cores in the tile stage", c->opts->device,
+                     c->cstart.nspecs);
+    }
     if (!c->opts->tile_set)
         choose_tile(c);
     core_start_begin(&c->cstart);

@@ -164,9 +164,21 @@ static void put_trim(const tr_run *c, unsigned char *p)
     }
 }
 
-/* The first half of tile k, on the main thread: loads it and runs the core
- * on its own points into sl (the halo goes beside it). */
-static gdt_status core_tile(tr_run *c, uint64_t k, tr_slot *sl, gdt_error *err)
+void tr_core_counts_add(tr_run *c, const tr_core_counts *n)
+{
+    if (n->max_tile_points > c->s.max_tile_points)
+        c->s.max_tile_points = n->max_tile_points;
+    if (n->max_halo_points > c->s.max_halo_points)
+        c->s.max_halo_points = n->max_halo_points;
+    c->s.gcd_tiles += n->gcd_tiles;
+    c->s.insert_tiles += n->insert_tiles;
+    c->s.t_core += n->t_core;
+}
+
+/* The first half of tile k: loads it and runs the core on its own points
+ * into sl (the halo goes beside it). */
+gdt_status tr_core_tile(tr_run *c, gdt_core *core, gdt_point_buf *halo, tr_core_counts *counts,
+                        uint64_t k, tr_slot *sl, gdt_error *err)
 {
     gdt_tile_desc *d = &sl->d;
     gdt_core_stats cs;
@@ -186,32 +198,32 @@ static gdt_status core_tile(tr_run *c, uint64_t k, tr_slot *sl, gdt_error *err)
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     if (st == GDT_OK)
         st = gdt_tiler_load_tile_local(c->tiler, k, d->local_x0, d->local_y0, sl->mesh.pts,
-                                       sl->z, &n, &c->halo, err);
+                                       sl->z, &n, halo, err);
     if (st != GDT_OK)
         return st;
     sl->n = n;
-    nh = sl->nh = c->halo.n;
-    if (n > c->s.max_tile_points)
-        c->s.max_tile_points = n;
-    if (nh > c->s.max_halo_points)
-        c->s.max_halo_points = nh;
+    nh = sl->nh = halo->n;
+    if (n > counts->max_tile_points)
+        counts->max_tile_points = n;
+    if (nh > counts->max_halo_points)
+        counts->max_halo_points = nh;
     if (tr_reserve(&sl->lh, &sl->cap_lh, nh + 1, sizeof *sl->lh) != 0)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     for (size_t i = 0; i < nh; i++) {
-        sl->lh[i].x = c->halo.pts[i].x - d->local_x0;
-        sl->lh[i].y = c->halo.pts[i].y - d->local_y0;
+        sl->lh[i].x = halo->pts[i].x - d->local_x0;
+        sl->lh[i].y = halo->pts[i].y - d->local_y0;
     }
 
     t0 = gdt_now();
     memset(&cs, 0, sizeof cs);
-    st = gdt_core_triangulate(c->core, sl->mesh.pts, n, c->tile, &sl->mesh, &cs, err);
+    st = gdt_core_triangulate(core, sl->mesh.pts, n, c->tile, &sl->mesh, &cs, err);
     if (st != GDT_OK)
         return st;
     if (strcmp(cs.path, "insert") == 0)
-        c->s.insert_tiles++;
+        counts->insert_tiles++;
     else
-        c->s.gcd_tiles++;
-    c->s.t_core += gdt_now() - t0;
+        counts->gcd_tiles++;
+    counts->t_core += gdt_now() - t0;
     return GDT_OK;
 }
 
@@ -550,28 +562,35 @@ static gdt_status reuse_tile(tr_run *c, uint64_t k, uint64_t size, uint64_t sum,
     return GDT_OK;
 }
 
-gdt_status tr_run_tiles(tr_run *c, const tr_tile_set *set, gdt_error *err)
+/* tr_post_join, then the joined post stage's slot (*posting) given back to
+ * the lanes. */
+static gdt_status post_join_slot(tr_run *c, tr_slot **posting, gdt_error *err)
 {
-    static const tr_tile_set all = {NULL, 0, NULL, NULL, NULL, NULL, NULL};
-    uint64_t ntiles = gdt_tiler_tile_count(c->tiler), n;
-    double t0;
+    gdt_status st = tr_post_join(c, err);
+    tr_lanes_posted(c, *posting);
+    *posting = NULL;
+    return st;
+}
+
+/* The n tiles of set in order; counts takes the figures of c->core.  With
+ * one device the i-th tile uses slot[i & 1]: the core fills one slot while
+ * the post stage empties the other; with several, the lanes' slots, each
+ * given back once its post stage was joined. */
+static gdt_status tiles_loop(tr_run *c, const tr_tile_set *set, uint64_t n,
+                             tr_core_counts *counts, gdt_error *err)
+{
+    tr_slot *posting = NULL; /* the slot of the post stage started last */
     gdt_status st;
 
-    if (set == NULL)
-        set = &all;
-    n = set->k != NULL ? set->n : ntiles;
-    t0 = gdt_now();
-    gdt_progress_stage(&c->prog, "tiles", c->s.vertices, "points");
-    /* the i-th tile of the set uses slot[i & 1]: the core fills one slot
-     * while the post stage empties the other */
     for (uint64_t i = 0; i < n; i++) {
         uint64_t k = set->k != NULL ? set->k[i] : i, size = 0, sum = 0;
         int found = 0, ok = 0;
+        tr_slot *sl = &c->slot[i & 1];
         if (tr_stopped(c)) {
             /* keep what is done: a rerun reuses it */
             gdt_error e2;
             gdt_error_clear(&e2);
-            if (tr_post_join(c, &e2) == GDT_OK)
+            if (post_join_slot(c, &posting, &e2) == GDT_OK)
                 flush_pending(c, set, &e2);
             st = tr_interrupted(c->job, "the tile stage", err);
             return st;
@@ -587,13 +606,15 @@ gdt_status tr_run_tiles(tr_run *c, const tr_tile_set *set, gdt_error *err)
             st = gdt_job_get_tile(c->jobdb, k, &found, &size, &sum, err);
         }
         /* reuse_tile shares the post stage's buffers */
-        if (st == GDT_OK && found && (st = tr_post_join(c, err)) == GDT_OK)
+        if (st == GDT_OK && found && (st = post_join_slot(c, &posting, err)) == GDT_OK)
             st = reuse_tile(c, k, size, sum, &ok, err);
         /* the core on tile k while the post stage finishes the one before */
         if (st == GDT_OK && !ok)
-            st = core_tile(c, k, &c->slot[i & 1], err);
+            st = c->lanes != NULL
+                     ? tr_lanes_take(c, i, &sl, counts, err)
+                     : tr_core_tile(c, c->core, &c->halo, counts, k, sl, err);
         if (st == GDT_OK)
-            st = tr_post_join(c, err);
+            st = post_join_slot(c, &posting, err);
         /* tiles before k have their .tri files, and tile k if reused; a
          * failed output is reported after the merge, once the tiles are
          * safe in the job for a rerun */
@@ -606,8 +627,10 @@ gdt_status tr_run_tiles(tr_run *c, const tr_tile_set *set, gdt_error *err)
          * journal (a short transaction) */
         if (st == GDT_OK)
             st = record_synced(c, set, err);
-        if (st == GDT_OK && !ok)
-            st = post_start(c, &c->slot[i & 1], set->k == NULL, err);
+        if (st == GDT_OK && !ok) {
+            st = post_start(c, sl, set->k == NULL, err);
+            posting = sl;
+        }
         if (st != GDT_OK)
             return st;
         if (ok && set->done != NULL)
@@ -619,11 +642,42 @@ gdt_status tr_run_tiles(tr_run *c, const tr_tile_set *set, gdt_error *err)
         if (set->k == NULL) /* a subset's caller shows the progress of all */
             gdt_progress_update(&c->prog, c->base[k + 1]);
     }
-    st = tr_post_join(c, err);
+    st = post_join_slot(c, &posting, err);
     if (st == GDT_OK)
         st = flush_pending(c, set, err);
     if (st == GDT_OK && set->poll != NULL)
         st = set->poll(set->ctx, err);
+    return st;
+}
+
+gdt_status tr_run_tiles(tr_run *c, const tr_tile_set *set, gdt_error *err)
+{
+    static const tr_tile_set all = {NULL, 0, NULL, NULL, NULL, NULL, NULL};
+    uint64_t ntiles = gdt_tiler_tile_count(c->tiler), n;
+    tr_core_counts counts;
+    double t0;
+    gdt_status st;
+
+    if (set == NULL)
+        set = &all;
+    n = set->k != NULL ? set->n : ntiles;
+    t0 = gdt_now();
+    memset(&counts, 0, sizeof counts);
+    gdt_progress_stage(&c->prog, "tiles", c->s.vertices, "points");
+    st = tr_lanes_start(c, set, n, err);
+    if (st == GDT_OK)
+        st = tiles_loop(c, set, n, &counts, err);
+    if (c->lanes != NULL) {
+        /* a post stage may still read a lane's slot */
+        gdt_error e2;
+        gdt_error_clear(&e2);
+        if (tr_post_join(c, &e2) != GDT_OK && st == GDT_OK) {
+            st = e2.status;
+            *err = e2;
+        }
+        tr_lanes_stop(c);
+    }
+    tr_core_counts_add(c, &counts);
     if (st != GDT_OK)
         return st;
     c->s.t_tiles = gdt_now() - t0;

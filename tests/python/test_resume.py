@@ -258,9 +258,17 @@ def test_sigkill_at_random_instants_then_rerun(big, tmp_path):
 
     for n, chain in enumerate(chains):
         attempt(f"chain{n}", chain)
-    # Every stage must have been hit; retry a missed one on a fresh job.
+    # Every stage must have been hit; retry a missed one on a fresh job.  A
+    # stage with no time of its own in the uninterrupted run cannot be hit:
+    # the seam merge, for one, may finish beside the tile stage (each row as
+    # soon as its tiles are written), so that the kills in the tile stage
+    # are the ones that stop it.
     spans = ru.durations(big.timeline, big.time)
-    for stage in MUST_HIT:
+    must_hit = [s for s in MUST_HIT if s == "after write" or s not in spans or
+                spans[s][1] >= 0.002]
+    log.append(f"stages without time of their own (not required): "
+               f"{[s for s in MUST_HIT if s not in must_hit]}")
+    for stage in must_hit:
         for k in range(4):
             if stage in hits:
                 break
@@ -279,7 +287,7 @@ def test_sigkill_at_random_instants_then_rerun(big, tmp_path):
     print(history)
     assert not failures, f"{len(failures)} failing scenarios:\n\n" + "\n\n".join(failures) + \
         f"\n\nall runs:\n{history}"
-    missed = [s for s in MUST_HIT if s not in hits]
+    missed = [s for s in must_hit if s not in hits]
     assert not missed, f"no SIGKILL landed in {missed}\n{history}"
     assert len(hits) >= MIN_KILLS, f"only {len(hits)} SIGKILLs hit a running process\n{history}"
 
@@ -744,3 +752,34 @@ def test_damaged_tiler_file_redoes_pass2(tiny, tmp_path, damage):
     s = ru.read_json(js)
     assert s["reused"]["pass2"] is False and s["redone"]["pass2"] is True, s
     assert s["reused"]["tiles"] + s["redone"]["tiles"] == tiny.ntiles, s
+
+
+# ------------------------------------------------------------ several devices
+
+def test_two_devices_resume_one_device_and_back(small, tmp_path):
+    """The tile stage on two cores (the one PoCL device opened twice, --device
+    0,0) gives the bytes of one; killed in its tile stage, the job is finished
+    by a run on one device, and a run on two devices reuses every tile of a
+    finished job."""
+    two = tmp_path / "two.ply"
+    r = ru.Run(small.cmd(small.las, two, "--device", "0,0"))
+    assert r.finish() == 0, r.stderr
+    small.assert_same(two, "--device 0,0")
+
+    out, job = tmp_path / "k.ply", tmp_path / "k.job"
+    cmd = small.cmd(small.las, out, "--device", "0,0", "--job", job)
+    kill_in_tile_stage(cmd, job, min_tri=2)
+    js = tmp_path / "k1.json"
+    r = ru.Run(small.cmd(small.las, out, "--job", job, "--keep-job", "--json", js))
+    assert r.finish() == 0, r.stderr
+    small.assert_same(out, "resumed on one device")
+    s = ru.read_json(js)
+    # the killed run's tiles count only once their batch was synced and recorded
+    assert s["reused"]["tiles"] < small.ntiles, s["reused"]
+
+    out.unlink()
+    js = tmp_path / "k2.json"
+    r = ru.Run(small.cmd(small.las, out, "--job", job, "--device", "0,0", "--json", js))
+    assert r.finish() == 0, r.stderr
+    small.assert_same(out, "rerun on two devices")
+    assert ru.read_json(js)["reused"]["tiles"] == small.ntiles

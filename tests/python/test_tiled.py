@@ -683,3 +683,43 @@ def test_without_tile_the_device_chooses(gdt_bin, tmp_path):
     assert r.returncode == 0, r.stderr
     c = json.loads((tmp_path / "c.json").read_text())
     assert c["tile"] == 1024 and c["tile_auto"] is False and "--tile 1024 for" not in r.stderr
+
+
+@pytest.mark.parametrize("devices", ["0,0", "0,0,0", "cpu:all", "all"])
+def test_several_devices_give_the_same_bytes(gdt_bin, tmp_path, devices):
+    """Tiles shared by several cores (one PoCL device opened several times, or
+    every device of a type) give the bytes of one device, --json figures
+    included."""
+    import json
+    cloud = tu.gen_cloud(tmp_path / "c.las", 20000, 9, "lidar", "--dup-fraction", "0.02")
+    outs = []
+    for tag, extra in (("one", []), ("many", ["--device", devices])):
+        out, js = tmp_path / f"{tag}.ply", tmp_path / f"{tag}.json"
+        r = tu.run([gdt_bin, cloud, "--tile", "64", "--cell", "0.1", "-o", out, "--json", js,
+                    "-q", *extra])
+        assert r.returncode == 0, r.stderr
+        outs.append((out.read_bytes(), json.loads(js.read_text())))
+    (a, sa), (b, sb) = outs
+    assert a == b
+    for key in ("tiles", "gcd_tiles", "insert_tiles", "max_tile_points", "max_halo_points",
+                "certified_faces", "merge_faces"):
+        assert sa.get(key) == sb.get(key), key
+
+
+@pytest.mark.parametrize("spec,code", [("0,,0", 2), ("0,x", 2), ("gpu:all", 5)])
+def test_bad_device_lists(gdt_bin, tmp_path, spec, code):
+    """A malformed list is a usage error before any work; a list element that
+    finds no device is exit 5 naming it."""
+    if code == 5 and "GPU" in tu.run(["clinfo", "-l"]).stdout:
+        pytest.skip("this machine has an OpenCL GPU")
+    cloud = tu.gen_cloud(tmp_path / "c.las", 500, 2, "uniform")
+    r = tu.run([gdt_bin, cloud, "-o", tmp_path / "o.ply", "--device", spec])
+    assert r.returncode == code, r.stderr
+    assert spec in r.stderr
+    assert not (tmp_path / "o.ply").exists()
+
+
+def test_single_tile_refuses_a_device_list(gdt_bin, tmp_path):
+    cloud = tu.gen_cloud(tmp_path / "c.las", 500, 2, "uniform")
+    r = tu.run([gdt_bin, cloud, "-o", tmp_path / "o.ply", "--single-tile", "--device", "0,0"])
+    assert r.returncode == 2 and "--single-tile" in r.stderr, r.stderr

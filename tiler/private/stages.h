@@ -114,6 +114,19 @@ typedef struct tr_slot {
 
 typedef struct tr_run tr_run;
 
+/* What running the core on tiles adds to the run's figures (per core,
+ * added up at the end of the tile stage), and a lane's failure. */
+typedef struct tr_core_counts {
+    uint64_t max_tile_points, max_halo_points, gcd_tiles, insert_tiles;
+    double t_core;
+    gdt_status st;
+    gdt_error err;
+} tr_core_counts;
+
+/* Several devices: the cores beyond the first, each on a thread of its own
+ * (run_lanes.c). */
+typedef struct tr_lanes tr_lanes;
+
 /* Pass 1 shared with other processes (the MPI scheduler): after the cloud
  * and the tiler exist, begin() says whether pass 1 is shared and, when it
  * is, gives this process's share [*first, *end) of the records (the others
@@ -197,7 +210,12 @@ typedef struct tr_merge_bg {
  * the file size limit raises on the thread that made it). */
 typedef struct tr_core_start {
     gdt_core_opts opts;
-    gdt_core *core;
+    char **specs;       /* several devices: --device as single SPECs
+                           (gdt_ocl_device_list), opts.device = specs[0]; owned */
+    size_t nspecs;
+    gdt_core *core;     /* on opts.device */
+    gdt_core **more;    /* on specs[1..nspecs): the tile stage's lanes; owned */
+    size_t nmore;       /* created */
     gdt_error err;
     gdt_status st;
     pthread_t thread;
@@ -226,7 +244,9 @@ struct tr_run {
     const gdt_tile_plan *plan;
     uint64_t *base;     /* ntiles + 1 output index of each tile's first vertex */
     gdt_point_buf halo; /* the current tile's halo */
-    tr_slot slot[2];    /* the i-th tile a tile stage runs uses slot[i & 1] */
+    tr_slot slot[2];    /* the i-th tile a tile stage runs uses slot[i & 1] (one
+                           device; with several, the lanes' slots) */
+    tr_lanes *lanes;    /* several devices, during the tile stage; else NULL */
     tr_post post;
     tr_reclaim reclaim;
     tr_out *out;        /* the mesh writer, from the tile stage on */
@@ -426,6 +446,27 @@ typedef struct tr_tile_set {
  * returns: GDT_OK; the tiler's, core's, certifier's and journal's errors;
  * GDT_EIO 48xx; GDT_EINTERRUPTED 1302. */
 gdt_status tr_run_tiles(tr_run *c, const tr_tile_set *set, gdt_error *err);
+
+/* Tile k loaded (with its halo, through the buffer halo) and triangulated
+ * by core into sl; counts takes the figures.  Thread-safe for distinct
+ * cores, halos, counts and slots (run_tiles.c). */
+gdt_status tr_core_tile(tr_run *c, gdt_core *core, gdt_point_buf *halo, tr_core_counts *counts,
+                        uint64_t k, tr_slot *sl, gdt_error *err);
+void tr_core_counts_add(tr_run *c, const tr_core_counts *n);
+
+/* Lanes (run_lanes.c), for the n tiles of set when the run has more than
+ * one core (c->cstart.nmore > 0; else nothing is started): tr_lanes_start
+ * starts them; tr_lanes_take gives the i-th tile of the set triangulated
+ * (by a lane, or by c->core on the caller's thread, counted in counts);
+ * tr_lanes_posted frees a slot whose post stage was joined; tr_lanes_stop
+ * joins the lanes, adds their figures and frees their slots (c->lanes
+ * NULL; nothing when none run).  Errors of take: the core's, a lane's for
+ * that tile. */
+gdt_status tr_lanes_start(tr_run *c, const tr_tile_set *set, uint64_t n, gdt_error *err);
+gdt_status tr_lanes_take(tr_run *c, uint64_t i, tr_slot **sl, tr_core_counts *counts,
+                         gdt_error *err);
+void tr_lanes_posted(tr_run *c, tr_slot *sl);
+void tr_lanes_stop(tr_run *c);
 
 /* Waits for the post stage (if one runs) and returns its status; its error,
  * if any, is copied to *err. */
