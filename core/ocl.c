@@ -440,6 +440,28 @@ gdt_status gdt_ocl_check_device_spec(const char *value, gdt_error *err)
     }
 }
 
+/* Appends the first len bytes of s to specs[0..*n) (capacity *cap).
+ * returns: 0, or -1 out of memory. */
+static int push_spec(char ***specs, size_t *n, size_t *cap, const char *s, size_t len)
+{
+    char *copy;
+    if (*n == *cap) {
+        size_t want = *cap ? 2 * *cap : 8;
+        char **g = realloc(*specs, want * sizeof *g);
+        if (g == NULL)
+            return -1;
+        *specs = g;
+        *cap = want;
+    }
+    copy = malloc(len + 1);
+    if (copy == NULL)
+        return -1;
+    memcpy(copy, s, len);
+    copy[len] = '\0';
+    (*specs)[(*n)++] = copy;
+    return 0;
+}
+
 gdt_status gdt_ocl_device_list(const char *value, char ***out, size_t *n_out, gdt_error *err)
 {
     char **specs = NULL;
@@ -464,42 +486,16 @@ gdt_status gdt_ocl_device_list(const char *value, char ***out, size_t *n_out, gd
                 if (t != 0 && (devs[i].type & t) == 0)
                     continue;
                 snprintf(buf, sizeof buf, "%u:%u", devs[i].pi, devs[i].di);
-                if (n == cap) {
-                    char **g = realloc(specs, (cap = cap ? 2 * cap : 8) * sizeof *g);
-                    if (g == NULL) {
-                        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-                        break;
-                    }
-                    specs = g;
-                }
-                specs[n] = dup_str(buf);
-                if (specs[n] == NULL)
+                if (push_spec(&specs, &n, &cap, buf, strlen(buf)) != 0)
                     st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-                else
-                    n++;
             }
             if (st == GDT_OK && n == before)
                 st = gdt_error_set(err, GDT_EDEVICE, 5101,
                                    "--device %.*s: no OpenCL device of that type among the "
                                    "%zu found (%s)",
                                    (int)len, p, ndev, gdt_ocl_error_name(CL_DEVICE_NOT_FOUND));
-        } else {
-            if (n == cap) {
-                char **g = realloc(specs, (cap = cap ? 2 * cap : 8) * sizeof *g);
-                if (g == NULL) {
-                    st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-                    break;
-                }
-                specs = g;
-            }
-            specs[n] = malloc(len + 1);
-            if (specs[n] == NULL) {
-                st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-                break;
-            }
-            memcpy(specs[n], p, len);
-            specs[n][len] = '\0';
-            n++;
+        } else if (push_spec(&specs, &n, &cap, p, len) != 0) {
+            st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         }
         if (e == NULL)
             break;
