@@ -685,7 +685,8 @@ def test_without_tile_the_device_chooses(gdt_bin, tmp_path):
     assert c["tile"] == 1024 and c["tile_auto"] is False and "--tile 1024 for" not in r.stderr
 
 
-@pytest.mark.parametrize("devices", ["0,0", "0,0,0", "cpu:all", "all"])
+@pytest.mark.parametrize("devices", [pytest.param("0,0", marks=pytest.mark.sanitize),
+                                     "0,0,0", "cpu:all", "all"])
 def test_several_devices_give_the_same_bytes(gdt_bin, tmp_path, devices):
     """Tiles shared by several cores (one PoCL device opened several times, or
     every device of a type) give the bytes of one device, --json figures
