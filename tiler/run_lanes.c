@@ -15,7 +15,8 @@
  * always finds a free slot for a tile it triangulates itself.
  *
  * Invariants (under mu): state[i] is FREE, TAKEN (a lane works on it), DONE
- * (slot_of[i] holds it) or FAILED (err_at, st, err); busy[s] is set from a
+ * (slot_of[i] holds it) or FAILED (the lowest failed tile is fail_i, its
+ * error fail_st and fail_err); busy[s] is set from a
  * slot's claim until its post stage was joined (tr_lanes_posted);
  * lane_held counts the slots lanes claimed that the stage has not taken. */
 #include "private/stages.h"
@@ -48,6 +49,9 @@ struct tr_lanes {
     int *slot_of;            /* the slot of i once DONE */
     uint64_t scan;           /* no FREE todo i below this */
     int stop;
+    uint64_t fail_i;
+    gdt_status fail_st;
+    gdt_error fail_err;
     int nslots, lane_held;
     tr_slot *slots;
     unsigned char *busy;
@@ -104,8 +108,11 @@ static void *lane_main(void *arg)
                 p->slot_of[i] = -1;
                 p->busy[s] = 0;
                 p->lane_held--;
-                l->counts.st = st;
-                l->counts.err = e;
+                if (p->fail_st == GDT_OK || i < p->fail_i) {
+                    p->fail_i = i;
+                    p->fail_st = st;
+                    p->fail_err = e;
+                }
                 p->stop = 1;
             }
             pthread_cond_broadcast(&p->cv);
@@ -113,6 +120,19 @@ static void *lane_main(void *arg)
     }
     pthread_mutex_unlock(&p->mu);
     return NULL;
+}
+
+/* The pool's arrays and the pool (not its slots' contents). */
+static void lanes_free(tr_lanes *p)
+{
+    free(p->k);
+    free(p->todo);
+    free(p->state);
+    free(p->slot_of);
+    free(p->slots);
+    free(p->busy);
+    free(p->lanes);
+    free(p);
 }
 
 gdt_status tr_lanes_start(tr_run *c, const tr_tile_set *set, uint64_t n, gdt_error *err)
@@ -170,14 +190,7 @@ gdt_status tr_lanes_start(tr_run *c, const tr_tile_set *set, uint64_t n, gdt_err
     }
     return GDT_OK;
 fail:
-    free(p->k);
-    free(p->todo);
-    free(p->state);
-    free(p->slot_of);
-    free(p->slots);
-    free(p->busy);
-    free(p->lanes);
-    free(p);
+    lanes_free(p);
     return st;
 }
 
@@ -218,15 +231,10 @@ gdt_status tr_lanes_take(tr_run *c, uint64_t i, tr_slot **sl, tr_core_counts *co
     while (p->state[i] == LN_TAKEN)
         pthread_cond_wait(&p->cv, &p->mu);
     if (p->state[i] == LN_FAILED) {
-        st = GDT_EINTERNAL;
-        for (int j = 0; j < p->nlanes; j++)
-            if (p->lanes[j].counts.st != GDT_OK) {
-                st = p->lanes[j].counts.st;
-                *err = p->lanes[j].counts.err;
-                break;
-            }
-        if (st == GDT_EINTERNAL && err->status == GDT_OK)
-            st = gdt_error_set(err, GDT_EINTERNAL, 7830, "a lane failed without a message");
+        /* the stage takes tiles in order: the first failure it meets is the
+         * lowest one */
+        st = p->fail_st;
+        *err = p->fail_err;
         pthread_mutex_unlock(&p->mu);
         return st;
     }
@@ -271,13 +279,6 @@ void tr_lanes_stop(tr_run *c)
     }
     pthread_mutex_destroy(&p->mu);
     pthread_cond_destroy(&p->cv);
-    free(p->k);
-    free(p->todo);
-    free(p->state);
-    free(p->slot_of);
-    free(p->slots);
-    free(p->busy);
-    free(p->lanes);
-    free(p);
+    lanes_free(p);
     c->lanes = NULL;
 }

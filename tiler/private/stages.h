@@ -115,12 +115,10 @@ typedef struct tr_slot {
 typedef struct tr_run tr_run;
 
 /* What running the core on tiles adds to the run's figures (per core,
- * added up at the end of the tile stage), and a lane's failure. */
+ * added up at the end of the tile stage). */
 typedef struct tr_core_counts {
     uint64_t max_tile_points, max_halo_points, gcd_tiles, insert_tiles;
     double t_core;
-    gdt_status st;
-    gdt_error err;
 } tr_core_counts;
 
 /* Several devices: the cores beyond the first, each on a thread of its own
