@@ -259,13 +259,13 @@ def test_sigkill_at_random_instants_then_rerun(big, tmp_path):
     for n, chain in enumerate(chains):
         attempt(f"chain{n}", chain)
     # Every stage must have been hit; retry a missed one on a fresh job.  A
-    # stage with no time of its own in the uninterrupted run cannot be hit:
-    # the seam merge, for one, may finish beside the tile stage (each row as
-    # soon as its tiles are written), so that the kills in the tile stage
-    # are the ones that stop it.
+    # stage with (nearly) no time of its own in the uninterrupted run cannot
+    # be aimed at: the seam merge, for one, finishes beside the tile stage
+    # (each row as soon as its tiles are written), leaving 0-4 ms after it,
+    # so the kills in the tile stage are the ones that stop it.
     spans = ru.durations(big.timeline, big.time)
     must_hit = [s for s in MUST_HIT if s == "after write" or s not in spans or
-                spans[s][1] >= 0.002]
+                spans[s][1] >= 0.010]
     log.append(f"stages without time of their own (not required): "
                f"{[s for s in MUST_HIT if s not in must_hit]}")
     for stage in must_hit:
