@@ -580,10 +580,6 @@ static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
         return gdt_error_set(err, GDT_EUSAGE, 2703, "%s needs --ground pmf", opts->pmf_set);
     if (opts->ground_out != NULL && !opts->ground)
         return gdt_error_set(err, GDT_EUSAGE, 2703, "--ground-out needs --ground pmf");
-    if (opts->ground_out != NULL && opts->comm != NULL)
-        return gdt_error_set(err, GDT_EUSAGE, 2704,
-                             "--ground-out is not written under mpirun yet: run the job "
-                             "without the launcher, or without --ground-out");
     if (opts->ground && opts->filter.class_mode > 0)
         return gdt_error_set(err, GDT_EUSAGE, 2703,
                              "--ground pmf classifies the points itself: not with --keep-class "

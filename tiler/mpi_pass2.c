@@ -246,6 +246,8 @@ void mr_wait_go(mr_ctx *m, gdt_status *st, gdt_error *err, unsigned char **go, s
                 s2 = mr_recv(m, 0, tag, *len, &msg, &e2);
             if (s2 == GDT_OK && tag == TAG_P1) {
                 mr_pass1_answer(m, msg, *len, pst, &pe);
+            } else if (s2 == GDT_OK && tag == TAG_GROUND) {
+                mr_ground_answer(m, msg, *len, &pst, &pe);
             } else if (s2 == GDT_OK && tag == TAG_PLAN) {
                 uint64_t id[2];
                 size_t slen = 0;

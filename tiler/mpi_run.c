@@ -205,8 +205,12 @@ static gdt_status r0_finished(mr_ctx *m, gdt_unpack *u, int from, gdt_error *err
         return mr_bad_message(from, TAG_FINISHED, err);
     m->finished[from] = 1;
     m->nfinished++;
-    if (m->c->s.ranks != NULL)
+    if (m->c->s.ranks != NULL) {
+        /* what GDONE told of the rank's ground filter stays */
+        r.ground_tiles = m->c->s.ranks[from].ground_tiles;
+        r.t_ground = m->c->s.ranks[from].t_ground;
         m->c->s.ranks[from] = r;
+    }
     if (st != GDT_OK) {
         char text[GDT_ERROR_MSG_MAX];
         snprintf(text, sizeof text, "%.*s", (int)(ml < sizeof text ? ml : sizeof text - 1),
@@ -339,6 +343,9 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
     c->p1share = &m->p1;
     mr_pass2_hooks(m);
     c->p2share = &m->p2;
+    mr_ground_hooks(m);
+    if (c->opts->ground)
+        c->gshare = &m->gs;
     if (st == GDT_OK) {
         c->s.ranks = calloc((size_t)m->size, sizeof *c->s.ranks);
         c->s.nranks = m->size;
@@ -353,6 +360,12 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
         st = tr_run_pass1(c, err);
     if (st == GDT_OK)
         st = tr_run_pass2(c, err);
+    if (st == GDT_OK && c->s.t_ground > 0 && c->s.ranks != NULL && m->raw_pre != NULL) {
+        /* rank 0's own share of the ground filter (the others' came in GDONE) */
+        for (uint64_t k = 0; k < m->raw_n; k++)
+            c->s.ranks[0].ground_tiles += mr_owner_of(m->raw_pre, m->raw_n, k, m->size) == 0;
+        c->s.ranks[0].t_ground = c->s.t_ground_own;
+    }
     /* a plain PLY is written by the tiles' owners (mpi_parts.c) */
     c->out_parts = m->size > 1;
     if (st == GDT_OK)

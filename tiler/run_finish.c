@@ -218,6 +218,11 @@ static gdt_status write_summary(const tr_run *c, gdt_error *err)
             gdt_json_double(&j, "post_s", q->t_post);
             if (c->out_parts)
                 gdt_json_double(&j, "write_s", q->t_write);
+            if (c->opts->ground) {
+                /* 0 when a resumed job took the classes of an earlier run */
+                gdt_json_uint(&j, "ground_tiles", q->ground_tiles);
+                gdt_json_double(&j, "ground_s", q->t_ground);
+            }
             gdt_json_end_object(&j);
         }
         gdt_json_end_array(&j);

@@ -65,10 +65,6 @@ gdt_status tr_run_init(tr_run *c, const gdt_options *opts, gdt_error *err)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     /* every path (those the job recorded, for --resume) before any work */
     gdt_status st = gdt_cli_check_paths(opts, c->job, err);
-    if (st == GDT_OK && opts->ground_out != NULL && opts->comm != NULL)
-        st = gdt_error_set(err, GDT_EUSAGE, 2704,
-                           "--ground-out is not written under mpirun yet: run the job "
-                           "without the launcher, or without --ground-out");
     if (st == GDT_OK)
         st = tr_ground_out_check(opts, err);
     return st;
@@ -234,6 +230,17 @@ void tr_remove_job_files(const char *job, int final, int own_dir)
         }
         rmdir(tiles);
         free(tiles);
+    }
+    {
+        /* the ranks' --ground-out bits of an MPI job (ground.bits.R) */
+        DIR *d = opendir(job);
+        struct dirent *e;
+        if (d != NULL) {
+            while ((e = readdir(d)) != NULL)
+                if (strncmp(e->d_name, "ground.bits.", 12) == 0)
+                    unlinkat(dirfd(d), e->d_name, 0);
+            closedir(d);
+        }
     }
     if (!final)
         return;

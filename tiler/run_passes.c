@@ -512,16 +512,15 @@ gdt_status tr_run_pass2(tr_run *c, gdt_error *err)
     return set_bases(c, err);
 }
 
-gdt_status tr_run_attach(tr_run *c, const uint64_t job_id[2], const unsigned char *state,
-                         size_t len, gdt_error *err)
+/* A new tiler from rank 0's state (the cloud opened first, headers only). */
+static gdt_status replace_tiler(tr_run *c, const unsigned char *state, size_t len,
+                                gdt_error *err)
 {
     const gdt_options *opts = c->opts;
     gdt_cloud_opts co;
     gdt_tiler_opts to;
     gdt_status st;
 
-    c->job_id[0] = job_id[0];
-    c->job_id[1] = job_id[1];
     if (c->cloud == NULL) {
         cloud_opts(c, &co, 0);
         st = gdt_cloud_open(&c->cloud, opts->inputs, opts->ninputs, &co, err);
@@ -535,6 +534,31 @@ gdt_status tr_run_attach(tr_run *c, const uint64_t job_id[2], const unsigned cha
     st = gdt_tiler_create(&c->tiler, &to, c->cloud, err);
     if (st == GDT_OK)
         st = gdt_tiler_import(c->tiler, state, len, err);
+    return st;
+}
+
+gdt_status tr_run_attach_ground(tr_run *c, const unsigned char *state, size_t len,
+                                gdt_error *err)
+{
+    gdt_status st = replace_tiler(c, state, len, err);
+    if (st != GDT_OK)
+        return st;
+    c->plan = gdt_tiler_get_plan(c->tiler);
+    if (c->plan == NULL || !gdt_tiler_pass2_done(c->tiler) || c->base != NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7954,
+                             "a rank was given the ground filter out of turn");
+    return GDT_OK;
+}
+
+gdt_status tr_run_attach(tr_run *c, const uint64_t job_id[2], const unsigned char *state,
+                         size_t len, gdt_error *err)
+{
+    const gdt_options *opts = c->opts;
+    gdt_status st;
+
+    c->job_id[0] = job_id[0];
+    c->job_id[1] = job_id[1];
+    st = replace_tiler(c, state, len, err);
     if (st != GDT_OK)
         return st;
     if (gdt_tiler_get_plan(c->tiler) == NULL || c->base != NULL)

@@ -75,8 +75,13 @@ CASES = {
                                   "--max-edge", "6")),
     "two-inputs-64": (("a", "b"), ("--tile", "64")),
     "laz-128": (("laz",), ("--tile", "128")),
-    # the ground filter inside pass 2 (classified by the planning rank)
+    # the ground filter inside pass 2, each rank classifying its tiles
     "ground-128": (("a",), ("--tile", "128", "--ground", "pmf")),
+    # and every input record classified: the ranks' bits ORed by rank 0
+    "ground-out-128": (("a",), ("--tile", "128", "--ground", "pmf", "--ground-out",
+                                "{d}/g.las")),
+    "ground-out-laz-64": (("laz",), ("--tile", "64", "--ground", "pmf", "--ground-out",
+                                     "{d}/g.las")),
     # every rank of the node takes the node's CPU devices in turn (here: the one)
     "device-local-64": (("b",), ("--tile", "64", "--device", "cpu/local")),
 }
@@ -103,6 +108,9 @@ def test_any_rank_count_writes_the_same_bytes(mpi_bin, clouds, tmp_path, case):
         assert (outs[k] / "o.ply").read_bytes() == ref, k
         if "--dem" in opts:
             assert (outs[k] / "x.tif").read_bytes() == (outs[1] / "x.tif").read_bytes(), k
+        if "--ground-out" in opts:
+            assert (outs[k] / "g.las").read_bytes() == (outs[1] / "g.las").read_bytes(), k
+            assert not list(outs[k].glob("**/ground.bits*"))
         j = json.loads((outs[k] / "run.json").read_text())
         j1 = json.loads((outs[1] / "run.json").read_text())
         for key in ("faces", "vertices", "certified_faces", "merge_faces", "gcd_tiles",
@@ -116,6 +124,13 @@ def test_any_rank_count_writes_the_same_bytes(mpi_bin, clouds, tmp_path, case):
         assert sum(q["vertices"] for q in mpi["per_rank"]) == j["vertices"]
         assert sum(q["certified_faces"] for q in mpi["per_rank"]) == j["certified_faces"]
         assert mpi["load_balance"] >= 1.0
+        if "--ground" in opts:
+            # every tile classified once, by the rank that merged it in pass 2
+            assert j["ground"] == j1["ground"] | {"seconds": j["ground"]["seconds"]}, k
+            assert sum(q["ground_tiles"] for q in mpi["per_rank"]) == j["tiles"], k
+            assert all(q["ground_tiles"] > 0 and q["ground_s"] > 0 for q in mpi["per_rank"]), k
+        else:
+            assert all("ground_tiles" not in q for q in mpi["per_rank"]), k
         # a plain PLY is written by the tiles' owners in parts; with a DEM or
         # trimming, rank 0's writer rasterises and drops faces as it copies
         plain = "--dem" not in opts and "--max-edge" not in opts
@@ -276,17 +291,22 @@ def test_bad_input_fails_the_whole_job(mpi_bin, clouds, tmp_path):
     assert not out.exists()
 
 
-def tiles_recorded(job):
+def journal_count(job, query):
+    """What a count query of the job's journal gives (0 while there is none)."""
     db = job / "job.db"
     if not db.exists():
         return 0
     try:
         con = sqlite3.connect(f"file:{db}?mode=ro", uri=True, timeout=0.2)
-        n = con.execute("select count(*) from tile").fetchone()[0]
+        n = con.execute(query).fetchone()[0]
         con.close()
         return n
     except sqlite3.Error:
         return 0
+
+
+def tiles_recorded(job):
+    return journal_count(job, "select count(*) from tile")
 
 
 def rank_pids(marker):
@@ -308,6 +328,29 @@ def rank_pids(marker):
     return out
 
 
+def kill_rank_when(mpi_bin, k, args, out, rank, ready):
+    """Runs mpirun -np k gdt-tile args and SIGKILLs the given rank (found by
+    the output path out in its command line) as soon as ready() holds; the
+    job must then fail."""
+    p = subprocess.Popen(["mpirun", "--oversubscribe", "-np", str(k), str(mpi_bin),
+                          *[str(a) for a in args]], env=env(), stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.time() + 120
+        while not ready() and time.time() < deadline and p.poll() is None:
+            time.sleep(0.02)
+        assert p.poll() is None, "the run ended before it could be killed"
+        pids = {r: pid for pid, r in rank_pids(str(out)).items()}
+        assert rank in pids, pids
+        os.kill(pids[rank], signal.SIGKILL)
+        _, err = p.communicate(timeout=120)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    assert p.returncode != 0, err
+
+
 @pytest.mark.parametrize("killed,k_first,k_then", [(1, 3, 2), (0, 2, 1)])
 def test_killed_rank_then_rerun_with_another_count(mpi_bin, root, tmp_path, killed, k_first,
                                                    k_then):
@@ -321,26 +364,11 @@ def test_killed_rank_then_rerun_with_another_count(mpi_bin, root, tmp_path, kill
     out = tmp_path / "o.ply"
     job = tmp_path / "o.ply.gdt-job"
     args = [c, "-o", out, "--tile", "64", "-q", "--threads", "1"]
-    p = subprocess.Popen(["mpirun", "--oversubscribe", "-np", str(k_first), str(mpi_bin),
-                          *[str(a) for a in args]], env=env(), stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True)
-    try:
-        deadline = time.time() + 120
-        # rank 0 records the others' tiles in batches: kill once some are
-        # recorded and at most a third of the tile files exist
-        while (tiles_recorded(job) < 20 or len(list((job / "tiles").glob("*.tri"))) < 40) and \
-                time.time() < deadline and p.poll() is None:
-            time.sleep(0.02)
-        assert p.poll() is None, "the run ended before it could be killed"
-        pids = {rank: pid for pid, rank in rank_pids(str(out)).items()}
-        assert killed in pids, pids
-        os.kill(pids[killed], signal.SIGKILL)
-        _, err = p.communicate(timeout=120)
-    finally:
-        if p.poll() is None:
-            p.kill()
-            p.wait()
-    assert p.returncode != 0, err
+    # rank 0 records the others' tiles in batches: kill once some are
+    # recorded and at most a third of the tile files exist
+    kill_rank_when(mpi_bin, k_first, args, out, killed,
+                   lambda: tiles_recorded(job) >= 20 and
+                   len(list((job / "tiles").glob("*.tri"))) >= 40)
     assert not out.exists()
     recorded = tiles_recorded(job)
     assert recorded >= 20
@@ -425,3 +453,68 @@ def test_a_failing_part_write_fails_the_job(mpi_bin, clouds, tools_dir, tmp_path
     r = run([mpi_bin, clouds["a"], "-o", ref, "--tile", "64", "-q"])
     assert r.returncode == 0, r.stderr
     assert out.read_bytes() == ref.read_bytes()
+
+
+def ground_recorded(job):
+    """The ground subsets the journal records (.gpts files)."""
+    return journal_count(job, "select count(*) from pfile where kind = 5")
+
+
+@pytest.fixture(scope="module")
+def ground_ref(mpi_bin, root, tmp_path_factory):
+    """A cloud whose ground filter takes seconds at --tile 128, and its plain
+    run's mesh and --ground-out file."""
+    d = tmp_path_factory.mktemp("mpi-ground")
+    c = gen(root, d / "c.las", 300000, 5)
+    r = run([mpi_bin, c, "-o", d / "ref.ply", "--tile", "128", "--ground", "pmf",
+             "--ground-out", d / "ref.las", "-q"])
+    assert r.returncode == 0, r.stderr
+    return {"cloud": c, "ply": d / "ref.ply", "las": d / "ref.las"}
+
+
+def test_killed_in_the_ground_filter_then_rerun(mpi_bin, ground_ref, tmp_path):
+    """SIGKILL of rank 1 while the ranks classify: rank 0 has recorded the
+    subsets it heard of (its own and rank 1's, one by one); a rerun under
+    three ranks takes them again (each rank verifies the files of its
+    tiles) and writes the mesh and the classified records of a plain run."""
+    out, job, las = tmp_path / "o.ply", tmp_path / "job", tmp_path / "g.las"
+    args = [ground_ref["cloud"], "-o", out, "--tile", "128", "--ground", "pmf", "--ground-out",
+            las, "-q", "--threads", "1", "--job", job]
+    kill_rank_when(mpi_bin, 2, args, out, 1, lambda: ground_recorded(job) >= 30)
+    assert not out.exists() and not las.exists()
+    recorded = ground_recorded(job)
+    assert 30 <= recorded < 144, recorded  # killed inside the filter
+    r = mpirun(3, mpi_bin, [*args, "--json", tmp_path / "j.json"])
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert out.read_bytes() == ground_ref["ply"].read_bytes()
+    assert las.read_bytes() == ground_ref["las"].read_bytes()
+    g = json.loads((tmp_path / "j.json").read_text())["ground"]
+    assert g["classified"] and g["tiles_reused"] >= recorded, (g, recorded)
+
+
+def test_a_rank_failing_in_the_ground_filter_fails_the_job(mpi_bin, ground_ref, tools_dir,
+                                                           tmp_path):
+    """Rank 1 cannot write its --ground-out bits (a full disk, through the
+    LD_PRELOAD shim on rank 1 only): the job exits 4 with rank 1's message
+    once, no output is written, and a plain rerun finishes the job with the
+    bytes of an undisturbed run."""
+    shim = tools_dir / "libgdt_fail_write.so"
+    if not shim.exists():
+        pytest.fail(f"libgdt_fail_write.so not built at {shim}")
+    out, job, las = tmp_path / "o.ply", tmp_path / "job", tmp_path / "g.las"
+    log = tmp_path / "refused.log"
+    args = [str(a) for a in (ground_ref["cloud"], "-o", out, "--tile", "128", "--ground", "pmf",
+                             "--ground-out", las, "-q", "--job", job)]
+    r = run(["mpirun", "--oversubscribe", "-np", "1", mpi_bin, *args, ":", "-np", "1", "env",
+             f"LD_PRELOAD={shim}", "GDT_TEST_FAIL_WRITE_MATCH=ground.bits.1",
+             "GDT_TEST_FAIL_WRITE_AFTER=5", f"GDT_TEST_FAIL_WRITE_LOG={log}", mpi_bin, *args])
+    assert log.exists(), r.stdout + r.stderr
+    assert r.returncode == 4, r.stdout + r.stderr
+    assert r.stderr.count("error GDT-4") == 1 and "rank 1: " in r.stderr, r.stderr
+    assert "ground.bits.1" in r.stderr, r.stderr
+    assert not out.exists() and not las.exists() and job.is_dir()
+    r = run([mpi_bin, *args])
+    assert r.returncode == 0, r.stderr
+    assert out.read_bytes() == ground_ref["ply"].read_bytes()
+    assert las.read_bytes() == ground_ref["las"].read_bytes()
+    assert not list(job.parent.glob("**/ground.bits*"))

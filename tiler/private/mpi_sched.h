@@ -26,7 +26,10 @@ enum {
     TAG_SPILL = 13,   /* r <-> q: pass 2 in shares: status, then records */
     TAG_P2FAIL = 14,  /* r -> 0: why this rank's share of pass 2 failed */
     TAG_PARTS = 15,   /* 0 -> r: write your tiles into the mesh (mpi_run.c) */
-    TAG_WROTE = 16    /* r -> 0: the rank's part is written and synced, or why not */
+    TAG_WROTE = 16,   /* r -> 0: the rank's part is written and synced, or why not */
+    TAG_GROUND = 17,  /* 0 -> r: classify your tiles (mpi_ground.c) */
+    TAG_GREC = 18,    /* r -> 0: ground subsets written */
+    TAG_GDONE = 19    /* r -> 0: the rank's ground filter ended, or why it failed */
 };
 
 /* Records per TAG_RECDATA message (32 MiB of gdt_point). */
@@ -68,6 +71,9 @@ typedef struct mr_ctx {
     gdt_status part_st;     /* the first failure of this rank's writes */
     gdt_error part_err;
     double part_t;          /* seconds this rank spent writing its part */
+    /* the shared ground filter (mpi_ground.c), rank 0 */
+    tr_ground_share gs;
+    int g_left;             /* ranks told GROUND that have not sent GDONE */
 } mr_ctx;
 
 /* Sends the packed message p to dest and frees it. */
@@ -151,6 +157,16 @@ void mr_parts_answer(mr_ctx *m, const uint64_t *ks, uint64_t n, const unsigned c
 
 /* Another rank: closes a part PARTS never came for (the job failed). */
 void mr_parts_drop(mr_ctx *m);
+
+/* Rank 0: the hooks of the shared ground filter into m->gs (mpi_ground.c). */
+void mr_ground_hooks(mr_ctx *m);
+
+/* Another rank, given GROUND (msg, len): classifies its tiles, reporting
+ * them (GREC), then answers GDONE; *st, *err: this rank's state, in and out
+ * (a failure is the answer).  Ends the job (gdt_comm_abort) when the
+ * messages themselves fail. */
+void mr_ground_answer(mr_ctx *m, const unsigned char *msg, size_t len, gdt_status *st,
+                      gdt_error *err);
 
 /* Rank 0: the hooks of the shared pass 2 into m->p2 (mpi_pass2.c). */
 void mr_pass2_hooks(mr_ctx *m);

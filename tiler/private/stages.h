@@ -64,6 +64,8 @@ typedef struct tr_rank_stats {
     uint64_t tiles, vertices, certified, reused;
     double t_tiles, t_core, t_certify, t_post;
     double t_write; /* its parts of a mesh written in parts: vertices, faces, sync */
+    uint64_t ground_tiles; /* --ground: tiles it classified (or adopted) */
+    double t_ground;       /* and its time in the filter */
     char device[128];
 } tr_rank_stats;
 
@@ -87,6 +89,7 @@ typedef struct tr_summary {
     uint64_t ground_points, nonground_points; /* --ground: the classes of pass 2's
                                  points (deduplicated), when this run classified */
     double t_ground;        /* the ground filter's wall time (0: adopted, or off) */
+    double t_ground_own;    /* of which this process's own tiles (a shared filter) */
     uint64_t ground_tiles_reused; /* subsets an earlier, stopped run classified */
     uint64_t ground_bits_size, ground_bits_sum; /* --ground-out: J/ground.bits */
     int nranks;             /* ranks of an MPI run; 0 in a plain run */
@@ -113,6 +116,7 @@ typedef struct tr_slot {
 } tr_slot;
 
 typedef struct tr_run tr_run;
+typedef struct tr_ground_share tr_ground_share;
 
 /* What running the core on tiles adds to the run's figures (per core,
  * added up at the end of the tile stage). */
@@ -286,6 +290,7 @@ struct tr_run {
     tr_summary s;
     const tr_pass1_share *p1share; /* set by the caller after tr_run_init; NULL: alone */
     const tr_pass2_share *p2share; /* likewise */
+    const tr_ground_share *gshare; /* likewise */
 };
 
 /* 1 when a signal asked the run to stop. */
@@ -381,9 +386,63 @@ gdt_status tr_run_pass2(tr_run *c, gdt_error *err);
  * files): classifies every tile's points with the ground filter on up to
  * --threads workers and replaces the tile files with the ground points
  * (gdt_tiler_take_subsets); c->s.ground_points, nonground_points,
- * t_ground.  returns: GDT_OK; the filter's (2702, 7701) and the tiler's
- * errors; GDT_EINTERRUPTED 1303. */
+ * t_ground.  With c->gshare, shared with other processes (see below).
+ * returns: GDT_OK; the filter's (2702, 7701) and the tiler's errors;
+ * GDT_EINTERRUPTED 1303; another process's failure. */
 gdt_status tr_run_ground(tr_run *c, gdt_error *err);
+
+/* A tile's ground subset as another process wrote (or adopted) it: its
+ * files (gdt_tiler_write_subset) and the tile's points before the filter. */
+typedef struct tr_ground_rec {
+    uint64_t k, own;
+    gdt_tiler_tile_files files;
+    int adopted;          /* an earlier run's subset, verified */
+} tr_ground_rec;
+
+/* The ground filter shared between processes (MPI), on rank 0: with
+ * c->gshare, tr_run_ground classifies only the tiles mine() gives it;
+ * begin tells the other processes to classify theirs (they run
+ * tr_run_ground_part); collect gives the subsets they finished since its
+ * last call (*recs malloc'd, *n; wait: until at least one message came)
+ * and *left, the processes still to finish; it returns a process's
+ * failure (the first one; later calls go on collecting).  merge_bits ORs
+ * the others' --ground-out bits into fd (every process has finished). */
+struct tr_ground_share {
+    int (*mine)(void *ctx, uint64_t k);
+    gdt_status (*begin)(void *ctx, gdt_error *err);
+    gdt_status (*collect)(void *ctx, int wait, tr_ground_rec **recs, size_t *n, int *left,
+                          gdt_error *err);
+    gdt_status (*merge_bits)(void *ctx, int fd, gdt_error *err);
+    void *ctx;
+};
+
+/* What rank 0's journal holds of a tile's subset: its .gpts and .gedge
+ * files' records (found, size, checksum). */
+typedef struct tr_ground_known {
+    int found[2];
+    uint64_t size[2], sum[2];
+} tr_ground_known;
+
+/* Another process's share of the ground filter: the tiles ks[0, n) with
+ * known[i] for ks[i]; report (on the caller's thread, between tiles and at
+ * the end) takes the subsets written since its last call; bits_path: this
+ * process's --ground-out bits (one bit per ordinal, a sparse file). */
+typedef struct tr_ground_part {
+    const uint64_t *ks;
+    uint64_t n;
+    const tr_ground_known *known;
+    gdt_status (*report)(void *ctx, const tr_ground_rec *recs, size_t n, gdt_error *err);
+    void *ctx;
+    const char *bits_path;
+} tr_ground_part;
+
+/* Another process of an MPI job, after tr_run_attach_ground: classifies
+ * the tiles of part as tr_run_ground does, writes their subsets and
+ * reports them; it records nothing (rank 0 does) and takes no subset
+ * into the tiler.  *classified: tiles it classified or adopted.
+ * returns: as tr_run_ground. */
+gdt_status tr_run_ground_part(tr_run *c, const tr_ground_part *part, uint64_t *classified,
+                              gdt_error *err);
 
 /* Another rank of an MPI job, after tr_run_start_core, in place of
  * tr_run_prepare_job, tr_run_pass1 and tr_run_pass2 (which rank 0 ran):
@@ -397,6 +456,12 @@ gdt_status tr_run_ground(tr_run *c, gdt_error *err);
  * returns: GDT_OK; the cloud's, tiler's and core's errors. */
 gdt_status tr_run_attach(tr_run *c, const uint64_t job_id[2], const unsigned char *state,
                          size_t len, gdt_error *err);
+
+/* Another rank of an MPI job with the ground filter: replaces its tiler
+ * with the state after pass 2 (every tile's files, before the ground
+ * subsets are taken), for tr_run_ground_part.  returns: as tr_run_attach. */
+gdt_status tr_run_attach_ground(tr_run *c, const unsigned char *state, size_t len,
+                                gdt_error *err);
 
 /* ---- run_tiles.c: the tile stage ---- */
 
