@@ -44,6 +44,8 @@ static void part_src(const tr_run *c, const gdt_lattice *lat, tr_out_src *s)
     s->base = c->base;
     s->ntiles = gdt_tiler_tile_count(c->tiler);
     s->stop = c->opts->stop;
+    s->trim = gdt_trim_on(&c->trim);
+    s->concavity = c->trim.concavity > 0;
 }
 
 /* Keeps the first failure of this rank's writes. */
@@ -126,21 +128,22 @@ void mr_parts_tile_done(mr_ctx *m, uint64_t k)
 gdt_status mr_parts_send(mr_ctx *m, int *wait, gdt_error *err)
 {
     tr_run *c = m->c;
-    const gdt_lattice *lat = &gdt_cloud_get_info(c->cloud)->lattice;
     uint64_t n = m->ntiles;
     uint64_t *first = malloc((n + 1) * sizeof *first);
-    tr_out_src src;
+    uint64_t *labels = NULL; /* --concavity: (tile, label) pairs dropped, by tile */
+    size_t nlab = 0, caplab = 0, at = 0;
+    const int peel = c->trim.concavity > 0;
     gdt_status st = first != NULL ? GDT_OK
                                   : gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
 
     *wait = 0;
-    part_src(c, lat, &src);
     if (st == GDT_OK)
         first[0] = 0;
+    /* each tile's kept faces (all of them without a trim rule) */
     for (uint64_t k = 0; st == GDT_OK && k < n; k++) {
-        uint64_t nf = 0;
-        st = tr_out_tile_faces(&src, k, &nf, err);
-        first[k + 1] = first[k] + nf;
+        uint64_t kept = 0;
+        st = tr_out_count_faces(c->out, k, &kept, peel ? &labels : NULL, &nlab, &caplab, err);
+        first[k + 1] = first[k] + kept;
     }
     for (int r = 1; r < m->size; r++) {
         gdt_pack p;
@@ -149,9 +152,21 @@ gdt_status mr_parts_send(mr_ctx *m, int *wait, gdt_error *err)
         gdt_error_clear(&e2);
         gdt_pack_u64(&p, (uint64_t)st);
         if (st == GDT_OK) {
+            size_t from;
             gdt_pack_u64(&p, n);
             for (uint64_t k = 0; k <= n; k++)
                 gdt_pack_u64(&p, first[k]);
+            /* the pairs of rank r's tiles (contiguous in tile order) */
+            while (at < nlab && mr_owner_of(c->base, n, labels[2 * at], m->size) < r)
+                at++;
+            from = at;
+            while (at < nlab && mr_owner_of(c->base, n, labels[2 * at], m->size) == r)
+                at++;
+            gdt_pack_u64(&p, (uint64_t)(at - from));
+            for (size_t i = from; i < at; i++) {
+                gdt_pack_u64(&p, labels[2 * i]);
+                gdt_pack_u64(&p, labels[2 * i + 1]);
+            }
         }
         if (mr_send_pack(m, r, TAG_PARTS, &p, &e2) != GDT_OK) {
             /* this rank would wait for ever: the job cannot go on */
@@ -175,6 +190,7 @@ gdt_status mr_parts_send(mr_ctx *m, int *wait, gdt_error *err)
     }
     if (c->s.ranks != NULL)
         c->s.ranks[0].t_write = m->part_t;
+    free(labels);
     free(first);
     return st;
 }
@@ -204,8 +220,15 @@ gdt_status mr_parts_wait(mr_ctx *m, gdt_error *err)
             int code = (int)gdt_unpack_u64(&u);
             double t = gdt_unpack_f64(&u);
             const unsigned char *msg = gdt_unpack_bytes(&u, &ml);
+            gdt_trim_counts tc;
+            tc.faces = gdt_unpack_u64(&u);
+            tc.cut = gdt_unpack_u64(&u);
+            tc.peeled = gdt_unpack_u64(&u);
+            tc.dropped = gdt_unpack_u64(&u);
             if (!u.bad && from > 0 && from < m->c->s.nranks)
                 m->c->s.ranks[from].t_write = t;
+            if (!u.bad && rst == GDT_OK)
+                tr_out_add_counts(m->c->out, &tc); /* the rank's tiles' faces and drops */
             if (u.bad) {
                 char text[64];
                 snprintf(text, sizeof text, "a WROTE message that does not parse");
@@ -232,7 +255,7 @@ static gdt_status write_part(mr_ctx *m, const uint64_t *ks, uint64_t n, gdt_unpa
                              gdt_error *err)
 {
     uint64_t ntiles = gdt_unpack_u64(u);
-    uint64_t *first = NULL;
+    uint64_t *first = NULL, *pairs = NULL, np = 0;
     gdt_status st = m->part_st;
     double t0 = gdt_now();
 
@@ -247,6 +270,18 @@ static gdt_status write_part(mr_ctx *m, const uint64_t *ks, uint64_t n, gdt_unpa
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     for (uint64_t k = 0; st == GDT_OK && k <= ntiles; k++)
         first[k] = gdt_unpack_u64(u);
+    if (st == GDT_OK) {
+        /* --concavity: the candidates of this rank's tiles that it drops */
+        np = gdt_unpack_u64(u);
+        if (u->bad || np > (u->n - u->at) / 16)
+            st = mr_bad_message(0, TAG_PARTS, err);
+        else if ((pairs = malloc((size_t)(2 * np + 2) * sizeof *pairs)) == NULL)
+            st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        for (uint64_t i = 0; st == GDT_OK && i < 2 * np; i++)
+            pairs[i] = gdt_unpack_u64(u);
+        if (st == GDT_OK)
+            tr_out_set_dropped(m->part_out, pairs, (size_t)np);
+    }
     for (uint64_t i = 0; st == GDT_OK && i < n; i++)
         st = ks[i] < ntiles ? tr_out_write_faces(m->part_out, ks[i], first[ks[i]], err)
                             : mr_bad_message(0, TAG_PARTS, err);
@@ -254,6 +289,7 @@ static gdt_status write_part(mr_ctx *m, const uint64_t *ks, uint64_t n, gdt_unpa
         gdt_error e2;
         gdt_status s2;
         gdt_error_clear(&e2);
+        m->part_tc = tr_out_tile_counts(m->part_out);
         s2 = tr_out_close_part(m->part_out, &e2);
         m->part_out = NULL;
         if (st == GDT_OK && s2 != GDT_OK) {
@@ -262,6 +298,7 @@ static gdt_status write_part(mr_ctx *m, const uint64_t *ks, uint64_t n, gdt_unpa
         }
     }
     m->part_t += gdt_now() - t0;
+    free(pairs);
     free(first);
     return st;
 }
@@ -292,6 +329,10 @@ void mr_parts_answer(mr_ctx *m, const uint64_t *ks, uint64_t n, const unsigned c
     gdt_pack_u64(&p, st != GDT_OK ? (uint64_t)err.code : 0);
     gdt_pack_f64(&p, m->part_t);
     gdt_pack_bytes(&p, st != GDT_OK ? err.msg : "", st != GDT_OK ? strlen(err.msg) : 0);
+    gdt_pack_u64(&p, m->part_tc.faces);
+    gdt_pack_u64(&p, m->part_tc.cut);
+    gdt_pack_u64(&p, m->part_tc.peeled);
+    gdt_pack_u64(&p, m->part_tc.dropped);
     gdt_error_clear(&e2);
     if (mr_send_pack(m, 0, TAG_WROTE, &p, &e2) != GDT_OK) {
         gdt_error_print(&e2, stderr);

@@ -471,9 +471,21 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
     {
         int wait = 0;
         double t_parts0 = gdt_now();
-        st = c->out_parts ? mr_parts_send(m, &wait, err) : GDT_OK;
-        if (st == GDT_OK)
+        /* --concavity: a tile's kept faces are known from the merge's
+         * trim graph only, so the parts follow the merge; otherwise they
+         * are written beside it */
+        const int after = c->out_parts && c->trim.concavity > 0;
+        if (after) {
             st = tr_run_merge(c, err);
+            if (st == GDT_OK) {
+                tr_out_set_trim(c->out, c->tgraph);
+                st = mr_parts_send(m, &wait, err);
+            }
+        } else {
+            st = c->out_parts ? mr_parts_send(m, &wait, err) : GDT_OK;
+            if (st == GDT_OK)
+                st = tr_run_merge(c, err);
+        }
         if (wait) {
             gdt_error e2;
             gdt_status s2;

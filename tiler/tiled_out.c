@@ -49,6 +49,9 @@ struct tr_out {
     uint64_t part_v, part_f;
     uint64_t part_header, part_nvert;
     uint64_t tile_faces;  /* src.parts: the faces of every tile (tr_out_set_tile_faces) */
+    const uint64_t *dlab; /* a part without the trim graph: the (tile, label) pairs it
+                           * drops, sorted (tr_out_set_dropped) */
+    size_t ndlab;
     gdt_raster_vertex *tile_pts; /* with a DEM: the points of the tile whose faces are
                                   * copied (24 bytes a point, not the 32 of a record) */
     size_t cap_tile_pts;
@@ -228,6 +231,24 @@ static gdt_status load_tile_points(tr_out *o, const gdt_tile_desc *d, gdt_error 
     return st;
 }
 
+/* Whether --concavity drops the candidates of label `label` of tile k: the
+ * trim graph's answer, or in a part without it the pairs rank 0 sent. */
+static int label_dropped(const tr_out *o, uint64_t k, uint32_t label)
+{
+    size_t lo = 0, hi = o->ndlab;
+    if (o->tg != NULL)
+        return gdt_trim_graph_tile_dropped(o->tg, k, label);
+    while (lo < hi) {
+        size_t mid = lo + (hi - lo) / 2;
+        const uint64_t *q = o->dlab + 2 * mid;
+        if (q[0] < k || (q[0] == k && q[1] < label))
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo < o->ndlab && o->dlab[2 * lo] == k && o->dlab[2 * lo + 1] == label;
+}
+
 /* The certified faces of tile k's .tri file, read with direct I/O (the
  * file is not needed in the page cache: the merge reads only its seam);
  * with a DEM, rasterised too. */
@@ -276,7 +297,7 @@ static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
                 o->tc.cut++;
             }
             for (; ia < tc.ncand && o->cand[2 * ia] < done + m; ia++) {
-                if (o->tg == NULL || !gdt_trim_graph_tile_dropped(o->tg, k, o->cand[2 * ia + 1]))
+                if (!label_dropped(o, k, o->cand[2 * ia + 1]))
                     continue;
                 o->tc.peeled++;
                 o->drop[o->cand[2 * ia] - done] = 1;
@@ -584,11 +605,11 @@ gdt_status tr_out_start(tr_out **out, const tr_out_src *src, gdt_error *err)
         /* the header now; every record through parts (this one for rank 0) */
         gdt_ply_writer *pw;
         o->part_nvert = src->base[src->ntiles];
-        st = gdt_mesh_format_of(src->output) == GDT_MESH_PLY && src->dem == NULL && !src->trim &&
+        st = gdt_mesh_format_of(src->output) == GDT_MESH_PLY && src->dem == NULL &&
                      src->check_ply == NULL
                  ? gdt_mesh_create(&o->w, src->output, GDT_MESH_PLY, &src->meta, err)
                  : gdt_error_set(err, GDT_EINTERNAL, 7830,
-                                 "the mesh written in parts must be a plain PLY");
+                                 "the mesh written in parts must be a PLY without a DEM");
         pw = st == GDT_OK ? gdt_mesh_ply_writer(o->w) : NULL;
         if (st == GDT_OK)
             st = gdt_ply_begin_parts(pw, o->part_nvert, &o->part_header, err);
@@ -634,27 +655,90 @@ gdt_status tr_out_open_part(tr_out **out, const tr_out_src *src, const char *tmp
     return GDT_OK;
 }
 
-gdt_status tr_out_tile_faces(const tr_out_src *src, uint64_t k, uint64_t *nf, gdt_error *err)
+gdt_status tr_out_count_faces(tr_out *o, uint64_t k, uint64_t *kept, uint64_t **labels,
+                              size_t *nlabels, size_t *cap, gdt_error *err)
 {
     gdt_tile_desc d;
     unsigned char hdr[TR_HEADER];
     char *path = NULL;
     FILE *f = NULL;
-    gdt_status st = gdt_tiler_tile_info(src->tiler, k, &d, err);
+    uint64_t nf = 0;
+    size_t first = *nlabels;
+    gdt_status st = gdt_tiler_tile_info(o->src.tiler, k, &d, err);
     if (st == GDT_OK)
-        st = tr_tile_path(src->tiles_dir, &d, "tri", &path, err);
+        st = tr_tile_path(o->src.tiles_dir, &d, "tri", &path, err);
     if (st == GDT_OK && (f = fopen(path, "rb")) == NULL)
         st = gdt_error_set(err, GDT_EIO, 4805, "%s: cannot open: %s", path, strerror(errno));
     if (st == GDT_OK && (fread(hdr, 1, TR_HEADER, f) != TR_HEADER ||
-                         memcmp(hdr, TR_MAGIC, 8) != 0 || tr_get_u64(hdr + 8) != src->base[k] ||
+                         memcmp(hdr, TR_MAGIC, 8) != 0 ||
+                         tr_get_u64(hdr + 8) != o->src.base[k] ||
                          tr_get_u64(hdr + 16) != d.points))
         st = gdt_error_set(err, GDT_EJOB, 6801, "%s: not the tile file this run wrote", path);
-    if (st == GDT_OK)
-        *nf = tr_get_u64(hdr + 24);
     if (f != NULL)
         fclose(f);
+    if (st == GDT_OK)
+        nf = *kept = tr_get_u64(hdr + 24);
+    if (st == GDT_OK && o->src.trim) {
+        tr_trim_counts tc = {0, 0, 0};
+        uint64_t dropped, ic = 0;
+        st = read_trim(o, path,
+                       TR_HEADER + 12 * nf + TR_SEAM_VERTEX * tr_get_u64(hdr + 32) +
+                           16 * tr_get_u64(hdr + 40),
+                       nf, &tc, err);
+        /* cut faces, and the peeled candidates that are not cut too (both
+         * lists by increasing face) */
+        dropped = tc.ncut;
+        for (uint64_t ia = 0; st == GDT_OK && ia < tc.ncand; ia++) {
+            uint32_t face = o->cand[2 * ia], label = o->cand[2 * ia + 1];
+            if (!label_dropped(o, k, label))
+                continue;
+            while (ic < tc.ncut && o->cut[ic] < face)
+                ic++;
+            dropped += !(ic < tc.ncut && o->cut[ic] == face);
+            if (labels != NULL) {
+                if (gdt_grow(labels, cap, 2 * (*nlabels + 1), sizeof **labels, 256) != 0) {
+                    st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+                    break;
+                }
+                (*labels)[2 * *nlabels] = k;
+                (*labels)[2 * *nlabels + 1] = label;
+                (*nlabels)++;
+            }
+        }
+        if (st == GDT_OK)
+            *kept = nf - dropped;
+        if (st == GDT_OK && labels != NULL && *nlabels > first) {
+            /* the tile's labels, sorted and each once */
+            uint64_t *q = *labels + 2 * first;
+            size_t n = *nlabels - first, w = 0;
+            for (size_t a = 1; a < n; a++) /* insertion sort: few labels a tile */
+                for (size_t b = a; b > 0 && q[2 * b + 1] < q[2 * b - 1]; b--) {
+                    uint64_t t = q[2 * b + 1];
+                    q[2 * b + 1] = q[2 * b - 1];
+                    q[2 * b - 1] = t;
+                }
+            for (size_t a = 0; a < n; a++)
+                if (w == 0 || q[2 * a + 1] != q[2 * w - 1]) {
+                    q[2 * w] = k;
+                    q[2 * w + 1] = q[2 * a + 1];
+                    w++;
+                }
+            *nlabels = first + w;
+        }
+    }
     free(path);
     return st;
+}
+
+void tr_out_set_dropped(tr_out *o, const uint64_t *pairs, size_t n)
+{
+    o->dlab = pairs;
+    o->ndlab = n;
+}
+
+gdt_trim_counts tr_out_tile_counts(const tr_out *o)
+{
+    return o->tc;
 }
 
 gdt_status tr_out_write_vertices(tr_out *o, uint64_t k, gdt_error *err)
@@ -686,6 +770,14 @@ gdt_status tr_out_close_part(tr_out *o, gdt_error *err)
 void tr_out_set_tile_faces(tr_out *o, uint64_t n)
 {
     o->tile_faces = n;
+}
+
+void tr_out_add_counts(tr_out *o, const gdt_trim_counts *tc)
+{
+    o->tc.faces += tc->faces;
+    o->tc.cut += tc->cut;
+    o->tc.peeled += tc->peeled;
+    o->tc.dropped += tc->dropped;
 }
 
 void tr_out_ready(tr_out *o, uint64_t n)
@@ -729,6 +821,10 @@ gdt_status tr_out_finish(tr_out *o, const char *merge_path, const char *merge_de
 {
     gdt_status st;
     if (o->w != NULL && o->part != NULL) { /* written in parts: the merge's faces last */
+        gdt_trim_counts m;
+        memset(&m, 0, sizeof m);
+        if (o->tg != NULL)
+            m = gdt_trim_graph_merge_counts(o->tg);
         o->part_f = o->tile_faces;
         st = stopped(o) ? tr_interrupted(o->src.job, "the output", err)
                         : copy_merge_faces(o, merge_path, merge_dem, merge_faces, err);
@@ -736,10 +832,19 @@ gdt_status tr_out_finish(tr_out *o, const char *merge_path, const char *merge_de
             st = gdt_ply_part_close(o->part, err);
         o->part = NULL;
         if (st == GDT_OK)
-            st = gdt_mesh_finish_parts(o->w, o->tile_faces + merge_faces, err);
+            st = gdt_mesh_finish_parts(o->w, o->tile_faces + merge_faces - m.dropped, err);
         o->w = NULL;
-        memset(tc, 0, sizeof *tc);
-        tc->faces = o->tile_faces + merge_faces;
+        if (o->src.trim) {
+            /* every tile's counts (tr_out_add_counts) and the merge's */
+            *tc = o->tc;
+            tc->faces += m.faces;
+            tc->cut += m.cut;
+            tc->peeled += m.peeled;
+            tc->dropped += m.dropped;
+        } else {
+            memset(tc, 0, sizeof *tc);
+            tc->faces = o->tile_faces + merge_faces;
+        }
         out_free(o);
         return st;
     }

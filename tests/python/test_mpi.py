@@ -73,6 +73,10 @@ CASES = {
     "las-64-check": (("a",), ("--tile", "64", "--check")),
     "las-256-dem-trim": (("a",), ("--tile", "256", "--dem", "{d}/x.tif", "--dem-res", "2",
                                   "--max-edge", "6")),
+    # trimmed meshes written by the tiles' owners: --max-edge beside the
+    # merge, --concavity after it (the peel's drops come from rank 0)
+    "max-edge-64": (("a",), ("--tile", "64", "--max-edge", "3")),
+    "concavity-64": (("a",), ("--tile", "64", "--max-edge", "4", "--concavity", "1.5")),
     "two-inputs-64": (("a", "b"), ("--tile", "64")),
     "laz-128": (("laz",), ("--tile", "128")),
     # the ground filter inside pass 2, each rank classifying its tiles
@@ -114,8 +118,9 @@ def test_any_rank_count_writes_the_same_bytes(mpi_bin, clouds, tmp_path, case):
         j = json.loads((outs[k] / "run.json").read_text())
         j1 = json.loads((outs[1] / "run.json").read_text())
         for key in ("faces", "vertices", "certified_faces", "merge_faces", "gcd_tiles",
-                    "insert_tiles", "max_tile_points", "max_halo_points", "certification"):
-            assert j[key] == j1[key], (k, key)
+                    "insert_tiles", "max_tile_points", "max_halo_points", "certification",
+                    "trim"):
+            assert j.get(key) == j1.get(key), (k, key)
         assert "mpi" not in j1
         mpi = j["mpi"]
         assert mpi["ranks"] == k and len(mpi["per_rank"]) == k
@@ -131,9 +136,13 @@ def test_any_rank_count_writes_the_same_bytes(mpi_bin, clouds, tmp_path, case):
             assert all(q["ground_tiles"] > 0 and q["ground_s"] > 0 for q in mpi["per_rank"]), k
         else:
             assert all("ground_tiles" not in q for q in mpi["per_rank"]), k
-        # a plain PLY is written by the tiles' owners in parts; with a DEM or
-        # trimming, rank 0's writer rasterises and drops faces as it copies
-        plain = "--dem" not in opts and "--max-edge" not in opts
+        # a PLY is written by the tiles' owners in parts, trimmed or not; with
+        # a DEM, rank 0's writer rasterises as it copies
+        plain = "--dem" not in opts
+        if "--max-edge" in opts and plain:
+            # the rules drop faces (of the tiles, which the owners write)
+            assert j["trim"]["dropped_max_edge"] > 0, k
+            assert ("--concavity" not in opts) == (j["trim"]["dropped_concavity"] == 0), k
         assert mpi["mesh_written_by"] == ("tile owners" if plain else "rank 0"), (k, case)
         # the parts' writing is timed: the stage beside the merge, and each rank's share
         assert ("parts" in j["times"]) == plain, (k, case)

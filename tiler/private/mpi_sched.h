@@ -71,6 +71,7 @@ typedef struct mr_ctx {
     gdt_status part_st;     /* the first failure of this rank's writes */
     gdt_error part_err;
     double part_t;          /* seconds this rank spent writing its part */
+    gdt_trim_counts part_tc; /* its tiles' faces and drops (a trimmed mesh) */
     /* the shared ground filter (mpi_ground.c), rank 0 */
     tr_ground_share gs;
     int g_left;             /* ranks told GROUND that have not sent GDONE */

@@ -49,8 +49,8 @@ typedef struct tr_out_src {
     tr_dem *dem;                 /* --dem: each tile's kept certified faces are rasterised
                                     into it as they are copied (NULL: no DEM); must outlive
                                     the writer */
-    int parts;                   /* a plain PLY (no DEM, trimming or check copy) written in
-                                  * parts by the tiles' owners (mpirun): see below */
+    int parts;                   /* a PLY (no DEM or check copy; trimmed or not) written
+                                  * in parts by the tiles' owners (mpirun): see below */
 } tr_out_src;
 
 /* Starts the writer (src is copied; the arrays and strings it points to
@@ -92,7 +92,7 @@ void tr_out_on_complete(tr_out *o, void (*fn)(void *), void *ctx);
  * tiles straight into the output's temporary (gdt_ply.h, "in parts"), so
  * that rank 0 does not copy the whole mesh.  Vertices of tile k go to
  * base[k]; its faces to the sum of the face counts of tiles 0..k-1
- * (tr_out_tile_faces), known once every tile is finished; the merge's
+ * (tr_out_count_faces), known once every tile is finished; the merge's
  * faces follow the last tile's.  The bytes are those of the sequential
  * writer.  Rank 0: tr_out_start with src.parts creates the file, writes its
  * header and starts no thread (tr_out_ready does nothing);
@@ -114,9 +114,26 @@ void tr_out_parts_layout(const tr_out *o, const char **tmp_path, uint64_t *heade
 gdt_status tr_out_open_part(tr_out **out, const tr_out_src *src, const char *tmp_path,
                             uint64_t header, uint64_t nvert, gdt_error *err);
 
-/* The face count in tile k's .tri header (checked against the tile).
- * returns: GDT_OK; GDT_EIO 4805; GDT_EJOB 6801. */
-gdt_status tr_out_tile_faces(const tr_out_src *src, uint64_t k, uint64_t *nf, gdt_error *err);
+/* The faces of tile k that the mesh keeps: the count in its .tri header
+ * (checked against the tile), less with src.trim the faces the rules drop
+ * (--concavity: by the trim graph, tr_out_set_trim, which must be set).
+ * With labels, the (tile, label) pairs of the candidates dropped are
+ * appended to (*labels)[2 *nlabels ..] (grown, *cap pairs' room), sorted
+ * and each once.  returns: GDT_OK; GDT_EIO 4805; GDT_EJOB 6801, 6802;
+ * GDT_EINTERNAL 7001. */
+gdt_status tr_out_count_faces(tr_out *o, uint64_t k, uint64_t *kept, uint64_t **labels,
+                              size_t *nlabels, size_t *cap, gdt_error *err);
+
+/* A part of a trimmed mesh without the trim graph: the (tile, label) pairs
+ * of the candidates --concavity drops, sorted (tr_out_count_faces gave
+ * them on rank 0); they must outlive the writes. */
+void tr_out_set_dropped(tr_out *o, const uint64_t *pairs, size_t n);
+
+/* The faces and drops of the tiles this writer has written (trimmed). */
+gdt_trim_counts tr_out_tile_counts(const tr_out *o);
+
+/* Rank 0: adds another rank's tile counts, for tr_out_finish's. */
+void tr_out_add_counts(tr_out *o, const gdt_trim_counts *tc);
 
 /* Writes tile k's vertices (at base[k]; any time after pass 2), or its
  * faces from face index first_face (once the tiles before it are counted).
