@@ -66,12 +66,51 @@ gdt_status gdt_las_copy_shift(unsigned char *recs, size_t n, unsigned record_len
                               const int64_t shift[3], const char *path, uint64_t first,
                               gdt_error *err);
 
-/* Appends n records (n * record_length bytes). */
+/* Appends n records (n * record_length bytes).  After a failure the
+ * caller ends with gdt_las_copy_abort. */
 gdt_status gdt_las_copy_put(gdt_las_copy *w, const unsigned char *recs, size_t n,
                             gdt_error *err);
 
-/* Writes the EVLRs, patches the header, syncs, renames; frees w. */
+/* Writes the EVLRs after the last record written, patches the header,
+ * syncs, renames; frees w. */
 gdt_status gdt_las_copy_finish(gdt_las_copy *w, gdt_error *err);
+
+/* ---- written in parts by several processes ----
+ * Records have a fixed length, so record r of the file (the records in
+ * input order) is at points_at + r * record_length whoever writes it.  The
+ * owner opens the file (gdt_las_copy_open), gives every other process its
+ * temporary's path and points_at (gdt_las_copy_layout) and may write a
+ * share itself (gdt_las_copy_seek, then _put); another process opens the
+ * temporary (gdt_las_copy_open_part), seeks to its share's first record,
+ * puts its records and closes its part (gdt_las_copy_close_part: synced)
+ * with their statistics, which the owner adds (gdt_las_copy_add_stats)
+ * before it seeks past the last record of the file and finishes.  The
+ * header's counts and bounds are then those of every record. */
+typedef struct gdt_las_copy_stats {
+    uint64_t count, by_return[15];
+    int32_t lo[3], hi[3]; /* record integers; meaningless when count is 0 */
+} gdt_las_copy_stats;
+
+void gdt_las_copy_layout(const gdt_las_copy *w, const char **tmp, uint64_t *points_at);
+
+/* tinfo: the template's source info (point format, record length).
+ * returns: GDT_OK; GDT_EIO 4151; GDT_EINTERNAL 7001.  End with
+ * gdt_las_copy_close_part or _abort (which leaves the file). */
+gdt_status gdt_las_copy_open_part(gdt_las_copy **out, const char *tmp, uint64_t points_at,
+                                  const gdt_source_info *tinfo, gdt_error *err);
+
+/* The next record put goes to record rec of the file.  returns: GDT_OK;
+ * GDT_EIO 4152 (the buffered records could not be written: abort w). */
+gdt_status gdt_las_copy_seek(gdt_las_copy *w, uint64_t rec, gdt_error *err);
+
+void gdt_las_copy_get_stats(const gdt_las_copy *w, gdt_las_copy_stats *s);
+void gdt_las_copy_add_stats(gdt_las_copy *w, const gdt_las_copy_stats *s);
+/* a += s: counts added, bounds widened. */
+void gdt_las_copy_stats_add(gdt_las_copy_stats *a, const gdt_las_copy_stats *s);
+
+/* Writes the rest, syncs, closes; *s: the part's statistics; frees w.
+ * returns: GDT_OK; GDT_EIO 4152, 4153. */
+gdt_status gdt_las_copy_close_part(gdt_las_copy *w, gdt_las_copy_stats *s, gdt_error *err);
 
 /* Removes the temporary file and frees w; w may be NULL. */
 void gdt_las_copy_abort(gdt_las_copy *w);

@@ -38,9 +38,11 @@ struct gdt_las_copy {
     double scale[3], offset[3];
     uint64_t count, by_return[15];
     int32_t lo[3], hi[3];
-    uint64_t pos;             /* bytes in the file */
+    uint64_t pos;             /* where buf goes in the file */
     unsigned char *buf;
     size_t blen;
+    uint64_t points_at;       /* the first record's offset */
+    int part;                 /* another process's part (gdt_las_copy_open_part) */
 };
 
 static void copy_free(gdt_las_copy *w)
@@ -62,18 +64,19 @@ void gdt_las_copy_abort(gdt_las_copy *w)
 {
     if (w == NULL)
         return;
-    if (w->fd >= 0 && w->tmp != NULL)
+    if (w->fd >= 0 && w->tmp != NULL && !w->part) /* a part's file is the owner's */
         unlink(w->tmp);
     copy_free(w);
 }
 
-static gdt_status fail(gdt_las_copy *w, gdt_error *err, gdt_status st, int code, const char *what,
-                       int e)
+/* The error of a failed write (w stays: the caller aborts it). */
+static gdt_status fail(const gdt_las_copy *w, gdt_error *err, gdt_status st, int code,
+                       const char *what, int e)
 {
-    gdt_error_set(err, st, code, "%s: %s: %s (temporary %s removed)", w->path, what, strerror(e),
-                  w->tmp);
-    gdt_las_copy_abort(w);
-    return st;
+    if (w->part)
+        return gdt_error_set(err, st, code, "%s: %s: %s", w->path, what, strerror(e));
+    return gdt_error_set(err, st, code, "%s: %s: %s (temporary %s removed)", w->path, what,
+                         strerror(e), w->tmp);
 }
 
 gdt_status gdt_las_copy_accepts(const gdt_source_info *t, const char *path,
@@ -228,7 +231,7 @@ static gdt_status read_template(gdt_las_copy *w, const char *tpath, gdt_error *e
         e = gdt_fd_write_all(w->fd, vl, keep, -1);
     if (e != 0)
         st = gdt_error_set(err, GDT_EIO, 4152, "%s: write failed: %s", w->tmp, strerror(e));
-    w->pos = w->hsize + keep;
+    w->pos = w->points_at = w->hsize + keep;
 done:
     free(vl);
     close(fd);
@@ -307,9 +310,12 @@ gdt_status gdt_las_copy_open_new(gdt_las_copy **out, const char *path, const dou
     memcpy(w->scale, scale, sizeof w->scale);
     memcpy(w->offset, offset, sizeof w->offset);
     e = gdt_fd_write_all(w->fd, h, w->hsize, -1);
-    if (e != 0)
-        return fail(w, err, GDT_EIO, 4152, "write failed", e);
-    w->pos = w->hsize;
+    if (e != 0) {
+        st = fail(w, err, GDT_EIO, 4152, "write failed", e);
+        gdt_las_copy_abort(w);
+        return st;
+    }
+    w->pos = w->points_at = w->hsize;
     *out = w;
     return GDT_OK;
 }
@@ -338,7 +344,7 @@ gdt_status gdt_las_copy_open(gdt_las_copy **out, const char *path, const char *t
 
 static gdt_status flush(gdt_las_copy *w, gdt_error *err)
 {
-    int e = w->blen > 0 ? gdt_fd_write_all(w->fd, w->buf, w->blen, -1) : 0;
+    int e = w->blen > 0 ? gdt_fd_write_all(w->fd, w->buf, w->blen, (off_t)w->pos) : 0;
     if (e != 0)
         return fail(w, err, GDT_EIO, 4152, "write failed", e);
     w->pos += w->blen;
@@ -373,6 +379,109 @@ gdt_status gdt_las_copy_put(gdt_las_copy *w, const unsigned char *recs, size_t n
     return GDT_OK;
 }
 
+void gdt_las_copy_layout(const gdt_las_copy *w, const char **tmp, uint64_t *points_at)
+{
+    *tmp = w->tmp;
+    *points_at = w->points_at;
+}
+
+gdt_status gdt_las_copy_open_part(gdt_las_copy **out, const char *tmp, uint64_t points_at,
+                                  const gdt_source_info *tinfo, gdt_error *err)
+{
+    gdt_las_copy *w = calloc(1, sizeof *w);
+    *out = NULL;
+    if (w == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    w->fd = -1;
+    w->part = 1;
+    w->path = strdup(tmp);
+    w->tmp = strdup(tmp);
+    w->buf = malloc(COPY_BUF);
+    if (w->path == NULL || w->tmp == NULL || w->buf == NULL) {
+        copy_free(w);
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    }
+    w->format = tinfo->point_format;
+    w->reclen = tinfo->record_length;
+    w->pos = w->points_at = points_at;
+    w->fd = open(tmp, O_WRONLY | O_CLOEXEC);
+    if (w->fd < 0) {
+        gdt_status st = gdt_error_set(err, GDT_EIO, 4151, "%s: cannot open: %s", tmp,
+                                      strerror(errno));
+        copy_free(w);
+        return st;
+    }
+    *out = w;
+    return GDT_OK;
+}
+
+gdt_status gdt_las_copy_seek(gdt_las_copy *w, uint64_t rec, gdt_error *err)
+{
+    gdt_status st = flush(w, err);
+    if (st == GDT_OK)
+        w->pos = w->points_at + rec * w->reclen;
+    return st;
+}
+
+void gdt_las_copy_get_stats(const gdt_las_copy *w, gdt_las_copy_stats *s)
+{
+    memset(s, 0, sizeof *s);
+    s->count = w->count;
+    memcpy(s->by_return, w->by_return, sizeof s->by_return);
+    for (int k = 0; k < 3; k++) {
+        s->lo[k] = w->lo[k];
+        s->hi[k] = w->hi[k];
+    }
+}
+
+void gdt_las_copy_stats_add(gdt_las_copy_stats *a, const gdt_las_copy_stats *s)
+{
+    if (s->count == 0)
+        return;
+    for (int k = 0; k < 3; k++) {
+        if (a->count == 0 || s->lo[k] < a->lo[k])
+            a->lo[k] = s->lo[k];
+        if (a->count == 0 || s->hi[k] > a->hi[k])
+            a->hi[k] = s->hi[k];
+    }
+    for (int i = 0; i < 15; i++)
+        a->by_return[i] += s->by_return[i];
+    a->count += s->count;
+}
+
+void gdt_las_copy_add_stats(gdt_las_copy *w, const gdt_las_copy_stats *s)
+{
+    gdt_las_copy_stats a;
+    gdt_las_copy_get_stats(w, &a);
+    gdt_las_copy_stats_add(&a, s);
+    w->count = a.count;
+    memcpy(w->by_return, a.by_return, sizeof w->by_return);
+    for (int k = 0; k < 3; k++) {
+        w->lo[k] = a.lo[k];
+        w->hi[k] = a.hi[k];
+    }
+}
+
+gdt_status gdt_las_copy_close_part(gdt_las_copy *w, gdt_las_copy_stats *s, gdt_error *err)
+{
+    gdt_status st = flush(w, err);
+    if (st != GDT_OK) {
+        gdt_las_copy_abort(w);
+        return st;
+    }
+    gdt_las_copy_get_stats(w, s);
+    if (fsync(w->fd) != 0 || close(w->fd) != 0) {
+        st = gdt_error_set(err, GDT_EIO, 4153, "%s: fsync or close failed: %s", w->tmp,
+                           strerror(errno));
+        w->fd = -1;
+        copy_free(w);
+        return st;
+    }
+    w->fd = -1;
+    copy_free(w);
+    return GDT_OK;
+}
+
 gdt_status gdt_las_copy_finish(gdt_las_copy *w, gdt_error *err)
 {
     unsigned char *h = w->head;
@@ -382,13 +491,18 @@ gdt_status gdt_las_copy_finish(gdt_las_copy *w, gdt_error *err)
     gdt_error e2;
     int e;
 
-    if (st != GDT_OK)
+    if (st != GDT_OK) {
+        gdt_las_copy_abort(w);
         return st;
+    }
     evlr_start = w->pos;
     if (w->evlrs_len > 0) {
-        e = gdt_fd_write_all(w->fd, w->evlrs, w->evlrs_len, -1);
-        if (e != 0)
-            return fail(w, err, GDT_EIO, 4152, "write failed", e);
+        e = gdt_fd_write_all(w->fd, w->evlrs, w->evlrs_len, (off_t)evlr_start);
+        if (e != 0) {
+            st = fail(w, err, GDT_EIO, 4152, "write failed", e);
+            gdt_las_copy_abort(w);
+            return st;
+        }
     }
     gdt_le_put_u32(h + 107, legacy ? (uint32_t)w->count : 0);
     for (int i = 0; i < 5; i++)
@@ -408,10 +522,14 @@ gdt_status gdt_las_copy_finish(gdt_las_copy *w, gdt_error *err)
             gdt_le_put_u64(h + 255 + 8 * i, w->by_return[i]);
     }
     e = gdt_fd_write_all(w->fd, h, w->hsize, 0);
-    if (e != 0)
-        return fail(w, err, GDT_EIO, 4152, "write failed", e);
-    if (fsync(w->fd) != 0)
-        return fail(w, err, GDT_EIO, 4153, "fsync failed", errno);
+    if (e == 0 && fsync(w->fd) != 0)
+        st = fail(w, err, GDT_EIO, 4153, "fsync failed", errno);
+    else if (e != 0)
+        st = fail(w, err, GDT_EIO, 4152, "write failed", e);
+    if (st != GDT_OK) {
+        gdt_las_copy_abort(w);
+        return st;
+    }
     e = close(w->fd);
     w->fd = -1;
     if (e != 0) {

@@ -172,13 +172,16 @@ static gdt_status write_from_points(tr_run *c, int bits_fd, gdt_error *err)
     return gdt_las_copy_finish(w, err);
 }
 
-/* Copies input path's records into w (onto the lattice of tinfo, the
+/* Copies the records of input path that fall in [first, end) of the
+ * inputs taken as one sequence (its record r is number *b + r; *b is
+ * advanced past it) into w, at w's place (onto the lattice of tinfo, the
  * first input's); *ord: the next input ordinal. */
 static gdt_status copy_input(const tr_run *c, const char *path, const gdt_source_info *tinfo,
-                             int bits_fd, gdt_las_copy *w, uint64_t *ord, gdt_error *err)
+                             int bits_fd, gdt_las_copy *w, uint64_t *b, uint64_t first,
+                             uint64_t end, uint64_t *ord, gdt_error *err)
 {
     int64_t shift[3];
-    uint64_t rec = 0;
+    uint64_t rec = 0, count, lo, hi;
     const gdt_options *opts = c->opts;
     gdt_source *src = NULL;
     gdt_source_opts so;
@@ -193,31 +196,45 @@ static gdt_status copy_input(const tr_run *c, const char *path, const gdt_source
     st = gdt_source_open(&src, path, &so, err);
     if (st != GDT_OK)
         return st;
+    /* this input's part of [first, end), in its own numbering */
+    count = gdt_source_get_info(src)->point_count;
+    lo = first > *b ? first - *b : 0;
+    hi = end - *b < count ? end - *b : count;
+    if (end <= *b || lo >= hi) {
+        *b += count;
+        gdt_source_close(src);
+        return GDT_OK;
+    }
+    *b += count;
+    rec = lo;
     fmt = gdt_source_get_info(src)->point_format;
     rl = gdt_source_get_info(src)->record_length;
     st = gdt_las_copy_accepts(tinfo, path, gdt_source_get_info(src), shift, err);
+    if (st == GDT_OK && (lo > 0 || hi < count))
+        st = gdt_source_seek(src, lo, hi, err);
     pt = malloc(GO_CHUNK * sizeof *pt);
     raw = malloc((size_t)GO_CHUNK * rl);
     if (st == GDT_OK && (pt == NULL || raw == NULL))
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-    while (st == GDT_OK) {
+    while (st == GDT_OK && rec < hi) {
         size_t n = 0, nkept = 0;
-        const uint64_t first = *ord;
-        st = gdt_source_read_raw(src, pt, raw, GO_CHUNK, &n, err);
+        const uint64_t ord0 = *ord;
+        st = gdt_source_read_raw(src, pt, raw, hi - rec < GO_CHUNK ? (size_t)(hi - rec) : GO_CHUNK,
+                                 &n, err);
         if (st != GDT_OK || n == 0)
             break;
         for (size_t i = 0; i < n; i++) {
             kept[i] = gdt_filter_test(&opts->filter, &pt[i]) == GDT_KEEP;
             nkept += kept[i];
         }
-        /* the kept records have ordinals [first, first + nkept) */
-        st = read_bits(c, bits_fd, first, nkept, bits, err);
+        /* the kept records have ordinals [ord0, ord0 + nkept) */
+        st = read_bits(c, bits_fd, ord0, nkept, bits, err);
         for (size_t i = 0; i < n && st == GDT_OK; i++) {
             unsigned char *r = raw + i * rl;
             unsigned cls;
             if (!kept[i])
                 continue;
-            cls = bit_class(bits, first, *ord);
+            cls = bit_class(bits, ord0, *ord);
             if (fmt >= 6)
                 r[16] = (unsigned char)cls;
             else
@@ -236,14 +253,77 @@ static gdt_status copy_input(const tr_run *c, const char *path, const gdt_source
     return st;
 }
 
+/* The records [first, end) of the inputs taken as one sequence, in order,
+ * into w from its record first, with ordinals from ord_base; *kept: the
+ * records the point filter kept among them; *records: every input's. */
+static gdt_status copy_share(const tr_run *c, const gdt_source_info *tinfo, int bits_fd,
+                             gdt_las_copy *w, uint64_t first, uint64_t end, uint64_t ord_base,
+                             uint64_t *kept, uint64_t *records, gdt_error *err)
+{
+    const gdt_options *opts = c->opts;
+    uint64_t b = 0, ord = ord_base;
+    gdt_status st = gdt_las_copy_seek(w, first, err);
+    for (size_t i = 0; i < opts->ninputs && st == GDT_OK; i++) {
+        st = copy_input(c, opts->inputs[i], tinfo, bits_fd, w, &b, first, end, &ord, err);
+        if (st == GDT_OK && tr_stopped(c))
+            st = gdt_error_set(err, GDT_EINTERRUPTED, 1303,
+                               "stopped by a signal while writing %s", opts->ground_out);
+    }
+    *kept = ord - ord_base;
+    *records = b;
+    return st;
+}
+
+/* The first input's header (the copy's template) and J/ground.bits open. */
+static gdt_status open_inputs(const tr_run *c, gdt_source_info *tinfo, int *fd, gdt_error *err)
+{
+    gdt_source *src = NULL;
+    gdt_source_opts so;
+    gdt_status st;
+    memset(&so, 0, sizeof so);
+    *fd = -1;
+    st = gdt_source_open(&src, c->opts->inputs[0], &so, err);
+    if (st == GDT_OK)
+        *tinfo = *gdt_source_get_info(src);
+    gdt_source_close(src);
+    if (st == GDT_OK && (*fd = open(c->ground_bits, O_RDONLY | O_CLOEXEC)) < 0)
+        st = gdt_error_set(err, GDT_EIO, 4504, "cannot open %s: %s", c->ground_bits,
+                           strerror(errno));
+    return st;
+}
+
+gdt_status tr_ground_out_part(tr_run *c, const char *tmp, uint64_t points_at, uint64_t first,
+                              uint64_t end, uint64_t ord_base, gdt_las_copy_stats *stats,
+                              uint64_t *kept, gdt_error *err)
+{
+    gdt_source_info tinfo;
+    gdt_las_copy *w = NULL;
+    uint64_t records = 0;
+    int fd = -1;
+    gdt_status st = open_inputs(c, &tinfo, &fd, err);
+
+    memset(stats, 0, sizeof *stats);
+    *kept = 0;
+    if (st == GDT_OK)
+        st = gdt_las_copy_open_part(&w, tmp, points_at, &tinfo, err);
+    if (st == GDT_OK)
+        st = copy_share(c, &tinfo, fd, w, first, end, ord_base, kept, &records, err);
+    if (fd >= 0)
+        close(fd);
+    if (st != GDT_OK) {
+        gdt_las_copy_abort(w);
+        return st;
+    }
+    return gdt_las_copy_close_part(w, stats, err);
+}
+
 gdt_status tr_ground_out_write(tr_run *c, gdt_error *err)
 {
     const gdt_options *opts = c->opts;
+    const tr_gout_share *sh = c->goshare;
     gdt_las_copy *w = NULL;
-    gdt_source *src = NULL;
-    gdt_source_opts so;
-    uint64_t ord = 0;
-    int fd, pcd = 0;
+    uint64_t kept = 0, records = 0;
+    int fd, pcd = 0, shared = 0;
     gdt_status st;
     gdt_source_info tinfo;
 
@@ -259,33 +339,51 @@ gdt_status tr_ground_out_write(tr_run *c, gdt_error *err)
         close(fd);
         return st;
     }
-    memset(&so, 0, sizeof so);
-    st = gdt_source_open(&src, opts->inputs[0], &so, err);
-    if (st == GDT_OK) {
-        tinfo = *gdt_source_get_info(src);
+    st = open_inputs(c, &tinfo, &fd, err);
+    if (st == GDT_OK)
         st = gdt_las_copy_open(&w, opts->ground_out, opts->inputs[0], &tinfo, err);
-    }
-    gdt_source_close(src);
-    if (st != GDT_OK)
+    if (st != GDT_OK) {
+        if (fd >= 0)
+            close(fd);
         return st;
-    fd = open(c->ground_bits, O_RDONLY | O_CLOEXEC);
-    if (fd < 0) {
-        gdt_las_copy_abort(w);
-        return gdt_error_set(err, GDT_EIO, 4504, "cannot open %s: %s", c->ground_bits,
-                             strerror(errno));
     }
-    for (size_t i = 0; i < opts->ninputs && st == GDT_OK; i++) {
-        st = copy_input(c, opts->inputs[i], &tinfo, fd, w, &ord, err);
-        if (st == GDT_OK && tr_stopped(c))
-            st = gdt_error_set(err, GDT_EINTERRUPTED, 1303,
-                               "stopped by a signal while writing %s", opts->ground_out);
+    if (sh != NULL) {
+        /* every other process writes its share of the records in place */
+        const char *tmp;
+        uint64_t at, first = 0, end = 0, base = 0;
+        gdt_las_copy_layout(w, &tmp, &at);
+        st = sh->begin(sh->ctx, tmp, at, &shared, &first, &end, &base, err);
+        if (st == GDT_OK && shared) {
+            gdt_las_copy_stats sum;
+            uint64_t others = 0;
+            gdt_error e2;
+            gdt_status s2;
+            st = copy_share(c, &tinfo, fd, w, first, end, base, &kept, &records, err);
+            gdt_error_clear(&e2);
+            s2 = sh->wait(sh->ctx, &sum, &others, &e2); /* also after a failure here */
+            if (st == GDT_OK && s2 != GDT_OK) {
+                st = s2;
+                *err = e2;
+            }
+            if (st == GDT_OK) {
+                gdt_las_copy_add_stats(w, &sum);
+                kept += others;
+                c->s.ground_out_shared = 1;
+                gdt_log_note((gdt_log *)&c->log, "%s: the records written in shares by the ranks",
+                             opts->ground_out);
+                /* past the last record: the EVLRs follow */
+                st = gdt_las_copy_seek(w, records, err);
+            }
+        }
     }
+    if (st == GDT_OK && !shared)
+        st = copy_share(c, &tinfo, fd, w, 0, UINT64_MAX, 0, &kept, &records, err);
     close(fd);
-    if (st == GDT_OK && ord != c->plan->points)
+    if (st == GDT_OK && kept != c->plan->points)
         st = gdt_error_set(err, GDT_EINPUT, 3501,
                            "the input changed since pass 1: %" PRIu64 " points kept now, %" PRIu64
                            " then",
-                           ord, c->plan->points);
+                           kept, c->plan->points);
     if (st != GDT_OK) {
         gdt_las_copy_abort(w);
         return st;

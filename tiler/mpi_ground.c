@@ -23,6 +23,7 @@
  * journal and output do not depend on the number of ranks. */
 #define _GNU_SOURCE /* SEEK_DATA, SEEK_HOLE */
 #include "private/mpi_sched.h"
+#include "private/ground_out.h"
 
 #include <errno.h>
 #include <fcntl.h>
@@ -157,10 +158,7 @@ static gdt_status g_collect(void *ctx, int wait, tr_ground_rec **recs, size_t *n
                     st = mr_bad_message(from, tag, &e);
             }
         } else if (st == GDT_OK && tag == TAG_GDONE) {
-            gdt_status rst = (gdt_status)gdt_unpack_u64(&u);
-            int code = (int)gdt_unpack_u64(&u);
-            size_t ml = 0;
-            const unsigned char *msg = gdt_unpack_bytes(&u, &ml);
+            gdt_status rst = mr_unpack_status(m, &u, from);
             uint64_t tiles = gdt_unpack_u64(&u);
             double t = gdt_unpack_f64(&u);
             if (u.bad) {
@@ -172,12 +170,7 @@ static gdt_status g_collect(void *ctx, int wait, tr_ground_rec **recs, size_t *n
                     c->s.ranks[from].t_ground = t;
                 }
                 if (rst != GDT_OK && fail == GDT_OK) {
-                    /* "rank R: " and its message, as the job's error */
-                    char text[GDT_ERROR_MSG_MAX];
-                    snprintf(text, sizeof text, "%.*s",
-                             (int)(ml < sizeof text ? ml : sizeof text - 1), (const char *)msg);
-                    mr_fail(m, from, rst, code, text);
-                    *err = m->job_err;
+                    *err = m->job_err; /* the first failure: the job's */
                     fail = rst;
                 }
             }
@@ -258,6 +251,149 @@ static gdt_status g_merge_bits(void *ctx, int fd, gdt_error *err)
     return st;
 }
 
+/* ---- --ground-out in shares ----
+ * Its records are the input records in input order, each of the same
+ * length, so a rank writes those of its pass-1 share at their places:
+ * GOUT (the temporary, where the records begin, the share and its first
+ * ordinal), then GOUTDONE (status, error, kept records, the share's
+ * statistics for the header).  Only when this run read pass 1 in shares
+ * (their ordinal bases come from it); otherwise rank 0 writes them all. */
+
+static gdt_status o_begin(void *ctx, const char *tmp, uint64_t points_at, int *shared,
+                          uint64_t *first, uint64_t *end, uint64_t *ord_base, gdt_error *err)
+{
+    mr_ctx *m = ctx;
+    uint64_t base;
+    *shared = 0;
+    if (!m->p1_shared || m->p1_bounds == NULL || m->p1_kept == NULL || m->size < 2)
+        return GDT_OK;
+    base = m->p1_kept[0];
+    for (int r = 1; r < m->size; r++) {
+        gdt_pack p;
+        gdt_status st;
+        memset(&p, 0, sizeof p);
+        gdt_pack_bytes(&p, tmp, strlen(tmp));
+        gdt_pack_u64(&p, points_at);
+        gdt_pack_u64(&p, m->p1_bounds[r]);
+        gdt_pack_u64(&p, m->p1_bounds[r + 1]);
+        gdt_pack_u64(&p, base);
+        base += m->p1_kept[r];
+        st = mr_send_pack(m, r, TAG_GOUT, &p, err);
+        if (st != GDT_OK) {
+            gdt_error_print(err, stderr);
+            gdt_comm_abort(m->comm, (int)st);
+        }
+    }
+    m->go_left = m->size - 1;
+    *shared = 1;
+    *first = m->p1_bounds[0];
+    *end = m->p1_bounds[1];
+    *ord_base = 0;
+    return GDT_OK;
+}
+
+static gdt_status o_wait(void *ctx, gdt_las_copy_stats *sum, uint64_t *kept, gdt_error *err)
+{
+    mr_ctx *m = ctx;
+    gdt_status fail = GDT_OK;
+    memset(sum, 0, sizeof *sum);
+    *kept = 0;
+    while (m->go_left > 0) {
+        unsigned char *buf = NULL;
+        size_t len = 0;
+        int ready = 0, from = 0, tag = 0;
+        gdt_unpack u;
+        gdt_las_copy_stats s;
+        gdt_status rst;
+        uint64_t k;
+        gdt_error e;
+        gdt_error_clear(&e);
+        gdt_status st = gdt_comm_wait(m->comm, -1, TAG_GOUTDONE, NULL, &ready, &from, &tag, &len,
+                                      &e);
+        if (st == GDT_OK)
+            st = mr_recv(m, from, tag, len, &buf, &e);
+        memset(&u, 0, sizeof u);
+        u.p = buf;
+        u.n = len;
+        rst = st == GDT_OK ? mr_unpack_status(m, &u, from) : GDT_OK;
+        k = gdt_unpack_u64(&u);
+        memset(&s, 0, sizeof s);
+        s.count = gdt_unpack_u64(&u);
+        for (int i = 0; i < 15; i++)
+            s.by_return[i] = gdt_unpack_u64(&u);
+        for (int i = 0; i < 3; i++) {
+            s.lo[i] = (int32_t)(uint32_t)gdt_unpack_u64(&u);
+            s.hi[i] = (int32_t)(uint32_t)gdt_unpack_u64(&u);
+        }
+        if (st == GDT_OK && u.bad)
+            st = mr_bad_message(from, tag, &e);
+        if (st != GDT_OK) {
+            free(buf);
+            gdt_error_print(&e, stderr);
+            gdt_comm_abort(m->comm, (int)st);
+        }
+        m->go_left--;
+        if (rst != GDT_OK && fail == GDT_OK) {
+            *err = m->job_err; /* the first failure: the job's */
+            fail = rst;
+        } else if (rst == GDT_OK) {
+            gdt_las_copy_stats_add(sum, &s);
+            *kept += k;
+        }
+        free(buf);
+    }
+    return fail;
+}
+
+void mr_gout_answer(mr_ctx *m, const unsigned char *msg, size_t len)
+{
+    gdt_unpack u;
+    size_t tl = 0;
+    const unsigned char *t;
+    char *tmp = NULL;
+    uint64_t at, first, end, base, kept = 0;
+    gdt_las_copy_stats s;
+    gdt_error err, e2;
+    gdt_status st = GDT_OK;
+    gdt_pack p;
+
+    memset(&u, 0, sizeof u);
+    u.p = msg;
+    u.n = len;
+    gdt_error_clear(&err);
+    memset(&s, 0, sizeof s);
+    t = gdt_unpack_bytes(&u, &tl);
+    at = gdt_unpack_u64(&u);
+    first = gdt_unpack_u64(&u);
+    end = gdt_unpack_u64(&u);
+    base = gdt_unpack_u64(&u);
+    if (u.bad || t == NULL)
+        st = mr_bad_message(0, TAG_GOUT, &err);
+    else if ((tmp = malloc(tl + 1)) == NULL)
+        st = gdt_error_set(&err, GDT_EINTERNAL, 7001, "out of memory");
+    if (st == GDT_OK) {
+        memcpy(tmp, t, tl);
+        tmp[tl] = '\0';
+        st = tr_ground_out_part(m->c, tmp, at, first, end, base, &s, &kept, &err);
+    }
+    free(tmp);
+    memset(&p, 0, sizeof p);
+    mr_pack_status(&p, st, &err);
+    gdt_pack_u64(&p, kept);
+    gdt_pack_u64(&p, s.count);
+    for (int i = 0; i < 15; i++)
+        gdt_pack_u64(&p, s.by_return[i]);
+    for (int i = 0; i < 3; i++) {
+        gdt_pack_u64(&p, (uint64_t)(uint32_t)s.lo[i]);
+        gdt_pack_u64(&p, (uint64_t)(uint32_t)s.hi[i]);
+    }
+    gdt_error_clear(&e2);
+    if (mr_send_pack(m, 0, TAG_GOUTDONE, &p, &e2) != GDT_OK) {
+        gdt_error_print(&e2, stderr);
+        gdt_comm_abort(m->comm, (int)e2.status);
+    }
+}
+
 void mr_ground_hooks(mr_ctx *m)
 {
     m->gs.mine = g_mine;
@@ -265,6 +401,9 @@ void mr_ground_hooks(mr_ctx *m)
     m->gs.collect = g_collect;
     m->gs.merge_bits = g_merge_bits;
     m->gs.ctx = m;
+    m->gos.begin = o_begin;
+    m->gos.wait = o_wait;
+    m->gos.ctx = m;
 }
 
 /* Another rank: GREC with the subsets written since the last one. */
@@ -345,9 +484,7 @@ void mr_ground_answer(mr_ctx *m, const unsigned char *msg, size_t len, gdt_statu
     free(bits);
     /* GDONE, whatever happened: rank 0 waits for it */
     memset(&p, 0, sizeof p);
-    gdt_pack_u64(&p, (uint64_t)*st);
-    gdt_pack_u64(&p, *st != GDT_OK ? (uint64_t)err->code : 0);
-    gdt_pack_bytes(&p, *st != GDT_OK ? err->msg : "", *st != GDT_OK ? strlen(err->msg) : 0);
+    mr_pack_status(&p, *st, err);
     gdt_pack_u64(&p, classified);
     gdt_pack_f64(&p, gdt_now() - t0);
     gdt_error_clear(&e2);

@@ -60,3 +60,25 @@ int mr_owner_of(const uint64_t *pre, uint64_t n, uint64_t k, int size)
     return r < 0 ? 0 : r >= size ? size - 1 : r;
 }
 
+
+void mr_pack_status(gdt_pack *p, gdt_status st, const gdt_error *err)
+{
+    gdt_pack_u64(p, (uint64_t)st);
+    gdt_pack_u64(p, st != GDT_OK ? (uint64_t)err->code : 0);
+    gdt_pack_bytes(p, st != GDT_OK ? err->msg : "", st != GDT_OK ? strlen(err->msg) : 0);
+}
+
+gdt_status mr_unpack_status(mr_ctx *m, gdt_unpack *u, int from)
+{
+    gdt_status st = (gdt_status)gdt_unpack_u64(u);
+    int code = (int)gdt_unpack_u64(u);
+    size_t ml = 0;
+    const unsigned char *msg = gdt_unpack_bytes(u, &ml);
+    char text[GDT_ERROR_MSG_MAX];
+    if (u->bad || st == GDT_OK)
+        return GDT_OK;
+    snprintf(text, sizeof text, "%.*s", (int)(ml < sizeof text ? ml : sizeof text - 1),
+             (const char *)msg);
+    mr_fail(m, from, st, code, text);
+    return st;
+}

@@ -70,20 +70,17 @@ static gdt_status p1_collect(void *ctx, gdt_status own, gdt_error *err)
     if (m->p1_kept != NULL)
         m->p1_kept[0] = gdt_cloud_total_counts(m->c->cloud).kept;
     for (int r = 1; r < m->size; r++) {
-        size_t len = 0, ml = 0, pl = 0;
+        size_t len = 0, pl = 0;
         unsigned char *buf = NULL;
-        const unsigned char *msg, *part;
+        const unsigned char *part;
         uint64_t kept;
         gdt_status rst;
-        int code;
         gdt_unpack u;
         mr_wait_recv(m, r, TAG_P1DONE, &buf, &len);
         memset(&u, 0, sizeof u);
         u.p = buf;
         u.n = len;
-        rst = (gdt_status)gdt_unpack_u64(&u);
-        code = (int)gdt_unpack_u64(&u);
-        msg = gdt_unpack_bytes(&u, &ml);
+        rst = mr_unpack_status(m, &u, r);
         kept = gdt_unpack_u64(&u);
         part = gdt_unpack_bytes(&u, &pl);
         if (m->p1_kept != NULL)
@@ -92,10 +89,6 @@ static gdt_status p1_collect(void *ctx, gdt_status own, gdt_error *err)
             if (st == GDT_OK)
                 st = mr_bad_message(r, TAG_P1DONE, err);
         } else if (rst != GDT_OK) {
-            char text[GDT_ERROR_MSG_MAX];
-            snprintf(text, sizeof text, "%.*s", (int)(ml < sizeof text ? ml : sizeof text - 1),
-                     (const char *)msg);
-            mr_fail(m, r, rst, code, text);
             if (st == GDT_OK) {
                 *err = m->job_err;
                 st = rst;
@@ -146,9 +139,7 @@ void mr_pass1_answer(mr_ctx *m, const unsigned char *msg, size_t len, gdt_status
     else
         st = tr_run_pass1_share(m->c, first, end, &part, &pl, &kept, &e);
     memset(&p, 0, sizeof p);
-    gdt_pack_u64(&p, (uint64_t)st);
-    gdt_pack_u64(&p, st != GDT_OK ? (uint64_t)e.code : 0);
-    gdt_pack_bytes(&p, st != GDT_OK ? e.msg : "", st != GDT_OK ? strlen(e.msg) : 0);
+    mr_pack_status(&p, st, &e);
     gdt_pack_u64(&p, kept);
     gdt_pack_bytes(&p, part, st == GDT_OK ? pl : 0);
     free(part);

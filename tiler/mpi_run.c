@@ -346,6 +346,8 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
     mr_ground_hooks(m);
     if (c->opts->ground)
         c->gshare = &m->gs;
+    if (c->opts->ground_out != NULL)
+        c->goshare = &m->gos;
     if (st == GDT_OK) {
         c->s.ranks = calloc((size_t)m->size, sizeof *c->s.ranks);
         c->s.nranks = m->size;
@@ -551,17 +553,6 @@ static gdt_status rn_poll(void *ctx, gdt_error *err)
     return gdt_error_set(err, GDT_EINTERRUPTED, 1303, "stopped: another rank failed");
 }
 
-/* Waits for one message with tag from rank 0 into *buf (malloc'd). */
-static gdt_status rn_wait(mr_ctx *m, int tag, unsigned char **buf, size_t *len, gdt_error *err)
-{
-    int ready = 0, from = 0, got_tag = 0;
-    gdt_status st = gdt_comm_wait(m->comm, 0, tag, NULL, &ready, &from, &got_tag, len, err);
-    *buf = NULL;
-    if (st == GDT_OK)
-        st = mr_recv(m, 0, tag, *len, buf, err);
-    return st;
-}
-
 static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
 {
     gdt_status st = tr_run_init(c, c->opts, err), run_st = GDT_OK;
@@ -632,21 +623,25 @@ static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
         gdt_error e2;
         gdt_error_clear(&e2);
         gdt_status s2 = mr_send_pack(m, 0, TAG_FINISHED, &p, &e2);
-        int ready = 0, from = 0, tag = 0;
-        /* PARTS (write this rank's tiles into the mesh) may come before FINAL */
-        if (s2 == GDT_OK)
+        /* PARTS (write this rank's tiles into the mesh) and GOUT (its
+         * share of --ground-out) may come before FINAL */
+        while (s2 == GDT_OK) {
+            int ready = 0, from = 0, tag = 0;
+            unsigned char *req = NULL;
             s2 = gdt_comm_wait(m->comm, 0, -1, NULL, &ready, &from, &tag, &len, &e2);
-        if (s2 == GDT_OK && tag == TAG_PARTS) {
-            unsigned char *parts = NULL;
-            s2 = mr_recv(m, 0, TAG_PARTS, len, &parts, &e2);
+            if (s2 == GDT_OK && tag == TAG_FINAL) {
+                s2 = mr_recv(m, 0, TAG_FINAL, len, &fin, &e2);
+                break;
+            }
+            if (s2 == GDT_OK && tag != TAG_PARTS && tag != TAG_GOUT)
+                s2 = mr_bad_message(0, tag, &e2);
             if (s2 == GDT_OK)
-                mr_parts_answer(m, ks, n, parts, len);
-            free(parts);
-            if (s2 == GDT_OK)
-                s2 = rn_wait(m, TAG_FINAL, &fin, &len, &e2);
-        } else if (s2 == GDT_OK) {
-            s2 = tag == TAG_FINAL ? mr_recv(m, 0, TAG_FINAL, len, &fin, &e2)
-                                  : mr_bad_message(0, tag, &e2);
+                s2 = mr_recv(m, 0, tag, len, &req, &e2);
+            if (s2 == GDT_OK && tag == TAG_PARTS)
+                mr_parts_answer(m, ks, n, req, len);
+            else if (s2 == GDT_OK)
+                mr_gout_answer(m, req, len);
+            free(req);
         }
         if (s2 != GDT_OK) {
             gdt_error_print(&e2, stderr);

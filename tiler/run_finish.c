@@ -202,6 +202,9 @@ static gdt_status write_summary(const tr_run *c, gdt_error *err)
         gdt_json_double(&j, "load_balance", sum > 0 ? max * s->nranks / sum : 1.0);
         /* a plain PLY's blocks are written by the ranks owning their tiles */
         gdt_json_string(&j, "mesh_written_by", c->out_parts ? "tile owners" : "rank 0");
+        if (c->opts->ground_out != NULL)
+            gdt_json_string(&j, "ground_out_written_by",
+                            s->ground_out_shared ? "ranks in shares" : "rank 0");
         gdt_json_begin_array(&j, "per_rank");
         for (int r = 0; r < s->nranks; r++) {
             const tr_rank_stats *q = &s->ranks[r];

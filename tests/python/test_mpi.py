@@ -63,7 +63,9 @@ def clouds(root, tmp_path_factory):
     a = gen(root, d / "a.las", 30000, 11)
     b = gen(root, d / "b.las", 12000, 12, "--offset", "500340", "4100100")
     laz = write_laz(a, d / "a.laz", chunk=7000)
-    return {"a": a, "b": b, "laz": laz, "dir": d}
+    # one chunk: pass 1 cannot be cut, so rank 0 reads it alone
+    laz1 = write_laz(a, d / "a1.laz", chunk=50000)
+    return {"a": a, "b": b, "laz": laz, "laz1": laz1, "dir": d}
 
 
 CASES = {
@@ -86,6 +88,9 @@ CASES = {
                                 "{d}/g.las")),
     "ground-out-laz-64": (("laz",), ("--tile", "64", "--ground", "pmf", "--ground-out",
                                      "{d}/g.las")),
+    # and rank 0 writes them all when pass 1 was not read in shares
+    "ground-out-laz1-64": (("laz1",), ("--tile", "64", "--ground", "pmf", "--ground-out",
+                                       "{d}/g.las")),
     # every rank of the node takes the node's CPU devices in turn (here: the one)
     "device-local-64": (("b",), ("--tile", "64", "--device", "cpu/local")),
 }
@@ -115,6 +120,10 @@ def test_any_rank_count_writes_the_same_bytes(mpi_bin, clouds, tmp_path, case):
         if "--ground-out" in opts:
             assert (outs[k] / "g.las").read_bytes() == (outs[1] / "g.las").read_bytes(), k
             assert not list(outs[k].glob("**/ground.bits*"))
+            # each rank wrote the records of its pass-1 share in place
+            jk = json.loads((outs[k] / "run.json").read_text())
+            assert jk["mpi"]["ground_out_written_by"] == \
+                ("rank 0" if "laz1" in case else "ranks in shares"), k
         j = json.loads((outs[k] / "run.json").read_text())
         j1 = json.loads((outs[1] / "run.json").read_text())
         for key in ("faces", "vertices", "certified_faces", "merge_faces", "gcd_tiles",
@@ -497,15 +506,20 @@ def test_killed_in_the_ground_filter_then_rerun(mpi_bin, ground_ref, tmp_path):
     assert r.returncode == 0, r.stdout + r.stderr
     assert out.read_bytes() == ground_ref["ply"].read_bytes()
     assert las.read_bytes() == ground_ref["las"].read_bytes()
-    g = json.loads((tmp_path / "j.json").read_text())["ground"]
+    j = json.loads((tmp_path / "j.json").read_text())
+    g = j["ground"]
     assert g["classified"] and g["tiles_reused"] >= recorded, (g, recorded)
+    assert j["mpi"]["ground_out_written_by"] == "ranks in shares"
 
 
-def test_a_rank_failing_in_the_ground_filter_fails_the_job(mpi_bin, ground_ref, tools_dir,
-                                                           tmp_path):
-    """Rank 1 cannot write its --ground-out bits (a full disk, through the
-    LD_PRELOAD shim on rank 1 only): the job exits 4 with rank 1's message
-    once, no output is written, and a plain rerun finishes the job with the
+@pytest.mark.parametrize("match,after", [("ground.bits.1", 5), ("g.las.tmp", 2)])
+def test_a_rank_failing_in_the_ground_stages_fails_the_job(mpi_bin, ground_ref, tools_dir,
+                                                           tmp_path, match, after):
+    """Rank 1 cannot write (a full disk, through the LD_PRELOAD shim on rank
+    1 only) its --ground-out bits in the ground filter, or its share of the
+    classified records after the mesh: the job exits 4 with rank 1's
+    message once, no classified file and no temporary are left (and no mesh
+    when the filter failed), and a plain rerun finishes the job with the
     bytes of an undisturbed run."""
     shim = tools_dir / "libgdt_fail_write.so"
     if not shim.exists():
@@ -515,15 +529,43 @@ def test_a_rank_failing_in_the_ground_filter_fails_the_job(mpi_bin, ground_ref, 
     args = [str(a) for a in (ground_ref["cloud"], "-o", out, "--tile", "128", "--ground", "pmf",
                              "--ground-out", las, "-q", "--job", job)]
     r = run(["mpirun", "--oversubscribe", "-np", "1", mpi_bin, *args, ":", "-np", "1", "env",
-             f"LD_PRELOAD={shim}", "GDT_TEST_FAIL_WRITE_MATCH=ground.bits.1",
-             "GDT_TEST_FAIL_WRITE_AFTER=5", f"GDT_TEST_FAIL_WRITE_LOG={log}", mpi_bin, *args])
+             f"LD_PRELOAD={shim}", f"GDT_TEST_FAIL_WRITE_MATCH={match}",
+             f"GDT_TEST_FAIL_WRITE_AFTER={after}", f"GDT_TEST_FAIL_WRITE_LOG={log}", mpi_bin,
+             *args])
     assert log.exists(), r.stdout + r.stderr
     assert r.returncode == 4, r.stdout + r.stderr
     assert r.stderr.count("error GDT-4") == 1 and "rank 1: " in r.stderr, r.stderr
-    assert "ground.bits.1" in r.stderr, r.stderr
-    assert not out.exists() and not las.exists() and job.is_dir()
+    assert "No space left on device" in r.stderr and match in r.stderr, r.stderr
+    assert not las.exists() and job.is_dir()
+    assert out.exists() == (match == "g.las.tmp")  # the mesh comes first
+    assert [p.name for p in tmp_path.iterdir() if ".tmp" in p.name] == []
     r = run([mpi_bin, *args])
     assert r.returncode == 0, r.stderr
     assert out.read_bytes() == ground_ref["ply"].read_bytes()
     assert las.read_bytes() == ground_ref["las"].read_bytes()
     assert not list(job.parent.glob("**/ground.bits*"))
+
+
+def test_ground_out_of_a_job_resumed_after_pass_2(mpi_bin, ground_ref, tmp_path):
+    """A plain run stopped after its ground filter (SIGINT) and resumed under
+    two ranks: pass 2 and the classes are the journal's, pass 1 is read
+    again in shares (which gives each rank its ordinals), and the ranks
+    write the classified records: the bytes of a plain run."""
+    out, job, las = tmp_path / "o.ply", tmp_path / "job", tmp_path / "g.las"
+    p = subprocess.Popen([str(a) for a in (mpi_bin, ground_ref["cloud"], "-o", out, "--tile",
+                                           "128", "--ground", "pmf", "--ground-out", las, "-q",
+                                           "--threads", "1", "--job", job)],
+                         env=env(), stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 120
+    while tiles_recorded(job) < 10 and time.time() < deadline and p.poll() is None:
+        time.sleep(0.02)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == 130, err
+    r = mpirun(2, mpi_bin, ["--resume", job, "-q", "--json", tmp_path / "j.json"])
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert out.read_bytes() == ground_ref["ply"].read_bytes()
+    assert las.read_bytes() == ground_ref["las"].read_bytes()
+    j = json.loads((tmp_path / "j.json").read_text())
+    assert j["reused"]["pass2"] and not j["ground"]["classified"], (j["reused"], j["ground"])
+    assert j["mpi"]["ground_out_written_by"] == "ranks in shares"

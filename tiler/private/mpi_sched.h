@@ -29,7 +29,9 @@ enum {
     TAG_WROTE = 16,   /* r -> 0: the rank's part is written and synced, or why not */
     TAG_GROUND = 17,  /* 0 -> r: classify your tiles (mpi_ground.c) */
     TAG_GREC = 18,    /* r -> 0: ground subsets written */
-    TAG_GDONE = 19    /* r -> 0: the rank's ground filter ended, or why it failed */
+    TAG_GDONE = 19,   /* r -> 0: the rank's ground filter ended, or why it failed */
+    TAG_GOUT = 20,    /* 0 -> r: write your share of --ground-out (mpi_ground.c) */
+    TAG_GOUTDONE = 21 /* r -> 0: the share is written and synced, or why not */
 };
 
 /* Records per TAG_RECDATA message (32 MiB of gdt_point). */
@@ -75,6 +77,8 @@ typedef struct mr_ctx {
     /* the shared ground filter (mpi_ground.c), rank 0 */
     tr_ground_share gs;
     int g_left;             /* ranks told GROUND that have not sent GDONE */
+    tr_gout_share gos;      /* --ground-out in shares (mpi_ground.c), rank 0 */
+    int go_left;            /* ranks told GOUT that have not sent GOUTDONE */
 } mr_ctx;
 
 /* Sends the packed message p to dest and frees it. */
@@ -88,6 +92,15 @@ gdt_status mr_recv(mr_ctx *m, int from, int tag, size_t len, unsigned char **buf
  * receives it (*buf malloc'd, *len); ends the job (gdt_comm_abort) when
  * the messages fail: the protocol cannot go on without it. */
 void mr_wait_recv(mr_ctx *m, int from, int tag, unsigned char **buf, size_t *len);
+
+/* An answer's first fields: its status, then its error's code and message
+ * (empty when it is GDT_OK). */
+void mr_pack_status(gdt_pack *p, gdt_status st, const gdt_error *err);
+
+/* Reads what mr_pack_status packed from rank from; a failure becomes the
+ * job's (mr_fail: "rank R: " and the message) and is returned (GDT_OK
+ * also when u went bad: the caller checks u->bad). */
+gdt_status mr_unpack_status(mr_ctx *m, gdt_unpack *u, int from);
 
 /* GDT_EINTERNAL 7952: a message that does not parse. */
 gdt_status mr_bad_message(int from, int tag, gdt_error *err);
@@ -168,6 +181,11 @@ void mr_ground_hooks(mr_ctx *m);
  * messages themselves fail. */
 void mr_ground_answer(mr_ctx *m, const unsigned char *msg, size_t len, gdt_status *st,
                       gdt_error *err);
+
+/* Another rank, given GOUT (msg, len): writes its share of the
+ * --ground-out records and answers GOUTDONE.  Ends the job
+ * (gdt_comm_abort) when the messages themselves fail. */
+void mr_gout_answer(mr_ctx *m, const unsigned char *msg, size_t len);
 
 /* Rank 0: the hooks of the shared pass 2 into m->p2 (mpi_pass2.c). */
 void mr_pass2_hooks(mr_ctx *m);

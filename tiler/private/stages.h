@@ -45,6 +45,7 @@
 #include "gdt_core.h"
 #include "gdt_error.h"
 #include "gdt_grow.h"
+#include "gdt_las_copy.h"
 #include "gdt_mesh.h"
 #include "gdt_mesh_out.h"
 #include "gdt_raster.h"
@@ -92,6 +93,7 @@ typedef struct tr_summary {
     double t_ground_own;    /* of which this process's own tiles (a shared filter) */
     uint64_t ground_tiles_reused; /* subsets an earlier, stopped run classified */
     uint64_t ground_bits_size, ground_bits_sum; /* --ground-out: J/ground.bits */
+    int ground_out_shared;  /* --ground-out: its records written by the ranks in shares */
     int nranks;             /* ranks of an MPI run; 0 in a plain run */
     tr_rank_stats *ranks;   /* nranks of them, rank 0 first; owned */
 } tr_summary;
@@ -117,6 +119,7 @@ typedef struct tr_slot {
 
 typedef struct tr_run tr_run;
 typedef struct tr_ground_share tr_ground_share;
+typedef struct tr_gout_share tr_gout_share;
 
 /* What running the core on tiles adds to the run's figures (per core,
  * added up at the end of the tile stage). */
@@ -291,6 +294,7 @@ struct tr_run {
     const tr_pass1_share *p1share; /* set by the caller after tr_run_init; NULL: alone */
     const tr_pass2_share *p2share; /* likewise */
     const tr_ground_share *gshare; /* likewise */
+    const tr_gout_share *goshare;  /* likewise (--ground-out written in shares) */
 };
 
 /* 1 when a signal asked the run to stop. */
@@ -435,6 +439,20 @@ typedef struct tr_ground_part {
     void *ctx;
     const char *bits_path;
 } tr_ground_part;
+
+/* --ground-out written in shares (MPI), on rank 0 with the file's
+ * temporary open (tmp; the records from points_at): begin tells every other
+ * process its share of the input records, when they can be cut (*shared =
+ * 1; rank 0's own share is [*first, *end) with ordinals from *ord_base);
+ * wait (after begin shared, whatever rank 0's own share did) gives the
+ * others' statistics summed and their kept records, or a process's
+ * failure. */
+struct tr_gout_share {
+    gdt_status (*begin)(void *ctx, const char *tmp, uint64_t points_at, int *shared,
+                        uint64_t *first, uint64_t *end, uint64_t *ord_base, gdt_error *err);
+    gdt_status (*wait)(void *ctx, gdt_las_copy_stats *sum, uint64_t *kept, gdt_error *err);
+    void *ctx;
+};
 
 /* Another process of an MPI job, after tr_run_attach_ground: classifies
  * the tiles of part as tr_run_ground does, writes their subsets and
