@@ -10,8 +10,10 @@
  *  - sbuf holds scap source records; px/py (projected clouds only) hold scap
  *    doubles each.
  *  - replay (opts.replay_dir set) holds the records of the compressed inputs
- *    pass 0 read to their end; while input cur streams from it, replaying is
- *    1 and src is NULL.  Pass 0 writes input cur to it while recording is 1.
+ *    pass 0 read to their end (a share: to the end of its part of the
+ *    input); while input cur streams from it, replaying is 1 and src is
+ *    NULL.  Pass 0 writes input cur to it while recording is 1; a later
+ *    pass replays an input when it reads the same records of it.
  *  - cur_read counts the records of input cur (what its header counts);
  *    next_ord counts the points kept by the filter, so ordinals have no gaps.
  *    in[i].counts (and census) describe the records of input i read in this
@@ -19,7 +21,7 @@
  *  - ranged (gdt_cloud_set_range): only the records [r_first, r_end) of the
  *    record sequence are read, ordinals from r_ord; input cur is read from
  *    its record cur_read to cur_end (its point count when the share ends
- *    at or after its end); a share neither replays nor records a replay.
+ *    at or after its end).
  */
 #include "gdt_cloud.h"
 #include "gdt_filter.h"
@@ -76,6 +78,7 @@ struct gdt_cloud {
     struct timespec *mtime; /* per input: modification time when pass 0 read it */
     int replaying, recording;
     int replay_noted;
+    uint64_t replayed_inputs; /* inputs (or their shares) read from the replay */
     /* gdt_cloud_set_range: the share [r_first, r_end) of the record
      * sequence, ordinals from r_ord; cur_end: input cur is read up to its
      * record cur_end (its point count outside a share) */
@@ -606,6 +609,11 @@ fail:
 
 const gdt_cloud_info *gdt_cloud_get_info(const gdt_cloud *cloud) { return &cloud->info; }
 
+uint64_t gdt_cloud_replayed(const gdt_cloud *cloud)
+{
+    return cloud != NULL ? cloud->replayed_inputs : 0;
+}
+
 const gdt_source_info *gdt_cloud_input_info(const gdt_cloud *cloud, size_t i)
 {
     return i < cloud->nin ? &cloud->in[i].info : NULL;
@@ -625,7 +633,7 @@ const gdt_cloud_input_map *gdt_cloud_input_map_of(const gdt_cloud *cloud, size_t
 
 /* Starts input c->cur from the replay file, after checking by its size and
  * modification time that the file is still the one pass 0 decoded. */
-static gdt_status replay_current(gdt_cloud *c, gdt_error *err)
+static gdt_status replay_current(gdt_cloud *c, uint64_t lo, gdt_error *err)
 {
     const cloud_input *ci = &c->in[c->cur];
     struct stat sb;
@@ -637,22 +645,24 @@ static gdt_status replay_current(gdt_cloud *c, gdt_error *err)
                              "%s: the file changed since it was opened (size or modification "
                              "time differ)",
                              ci->path);
-    c->cur_read = 0;
+    c->cur_read = lo;
     c->replaying = 1;
+    c->replayed_inputs++;
     gdt_log_note(c->opts.log, "%s: reading the points decoded by the first pass", ci->path);
     return gdt_replay_start(c->replay, c->cur, ci->info.scale, ci->info.offset, err);
 }
 
-/* Opens input c->cur and checks it is still the file seen at open. */
-static gdt_status open_current(gdt_cloud *c, gdt_error *err)
+/* Opens input c->cur for its records [lo, hi) (seeking is the caller's)
+ * and checks it is still the file seen at open, or replays them. */
+static gdt_status open_current(gdt_cloud *c, uint64_t lo, uint64_t hi, gdt_error *err)
 {
     const cloud_input *ci = &c->in[c->cur];
     const gdt_source_info *now;
     gdt_source_opts so;
     gdt_status st;
 
-    if (c->pass > 0 && !c->ranged && gdt_replay_has(c->replay, c->cur))
-        return replay_current(c, err);
+    if (c->pass > 0 && gdt_replay_has(c->replay, c->cur, lo, hi))
+        return replay_current(c, lo, err);
 
     memset(&so, 0, sizeof so);
     so.log = c->pass == 0 ? c->opts.log : &c->quiet;
@@ -673,11 +683,11 @@ static gdt_status open_current(gdt_cloud *c, gdt_error *err)
                              "%s: the file changed since it was opened (header or size differ)",
                              ci->path);
     c->cur_read = 0;
-    if (c->pass == 0 && c->replay != NULL && !c->ranged && ci->info.compressed) {
+    if (c->pass == 0 && c->replay != NULL && ci->info.compressed) {
         struct stat sb;
         if (stat(ci->path, &sb) == 0) {
             c->mtime[c->cur] = sb.st_mtim;
-            gdt_replay_begin(c->replay, c->cur);
+            gdt_replay_begin(c->replay, c->cur, lo, hi);
             c->recording = 1;
         }
     }
@@ -971,27 +981,26 @@ gdt_status gdt_cloud_read(gdt_cloud *cloud, gdt_point *buf, size_t cap, size_t *
         const cloud_input *ci = &cloud->in[cloud->cur];
         size_t want = cap < cloud->scap ? cap : cloud->scap;
         if (cloud->src == NULL && !cloud->replaying) {
-            uint64_t lo = 0, hi = 0;
+            uint64_t lo = 0, hi = ci->info.point_count;
             if (cloud->ranged && !share_of(cloud, cloud->cur, &lo, &hi)) {
                 cloud->cur++;
                 continue;
             }
-            st = open_current(cloud, &cloud->failed);
-            cloud->cur_end = ci->info.point_count;
-            if (st == GDT_OK && cloud->ranged) {
-                /* a share never replays: src is open */
+            st = open_current(cloud, lo, hi, &cloud->failed);
+            if (st == GDT_OK && !cloud->replaying) {
+                /* a replay holds just these records; a source seeks */
                 if (lo > 0 || hi < ci->info.point_count)
                     st = gdt_source_seek(cloud->src, lo, hi, &cloud->failed);
                 cloud->cur_read = lo;
-                cloud->cur_end = hi;
             }
+            cloud->cur_end = hi;
             if (st != GDT_OK)
                 goto fail;
         }
         if (cloud->cur_end < ci->info.point_count) {
-            /* a share that ends inside this input */
+            /* a share that ends inside this input: its records are complete */
             if (cloud->cur_read == cloud->cur_end) {
-                end_current(cloud, 0);
+                end_current(cloud, 1);
                 cloud->cur++;
                 continue;
             }

@@ -197,13 +197,19 @@ const gdt_point_filter *gdt_cloud_filter(const gdt_cloud *cloud);
  * cloud starts again (gdt_cloud_rewind); it holds over rewinds until set
  * again (0, UINT64_MAX, 0: the whole cloud).  Boundaries inside an input are allowed only where it can
  * start at a record: anywhere in uncompressed LAS and PCD binary, at the
- * first record of a chunk of LAZ (gdt_cloud_split puts them only there).  A share keeps
- * no replay and gives no per-input notes: the caller sums the shares'
+ * first record of a chunk of LAZ (gdt_cloud_split puts them only there).  A share's
+ * first pass keeps the replay of its part of each compressed input (opts.replay_dir),
+ * which a later pass over the same share reads.  A share gives no per-input notes:
+ * the caller sums the shares'
  * counts (gdt_cloud_add_counts) and reports them (gdt_cloud_report_counts).
  * Empty inputs belong to no share.  returns: GDT_EINTERNAL 7403 (first >
  * end, or a boundary inside an input that cannot seek). */
 gdt_status gdt_cloud_set_range(gdt_cloud *cloud, uint64_t first, uint64_t end,
                                uint64_t ord_base, gdt_error *err);
+
+/* How many times an input (or a share's part of one) was read from the
+ * replay instead of being decoded again, since the cloud was opened. */
+uint64_t gdt_cloud_replayed(const gdt_cloud *cloud);
 
 /* Cuts the cloud's records into n >= 1 shares balanced by count:
  * bounds[0 .. n], bounds[0] = 0, bounds[n] = every record, nondecreasing;

@@ -57,6 +57,7 @@ static void pack_report(gdt_pack *p, const tr_run *c, uint64_t tiles, uint64_t v
     for (size_t i = 0; i < sizeof t / sizeof t[0]; i++)
         gdt_pack_f64(p, t[i]);
     gdt_pack_bytes(p, s->device, strlen(s->device));
+    gdt_pack_u64(p, gdt_cloud_replayed(c->cloud));
 }
 
 /* Adds a FINISHED report to sum (seam vertices into *seam) and describes the
@@ -105,6 +106,7 @@ static void unpack_report(gdt_unpack *u, tr_summary *sum, uint64_t *seam, tr_ran
     if (dev != NULL)
         snprintf(r->device, sizeof r->device, "%.*s",
                  (int)(dl < sizeof r->device ? dl : sizeof r->device - 1), (const char *)dev);
+    r->replayed = gdt_unpack_u64(u);
 }
 
 /* ---- rank 0 ---- */
@@ -448,6 +450,7 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
         r0->t_core = s->t_core;
         r0->t_certify = s->t_certify;
         r0->t_post = s->t_post;
+        r0->replayed = gdt_cloud_replayed(c->cloud);
         snprintf(r0->device, sizeof r0->device, "%.*s", (int)sizeof r0->device - 1, s->device);
         s->certified += o->certified;
         c->seam_total += m->remote_seam;

@@ -219,6 +219,7 @@ static gdt_status write_summary(const tr_run *c, gdt_error *err)
             gdt_json_double(&j, "core_s", q->t_core);
             gdt_json_double(&j, "certify_s", q->t_certify);
             gdt_json_double(&j, "post_s", q->t_post);
+            gdt_json_uint(&j, "replayed_inputs", q->replayed);
             if (c->out_parts)
                 gdt_json_double(&j, "write_s", q->t_write);
             if (c->opts->ground) {

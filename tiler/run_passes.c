@@ -342,14 +342,19 @@ gdt_status tr_run_pass1_share(tr_run *c, uint64_t first, uint64_t end, unsigned 
 {
     gdt_cloud_opts co;
     gdt_tiler_opts to;
-    gdt_cloud *cloud = NULL;
+    gdt_cloud *cloud;
     gdt_tiler *t = NULL;
-    gdt_status st;
+    gdt_status st = GDT_OK;
 
     *buf = NULL;
     *len = 0;
-    cloud_opts(c, &co, 0);
-    st = gdt_cloud_open(&cloud, c->opts->inputs, c->opts->ninputs, &co, err);
+    /* the run's cloud, kept for pass 2: the LAZ chunks of this share are
+     * decoded once, into a replay in the job directory, and pass 2 reads
+     * the same share from it */
+    cloud_opts(c, &co, 1);
+    if (c->cloud == NULL)
+        st = gdt_cloud_open(&c->cloud, c->opts->inputs, c->opts->ninputs, &co, err);
+    cloud = c->cloud;
     if (st == GDT_OK) {
         tiler_opts(c, cloud, &to);
         to.job_dir = NULL; /* the planning rank saves the index */
@@ -364,7 +369,6 @@ gdt_status tr_run_pass1_share(tr_run *c, uint64_t first, uint64_t end, unsigned 
         st = gdt_tiler_pass1_part_export(t, buf, len, err);
     *kept = st == GDT_OK ? gdt_cloud_total_counts(cloud).kept : 0;
     gdt_tiler_destroy(t);
-    gdt_cloud_close(cloud);
     return st;
 }
 

@@ -24,6 +24,7 @@
 
 typedef struct replay_range {
     uint64_t first, count;
+    uint64_t lo, hi;          /* the input's records it holds: [lo, hi) */
     int complete;
 } replay_range;
 
@@ -103,7 +104,7 @@ static void replay_flush(gdt_replay *r)
     r->buf_len = 0;
 }
 
-void gdt_replay_begin(gdt_replay *r, size_t input)
+void gdt_replay_begin(gdt_replay *r, size_t input, uint64_t lo, uint64_t hi)
 {
     if (r->failed[0] != '\0' || r->writing != SIZE_MAX || r->reading != SIZE_MAX)
         return;
@@ -120,6 +121,8 @@ void gdt_replay_begin(gdt_replay *r, size_t input)
         return; /* begun before: never write an input twice */
     r->in[input].first = r->end;
     r->in[input].count = 0;
+    r->in[input].lo = lo;
+    r->in[input].hi = hi;
     r->writing = input;
 }
 
@@ -170,9 +173,10 @@ void gdt_replay_abandon(gdt_replay *r)
     r->writing = SIZE_MAX;
 }
 
-int gdt_replay_has(const gdt_replay *r, size_t input)
+int gdt_replay_has(const gdt_replay *r, size_t input, uint64_t lo, uint64_t hi)
 {
-    return r != NULL && input < r->nin && r->in[input].complete;
+    return r != NULL && input < r->nin && r->in[input].complete && r->in[input].lo == lo &&
+           r->in[input].hi == hi;
 }
 
 const char *gdt_replay_failed(const gdt_replay *r)
@@ -183,7 +187,7 @@ const char *gdt_replay_failed(const gdt_replay *r)
 gdt_status gdt_replay_start(gdt_replay *r, size_t input, const double scale[3],
                             const double offset[3], gdt_error *err)
 {
-    if (!gdt_replay_has(r, input) || r->writing != SIZE_MAX)
+    if (input >= r->nin || !r->in[input].complete || r->writing != SIZE_MAX)
         return gdt_error_set(err, GDT_EINTERNAL, 7601,
                              "decoded points of input %zu are not available", input + 1);
     r->reading = input;

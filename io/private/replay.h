@@ -32,22 +32,24 @@ typedef struct gdt_replay gdt_replay;
  * callers may go on without a replay. */
 gdt_status gdt_replay_open(gdt_replay **out, const char *dir, gdt_error *err);
 
-/* Writing: begin input (which must not have been begun before), append its
- * records in stream order, end it.  A failed write makes append and end
+/* Writing: begin input (which must not have been begun before) with the
+ * range of its records [lo, hi) the stream holds (0 and its point count for
+ * the whole input, a share's records otherwise), append its records in
+ * stream order, end it.  A failed write makes append and end
  * no-ops and the input (and later ones) not replayable; they return GDT_OK
  * all the same, the failure is reported by gdt_replay_failed. */
-void gdt_replay_begin(gdt_replay *r, size_t input);
+void gdt_replay_begin(gdt_replay *r, size_t input, uint64_t lo, uint64_t hi);
 void gdt_replay_append(gdt_replay *r, const gdt_src_point *p, size_t n);
 void gdt_replay_end(gdt_replay *r);
 /* Drops the input being written (its stream was not read to the end). */
 void gdt_replay_abandon(gdt_replay *r);
 
-/* 1 when input's records are complete in the file. */
-int gdt_replay_has(const gdt_replay *r, size_t input);
+/* 1 when input's records [lo, hi) are complete in the file. */
+int gdt_replay_has(const gdt_replay *r, size_t input, uint64_t lo, uint64_t hi);
 /* The reason the replay stopped, or NULL while it works. */
 const char *gdt_replay_failed(const gdt_replay *r);
 
-/* Reading: start input (gdt_replay_has must be 1), then read records until
+/* Reading: start input (complete: gdt_replay_has), then read records until
  * *n is 0.  Coordinates are rebuilt with the input's scale and offset. */
 gdt_status gdt_replay_start(gdt_replay *r, size_t input, const double scale[3],
                             const double offset[3], gdt_error *err);

@@ -36,15 +36,15 @@ static int same_point(const gdt_src_point *a, const gdt_src_point *b)
 }
 
 /* Reads input back in reads of cap and compares with want[0..n). */
-static void check_input(gdt_replay *r, size_t input, const gdt_src_point *want, size_t n,
-                        size_t cap, const double scale[3], const double offset[3])
+static void check_input(gdt_replay *r, size_t input, uint64_t lo, const gdt_src_point *want,
+                        size_t n, size_t cap, const double scale[3], const double offset[3])
 {
     static gdt_src_point buf[70000];
     gdt_error err;
     size_t got = 0, k;
 
     gdt_error_clear(&err);
-    GDT_CHECK(&checks, gdt_replay_has(r, input), "input %zu replayable", input);
+    GDT_CHECK(&checks, gdt_replay_has(r, input, lo, lo + n), "input %zu replayable", input);
     GDT_CHECK(&checks, gdt_replay_start(r, input, scale, offset, &err) == GDT_OK, "%s", err.msg);
     do {
         k = 0;
@@ -77,34 +77,39 @@ int main(int argc, char **argv)
         c[i] = make_point(&rng, scale2, offset2);
 
     /* input 0: 100,000 records (several buffer refills), written unevenly */
-    gdt_replay_begin(r, 0);
+    gdt_replay_begin(r, 0, 0, 100000);
     gdt_replay_append(r, a, 1);
     gdt_replay_append(r, a + 1, 65535);
     gdt_replay_append(r, a + 65536, 100000 - 65536);
-    GDT_CHECK(&checks, !gdt_replay_has(r, 0), "not replayable before its end");
+    GDT_CHECK(&checks, !gdt_replay_has(r, 0, 0, 100000), "not replayable before its end");
     gdt_replay_end(r);
     /* input 1: abandoned half way */
-    gdt_replay_begin(r, 1);
+    gdt_replay_begin(r, 1, 0, 1000);
     gdt_replay_append(r, a, 500);
     gdt_replay_abandon(r);
-    /* input 2: three records, another lattice; input 3: empty */
-    gdt_replay_begin(r, 2);
+    /* input 2: a share of three records (7..9), another lattice; input 3:
+     * empty */
+    gdt_replay_begin(r, 2, 7, 10);
     gdt_replay_append(r, c, 3);
     gdt_replay_end(r);
-    gdt_replay_begin(r, 3);
+    gdt_replay_begin(r, 3, 0, 0);
     gdt_replay_end(r);
     /* an input is never written twice */
-    gdt_replay_begin(r, 2);
+    gdt_replay_begin(r, 2, 0, 10);
     gdt_replay_append(r, a, 10);
     gdt_replay_end(r);
 
     GDT_CHECK(&checks, gdt_replay_failed(r) == NULL, "%s", gdt_replay_failed(r));
-    GDT_CHECK(&checks, !gdt_replay_has(r, 1), "an abandoned input is not replayable");
-    GDT_CHECK(&checks, !gdt_replay_has(r, 4), "an input never begun is not replayable");
-    check_input(r, 0, a, 100000, 4096, scale, offset);
-    check_input(r, 2, c, 3, 2, scale2, offset2);
-    check_input(r, 3, c, 0, 16, scale2, offset2);
-    check_input(r, 0, a, 100000, 70000, scale, offset); /* again, other read sizes */
+    GDT_CHECK(&checks, !gdt_replay_has(r, 1, 0, 1000), "an abandoned input is not replayable");
+    GDT_CHECK(&checks, !gdt_replay_has(r, 4, 0, 0), "an input never begun is not replayable");
+    /* another range of an input is not what the replay holds */
+    GDT_CHECK(&checks, !gdt_replay_has(r, 2, 0, 10) && !gdt_replay_has(r, 2, 7, 9),
+              "a share replays only its own records");
+    GDT_CHECK(&checks, !gdt_replay_has(r, 0, 0, 99999), "nor a whole input a part of it");
+    check_input(r, 0, 0, a, 100000, 4096, scale, offset);
+    check_input(r, 2, 7, c, 3, 2, scale2, offset2);
+    check_input(r, 3, 0, c, 0, 16, scale2, offset2);
+    check_input(r, 0, 0, a, 100000, 70000, scale, offset); /* again, other read sizes */
     GDT_CHECK(&checks, gdt_replay_start(r, 1, scale, offset, &err) == GDT_EINTERNAL,
               "starting an abandoned input is an internal error");
     gdt_replay_close(r);

@@ -138,6 +138,11 @@ def test_any_rank_count_writes_the_same_bytes(mpi_bin, clouds, tmp_path, case):
         assert sum(q["vertices"] for q in mpi["per_rank"]) == j["vertices"]
         assert sum(q["certified_faces"] for q in mpi["per_rank"]) == j["certified_faces"]
         assert mpi["load_balance"] >= 1.0
+        # LAZ chunks are decoded once: each rank's pass 2 reads its share of
+        # pass 1 back from its replay (rank 0 alone reads a LAZ of one chunk)
+        want = [1 if names == ("laz",) or (names == ("laz1",) and q == 0) else 0
+                for q in range(k)]
+        assert [q["replayed_inputs"] for q in mpi["per_rank"]] == want, (k, case)
         if "--ground" in opts:
             # every tile classified once, by the rank that merged it in pass 2
             assert j["ground"] == j1["ground"] | {"seconds": j["ground"]["seconds"]}, k

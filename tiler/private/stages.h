@@ -67,6 +67,8 @@ typedef struct tr_rank_stats {
     double t_write; /* its parts of a mesh written in parts: vertices, faces, sync */
     uint64_t ground_tiles; /* --ground: tiles it classified (or adopted) */
     double t_ground;       /* and its time in the filter */
+    uint64_t replayed;     /* compressed inputs (its shares of them) read back from
+                            * its replay instead of decoded again */
     char device[128];
 } tr_rank_stats;
 
