@@ -122,6 +122,22 @@ void mr_parts_tile_done(mr_ctx *m, uint64_t k)
     gdt_error_clear(&e);
     t0 = gdt_now();
     part_fail(m, tr_out_write_vertices(o, k, &e), &e);
+    /* Rank 0's tiles come first in the file: the faces of its tile k
+     * start after those of its tiles before k, known once they are done
+     * (and in tile order), so they are written now, beside the tile stage.
+     * Not with --concavity, whose drops the merge decides. */
+    if (m->rank == 0 && k == m->r0_fdone && m->part_st == GDT_OK &&
+        !(m->c->trim.concavity > 0)) {
+        uint64_t kept = 0;
+        gdt_status st = tr_out_count_faces(o, k, &kept, NULL, NULL, NULL, &e);
+        if (st == GDT_OK)
+            st = tr_out_write_faces(o, k, m->r0_fnext, &e);
+        part_fail(m, st, &e);
+        if (st == GDT_OK) {
+            m->r0_fdone++;
+            m->r0_fnext += kept;
+        }
+    }
     m->part_t += gdt_now() - t0;
 }
 
@@ -181,7 +197,13 @@ gdt_status mr_parts_send(mr_ctx *m, int *wait, gdt_error *err)
             st = m->part_st;
         }
         double t0 = gdt_now();
-        for (uint64_t k = 0; st == GDT_OK && k < n; k++)
+        /* those written during the tile stage had these places too */
+        if (st == GDT_OK && m->r0_fdone > 0 && first[m->r0_fdone] != m->r0_fnext)
+            st = gdt_error_set(err, GDT_EINTERNAL, 7831,
+                               "rank 0's faces: %" PRIu64 " written for its first %" PRIu64
+                               " tiles, which hold %" PRIu64,
+                               m->r0_fnext, m->r0_fdone, first[m->r0_fdone]);
+        for (uint64_t k = m->r0_fdone; st == GDT_OK && k < n; k++)
             if (mr_owner_of(c->base, n, k, m->size) == 0)
                 st = tr_out_write_faces(c->out, k, first[k], err);
         if (st == GDT_OK)

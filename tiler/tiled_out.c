@@ -663,7 +663,7 @@ gdt_status tr_out_count_faces(tr_out *o, uint64_t k, uint64_t *kept, uint64_t **
     char *path = NULL;
     FILE *f = NULL;
     uint64_t nf = 0;
-    size_t first = *nlabels;
+    size_t first = nlabels != NULL ? *nlabels : 0;
     gdt_status st = gdt_tiler_tile_info(o->src.tiler, k, &d, err);
     if (st == GDT_OK)
         st = tr_tile_path(o->src.tiles_dir, &d, "tri", &path, err);

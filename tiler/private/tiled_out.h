@@ -117,7 +117,8 @@ gdt_status tr_out_open_part(tr_out **out, const tr_out_src *src, const char *tmp
 /* The faces of tile k that the mesh keeps: the count in its .tri header
  * (checked against the tile), less with src.trim the faces the rules drop
  * (--concavity: by the trim graph, tr_out_set_trim, which must be set).
- * With labels, the (tile, label) pairs of the candidates dropped are
+ * With labels (else labels, nlabels and cap may be NULL), the (tile,
+ * label) pairs of the candidates dropped are
  * appended to (*labels)[2 *nlabels ..] (grown, *cap pairs' room), sorted
  * and each once.  returns: GDT_OK; GDT_EIO 4805; GDT_EJOB 6801, 6802;
  * GDT_EINTERNAL 7001. */
