@@ -99,7 +99,8 @@ static const opt_spec OPTIONS[] = {
     {OPT_GROUND_OUT, "--ground-out", NULL, "FILE.las", NULL,
      "with --ground: also write every input record as LAS, class 2 (ground) or 1 (the "
      "filter's points), other records and fields as they were (LAS/LAZ inputs of one "
-     "point layout; PCD inputs: one format-0 record per point); not under mpirun"},
+     "point layout; PCD inputs: one format-0 record per point); under mpirun each rank "
+     "writes its share"},
     {OPT_MAX_EDGE, "--max-edge", NULL, "L", NULL,
      "drop every triangle with an edge longer than L (horizontal, CRS units)"},
     {OPT_CONCAVITY, "--concavity", NULL, "L", NULL,
