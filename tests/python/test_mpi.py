@@ -562,8 +562,10 @@ def test_ground_out_of_a_job_resumed_after_pass_2(mpi_bin, ground_ref, tmp_path)
                                            "--threads", "1", "--job", job)],
                          env=env(), stderr=subprocess.PIPE, text=True)
     deadline = time.time() + 120
-    while tiles_recorded(job) < 10 and time.time() < deadline and p.poll() is None:
-        time.sleep(0.02)
+    # as soon as pass 2 (with the classes) is recorded: the tile stage follows
+    while journal_count(job, "select count(*) from stage where name = 'pass2' and done = 1") \
+            == 0 and time.time() < deadline and p.poll() is None:
+        time.sleep(0.01)
     p.send_signal(signal.SIGINT)
     _, err = p.communicate(timeout=120)
     assert p.returncode == 130, err
