@@ -126,14 +126,16 @@ void mr_parts_tile_done(mr_ctx *m, uint64_t k)
      * start after those of its tiles before k, known once they are done
      * (and in tile order), so they are written now, beside the tile stage.
      * Not with --concavity, whose drops the merge decides. */
-    if (m->rank == 0 && k == m->r0_fdone && m->part_st == GDT_OK &&
-        !(m->c->trim.concavity > 0)) {
+    if (m->rank == 0 && k == m->r0_fdone && k < m->ntiles && m->part_st == GDT_OK &&
+        !(m->c->trim.concavity > 0) &&
+        (m->r0_kept != NULL || (m->r0_kept = calloc(m->ntiles, sizeof *m->r0_kept)) != NULL)) {
         uint64_t kept = 0;
         gdt_status st = tr_out_count_faces(o, k, &kept, NULL, NULL, NULL, &e);
         if (st == GDT_OK)
             st = tr_out_write_faces(o, k, m->r0_fnext, &e);
         part_fail(m, st, &e);
         if (st == GDT_OK) {
+            m->r0_kept[k] = kept; /* for PARTS: not counted again */
             m->r0_fdone++;
             m->r0_fnext += kept;
         }
@@ -155,10 +157,15 @@ gdt_status mr_parts_send(mr_ctx *m, int *wait, gdt_error *err)
     *wait = 0;
     if (st == GDT_OK)
         first[0] = 0;
-    /* each tile's kept faces (all of them without a trim rule) */
+    /* each tile's kept faces (all of them without a trim rule); those of
+     * the tiles rank 0 wrote during the tile stage are known */
     for (uint64_t k = 0; st == GDT_OK && k < n; k++) {
         uint64_t kept = 0;
-        st = tr_out_count_faces(c->out, k, &kept, peel ? &labels : NULL, &nlab, &caplab, err);
+        if (k < m->r0_fdone)
+            kept = m->r0_kept[k];
+        else
+            st = tr_out_count_faces(c->out, k, &kept, peel ? &labels : NULL, &nlab, &caplab,
+                                    err);
         first[k + 1] = first[k] + kept;
     }
     for (int r = 1; r < m->size; r++) {
@@ -197,12 +204,6 @@ gdt_status mr_parts_send(mr_ctx *m, int *wait, gdt_error *err)
             st = m->part_st;
         }
         double t0 = gdt_now();
-        /* those written during the tile stage had these places too */
-        if (st == GDT_OK && m->r0_fdone > 0 && first[m->r0_fdone] != m->r0_fnext)
-            st = gdt_error_set(err, GDT_EINTERNAL, 7831,
-                               "rank 0's faces: %" PRIu64 " written for its first %" PRIu64
-                               " tiles, which hold %" PRIu64,
-                               m->r0_fnext, m->r0_fdone, first[m->r0_fdone]);
         for (uint64_t k = m->r0_fdone; st == GDT_OK && k < n; k++)
             if (mr_owner_of(c->base, n, k, m->size) == 0)
                 st = tr_out_write_faces(c->out, k, first[k], err);

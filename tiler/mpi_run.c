@@ -726,6 +726,7 @@ gdt_status gdt_cli_tiled_mpi(const gdt_options *opts, gdt_comm *comm, gdt_error 
     free(m.p1_bounds);
     free(m.p1_kept);
     free(m.p1_counts);
+    free(m.r0_kept);
     if (m.rank != 0)
         gdt_error_clear(err); /* rank 0 reports the job's error */
     free(m.done);

@@ -251,7 +251,7 @@ static gdt_status take_remote(ground_ctx *g, const tr_ground_rec *recs, size_t n
     for (size_t i = 0; st == GDT_OK && i < n; i++) {
         const tr_ground_rec *r = &recs[i];
         if (r->k >= g->ntiles || g->have[r->k] || r->files.points > r->own) {
-            st = gdt_error_set(err, GDT_EINTERNAL, 7706,
+            st = gdt_error_set(err, GDT_EINTERNAL, 7708,
                                "ground filter: a subset of tile %" PRIu64 " reported twice or "
                                "out of range",
                                r->k);
@@ -538,7 +538,7 @@ static gdt_status ground_run(tr_run *c, const tr_ground_share *sh, const tr_grou
     if (part != NULL) {
         for (uint64_t i = 0; i < part->n; i++)
             if (part->ks[i] >= ntiles) {
-                st = gdt_error_set(err, GDT_EINTERNAL, 7706,
+                st = gdt_error_set(err, GDT_EINTERNAL, 7708,
                                    "ground filter: tile %" PRIu64 " of %" PRIu64 " tiles",
                                    part->ks[i], ntiles);
                 goto out;
@@ -617,7 +617,7 @@ static gdt_status ground_run(tr_run *c, const tr_ground_share *sh, const tr_grou
         goto out;
     }
     if (g.done != ntiles) {
-        st = gdt_error_set(err, GDT_EINTERNAL, 7707,
+        st = gdt_error_set(err, GDT_EINTERNAL, 7709,
                            "ground filter: %" PRIu64 " of %" PRIu64 " tiles have no subset",
                            ntiles - g.done, ntiles);
         goto out;

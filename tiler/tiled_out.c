@@ -231,6 +231,15 @@ static gdt_status load_tile_points(tr_out *o, const gdt_tile_desc *d, gdt_error 
     return st;
 }
 
+/* Orders (tile, label) pairs. */
+static int pair_cmp(const void *a, const void *b)
+{
+    const uint64_t *p = a, *q = b;
+    if (p[0] != q[0])
+        return p[0] < q[0] ? -1 : 1;
+    return p[1] < q[1] ? -1 : p[1] > q[1];
+}
+
 /* Whether --concavity drops the candidates of label `label` of tile k: the
  * trim graph's answer, or in a part without it the pairs rank 0 sent. */
 static int label_dropped(const tr_out *o, uint64_t k, uint32_t label)
@@ -708,15 +717,11 @@ gdt_status tr_out_count_faces(tr_out *o, uint64_t k, uint64_t *kept, uint64_t **
         if (st == GDT_OK)
             *kept = nf - dropped;
         if (st == GDT_OK && labels != NULL && *nlabels > first) {
-            /* the tile's labels, sorted and each once */
+            /* the tile's labels (its pairs share the tile), sorted and each
+             * once */
             uint64_t *q = *labels + 2 * first;
             size_t n = *nlabels - first, w = 0;
-            for (size_t a = 1; a < n; a++) /* insertion sort: few labels a tile */
-                for (size_t b = a; b > 0 && q[2 * b + 1] < q[2 * b - 1]; b--) {
-                    uint64_t t = q[2 * b + 1];
-                    q[2 * b + 1] = q[2 * b - 1];
-                    q[2 * b - 1] = t;
-                }
+            qsort(q, n, 2 * sizeof *q, pair_cmp);
             for (size_t a = 0; a < n; a++)
                 if (w == 0 || q[2 * a + 1] != q[2 * w - 1]) {
                     q[2 * w] = k;

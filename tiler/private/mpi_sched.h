@@ -76,6 +76,7 @@ typedef struct mr_ctx {
     gdt_trim_counts part_tc; /* its tiles' faces and drops (a trimmed mesh) */
     uint64_t r0_fdone;      /* rank 0: its tiles [0, r0_fdone) have their faces written */
     uint64_t r0_fnext;      /* and the first face of tile r0_fdone */
+    uint64_t *r0_kept;      /* ntiles: the faces kept of each of those tiles */
     /* the shared ground filter (mpi_ground.c), rank 0 */
     tr_ground_share gs;
     int g_left;             /* ranks told GROUND that have not sent GDONE */

@@ -366,11 +366,12 @@ gdt_status tr_core_start_join(tr_core_start *cs, gdt_core **core, gdt_error *err
  * 1302. */
 gdt_status tr_run_pass1(tr_run *c, gdt_error *err);
 
-/* Another rank of an MPI job, told its share of pass 1: opens a cloud and
- * a tiler of its own (no job directory), reads the records [first, end)
- * (gdt_tiler_pass1_part) and returns what it read as bytes (*buf
- * malloc'd, gdt_tiler_pass1_part_export) and the points the filter kept
- * (*kept); nothing of c changes.
+/* Another rank of an MPI job, told its share of pass 1: opens the run's
+ * cloud (c->cloud, kept: its replay holds the share's decoded LAZ records
+ * for the rank's pass 2) and a tiler of its own (no job directory), reads
+ * the records [first, end) (gdt_tiler_pass1_part) and returns what it read
+ * as bytes (*buf malloc'd, gdt_tiler_pass1_part_export) and the points the
+ * filter kept (*kept); nothing else of c changes.
  * returns: the cloud's and tiler's errors. */
 gdt_status tr_run_pass1_share(tr_run *c, uint64_t first, uint64_t end, unsigned char **buf,
                               size_t *len, uint64_t *kept, gdt_error *err);
