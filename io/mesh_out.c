@@ -4,6 +4,7 @@
 #include "gdt_ply.h"
 #include "private/fd_io.h"
 #include "private/mesh_crs.h"
+#include "private/num_text.h"
 
 #include <errno.h>
 #include <fcntl.h>
@@ -109,6 +110,12 @@ char *gdt_mesh_prj_path(const char *path, gdt_mesh_format f)
  * current.  returns the length, 0 when none of the precisions round-trips. */
 static size_t fmt_double_c(char *out, size_t cap, double d)
 {
+    /* the same text without the C library for the usual magnitudes */
+    if (cap >= GDT_NUM_TEXT_MAX) {
+        size_t n = gdt_num_text(out, d);
+        if (n > 0)
+            return n;
+    }
     for (int prec = 15; prec <= 17; prec++) {
         int n = snprintf(out, cap, "%.*g", prec, d);
         if (n <= 0 || (size_t)n >= cap)

@@ -204,6 +204,50 @@ static void test_numbers(tctx *t)
             continue;
         check_number(t, d, &bad);
     }
+    /* the integer-arithmetic range 1e-4 <= |d| < 1e14 and its edges: every
+     * scale a LAS or PCD lattice uses, offsets, powers of ten and of two
+     * and their neighbours, log-uniform magnitudes */
+    {
+        static const double steps[] = {1e-7, 1e-4, 0.001, 0.01, 0.025, 0.1, 0.25, 1.0 / 3.0};
+        static const double offsets[] = {0.0, -1000.0, 480000.0, 4860000.0, 1e13, 123.456};
+        for (int i = 0; i < 400000; i++) {
+            uint64_t b = gdt_splitmix64(&seed);
+            double d;
+            switch (i % 5) {
+            case 0:
+                d = offsets[(b >> 3) % 6] +
+                    steps[b % 8] * (double)(int64_t)((b >> 8) % 2000000001 - 1000000000);
+                break;
+            case 1: /* log-uniform over the range and a decade beyond each end */
+                d = pow(10.0, -5.0 + 20.0 * (double)(b >> 11) * 0x1p-53);
+                break;
+            case 2: { /* 10^e and 2^e and their neighbours */
+                int e = (int)(b % 40) - 20;
+                double base = (b >> 6) & 1 ? pow(10.0, e) : ldexp(1.0, e * 2);
+                int steps_away = (int)((b >> 7) % 5) - 2;
+                d = base;
+                for (int s = 0; s < steps_away; s++)
+                    d = nextafter(d, INFINITY);
+                for (int s = 0; s > steps_away; s--)
+                    d = nextafter(d, 0.0);
+                break;
+            }
+            case 3: /* short decimals and their neighbours */
+                d = (double)(int64_t)(b % 100000000) / pow(10.0, (double)((b >> 40) % 12));
+                if ((b >> 60) & 1)
+                    d = nextafter(d, (b >> 61) & 1 ? INFINITY : 0.0);
+                break;
+            default: /* decimals rounding up to the next power of ten */
+                d = pow(10.0, (double)((int)(b % 18) - 4)) *
+                    (1.0 - (double)((b >> 8) % 1000) * 1e-17);
+                break;
+            }
+            if ((b >> 62) & 1)
+                d = -d;
+            if (isfinite(d))
+                check_number(t, d, &bad);
+        }
+    }
     CHECK(t, bad == 0, "%lu numbers failed", bad);
     CHECK(t, gdt_mesh_format_double(buf, sizeof buf, NAN) == 0, "NaN formatted");
     CHECK(t, gdt_mesh_format_double(buf, sizeof buf, INFINITY) == 0, "inf formatted");
