@@ -142,6 +142,76 @@ gdt_status gdt_mesh_finish_parts(gdt_mesh_writer *w, uint64_t nface, gdt_error *
 /* Removes the temporaries and frees w; w may be NULL. */
 void gdt_mesh_abort(gdt_mesh_writer *w);
 
+/* ---- A text mesh (OBJ, LandXML) written in parts ----
+ *
+ * Text records have no fixed size, so a part's place is known only once
+ * every part before it is formatted.  The parts are first formatted into
+ * fragments (files of records exactly as the writer makes them, no header
+ * or footer), whose lengths give every part its byte offset; then each
+ * fragment is copied to its place in the mesh's temporary.  The file is:
+ *   header | vertex fragments in vertex order | separator |
+ *   face fragments in face order | the writer's own faces | footer
+ * and its bytes are those of the sequential writer.  The writer that made
+ * the temporary: gdt_mesh_begin_text_parts (writes the header; nothing
+ * else written), then, once the fragments are placed,
+ * gdt_mesh_resume_text at the end of the last one, its own faces, and
+ * gdt_mesh_finish.  Whoever places fragments: gdt_mesh_part_open on the
+ * temporary's path (gdt_mesh_temp_path), gdt_mesh_part_copy /
+ * gdt_mesh_part_write, gdt_mesh_part_close (which syncs). */
+
+/* The bytes between the vertex and the face records: LandXML
+ * "</Pnts>\n<Faces>\n", OBJ "". */
+const char *gdt_mesh_text_separator(gdt_mesh_format f);
+
+/* A fragment writer at path (created or truncated; not synced, kept by
+ * gdt_mesh_fragment_close, removed on failure or gdt_mesh_abort) that
+ * takes gdt_mesh_write_vertices (faces == 0: the first vertex has index
+ * first, which LandXML ids count from) or gdt_mesh_write_faces (faces != 0:
+ * indices below first, the mesh's vertex count).  fmt: OBJ or LandXML.
+ * returns: GDT_OK; 7710; 3710; 4711 (cannot create); 7001. */
+gdt_status gdt_mesh_fragment_create(gdt_mesh_writer **out, const char *path, gdt_mesh_format fmt,
+                                    uint64_t first, int faces, gdt_error *err);
+
+/* Writes out and closes a fragment; *bytes (may be NULL) its length; frees
+ * w, also on failure (the file is then removed).  returns: GDT_OK; the
+ * first error of its writes; 4712, 4714. */
+gdt_status gdt_mesh_fragment_close(gdt_mesh_writer *w, uint64_t *bytes, gdt_error *err);
+
+/* The temporary the mesh is written to (owned by w). */
+const char *gdt_mesh_temp_path(const gdt_mesh_writer *w);
+
+/* A fresh text mesh (nothing written after gdt_mesh_create): its header is
+ * written out; *header gets its length.  returns: GDT_OK; 7710; 4712. */
+gdt_status gdt_mesh_begin_text_parts(gdt_mesh_writer *w, uint64_t *header, gdt_error *err);
+
+/* After the fragments are in place: the writer goes on at byte offset (the
+ * end of the last face fragment) as if it had written nvert vertices, the
+ * separator and nface faces.  returns: GDT_OK; 7710; 4712. */
+gdt_status gdt_mesh_resume_text(gdt_mesh_writer *w, uint64_t offset, uint64_t nvert, uint64_t nface,
+                                gdt_error *err);
+
+typedef struct gdt_mesh_part gdt_mesh_part;
+
+/* Opens the temporary at tmp_path (it must exist) to place fragments.
+ * returns: GDT_OK; GDT_EIO 4720; 7001. */
+gdt_status gdt_mesh_part_open(gdt_mesh_part **out, const char *tmp_path, gdt_error *err);
+
+/* Copies the fragment file (which must be exactly bytes long) to byte
+ * offset of the temporary.  returns: GDT_OK; GDT_EIO 4805 (unreadable),
+ * 4721 (write); GDT_EJOB 6802 (its length is not bytes); 7001. */
+gdt_status gdt_mesh_part_copy(gdt_mesh_part *p, const char *fragment, uint64_t bytes,
+                              uint64_t offset, gdt_error *err);
+
+/* Writes n bytes at byte offset of the temporary.  returns: GDT_OK; 4721. */
+gdt_status gdt_mesh_part_write(gdt_mesh_part *p, const void *bytes, size_t n, uint64_t offset,
+                               gdt_error *err);
+
+/* Syncs and closes p; frees it.  p may be NULL.  returns: GDT_OK; 4722. */
+gdt_status gdt_mesh_part_close(gdt_mesh_part *p, gdt_error *err);
+
+/* Closes p without syncing; frees it.  p may be NULL. */
+void gdt_mesh_part_abort(gdt_mesh_part *p);
+
 /* The shortest of %.15g / %.16g / %.17g of the finite d that strtod reads
  * back as d, made and checked in the C numeric locale whatever the
  * process's, into out (cap >= 32).  The writer itself switches locale once

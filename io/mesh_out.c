@@ -1,4 +1,5 @@
 /* The TIN writer over PLY, OBJ and LandXML (see gdt_mesh_out.h). */
+#define _GNU_SOURCE 1 /* copy_file_range */
 #include "gdt_mesh_out.h"
 #include "gdt_outfile.h"
 #include "gdt_ply.h"
@@ -50,6 +51,7 @@ struct gdt_mesh_writer {
     uint64_t nvert;
     uint64_t nface;
     int in_faces;
+    int fragment; /* gdt_mesh_fragment_create: records only, no header, footer or rename */
     locale_t cloc;
     gdt_error fail;
 };
@@ -898,7 +900,9 @@ gdt_status gdt_mesh_finish(gdt_mesh_writer *w, gdt_error *err)
     gdt_status st;
     if (w == NULL)
         return gdt_error_set(err, GDT_EINTERNAL, 7710, "mesh writer: NULL writer");
-    if (w->ply != NULL) {
+    if (w->fragment) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7710, "%s: a fragment is not a mesh", w->path);
+    } else if (w->ply != NULL) {
         st = gdt_ply_finish(w->ply, err);
         w->ply = NULL;
     } else if (w->fail.status != GDT_OK) {
@@ -919,4 +923,275 @@ void gdt_mesh_abort(gdt_mesh_writer *w)
         gdt_ply_abort(w->ply);
     discard(w);
     writer_free(w);
+}
+
+/* ---- text meshes in parts ----------------------------------------------- */
+
+const char *gdt_mesh_text_separator(gdt_mesh_format f)
+{
+    return f == GDT_MESH_LANDXML ? "</Pnts>\n<Faces>\n" : "";
+}
+
+gdt_status gdt_mesh_fragment_create(gdt_mesh_writer **out, const char *path, gdt_mesh_format fmt,
+                                    uint64_t first, int faces, gdt_error *err)
+{
+    gdt_mesh_writer *w;
+
+    if (out == NULL || path == NULL || path[0] == '\0' ||
+        (fmt != GDT_MESH_OBJ && fmt != GDT_MESH_LANDXML))
+        return gdt_error_set(err, GDT_EINTERNAL, 7710, "mesh fragment: %s",
+                             out == NULL || path == NULL || path[0] == '\0'
+                                 ? "NULL or empty argument"
+                                 : "not a text format");
+    *out = NULL;
+    if (first > GDT_PLY_MAX_VERTICES)
+        return gdt_error_set(err, GDT_EINPUT, 3710,
+                             "%s: vertex %" PRIu64 " beyond the limit of %" PRIu64, path, first,
+                             GDT_PLY_MAX_VERTICES);
+    w = calloc(1, sizeof *w);
+    if (w == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    w->fd = -1;
+    w->fmt = fmt;
+    w->fragment = 1;
+    gdt_error_clear(&w->fail);
+    w->path = strdup(path);
+    w->tmp_path = strdup(path);
+    w->buf = malloc(GDT_MESH_BUFFER_BYTES);
+    w->cloc = newlocale(LC_NUMERIC_MASK, "C", (locale_t)0);
+    if (w->path == NULL || w->tmp_path == NULL || w->buf == NULL || w->cloc == (locale_t)0) {
+        writer_free(w);
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    }
+    w->fd = open(path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
+    if (w->fd < 0) {
+        int e = errno;
+        writer_free(w);
+        return gdt_error_set(err, GDT_EIO, 4711, "%s: cannot create this part of the mesh: %s",
+                             path, strerror(e));
+    }
+    w->tmp_exists = 1;
+    /* vertices: numbered from first; faces: over first vertices, no
+     * separator before them */
+    w->nvert = first;
+    w->in_faces = faces != 0;
+    *out = w;
+    return GDT_OK;
+}
+
+gdt_status gdt_mesh_fragment_close(gdt_mesh_writer *w, uint64_t *bytes, gdt_error *err)
+{
+    gdt_status st = GDT_OK;
+    off_t end;
+
+    if (w == NULL || !w->fragment) {
+        gdt_mesh_abort(w);
+        return gdt_error_set(err, GDT_EINTERNAL, 7710, "mesh fragment: not a fragment");
+    }
+    if (w->fail.status != GDT_OK)
+        st = refail(w, err);
+    if (st == GDT_OK)
+        st = flush_buf(w, err);
+    if (st == GDT_OK) {
+        end = lseek(w->fd, 0, SEEK_CUR);
+        if (end < 0)
+            st = wfail(w, err, GDT_EIO, 4712, "%s: cannot tell its length: %s", w->path,
+                       strerror(errno));
+        else if (bytes != NULL)
+            *bytes = (uint64_t)end;
+    }
+    if (st == GDT_OK) {
+        int e = close(w->fd);
+        w->fd = -1;
+        if (e != 0)
+            st = wfail(w, err, GDT_EIO, 4714, "%s: close failed (removed): %s", w->path,
+                       strerror(errno));
+        else
+            w->tmp_exists = 0; /* kept: it is the caller's now */
+    }
+    discard(w);
+    writer_free(w);
+    return st;
+}
+
+const char *gdt_mesh_temp_path(const gdt_mesh_writer *w)
+{
+    if (w == NULL)
+        return NULL;
+    return w->ply != NULL ? gdt_ply_temp_path(w->ply) : w->tmp_path;
+}
+
+gdt_status gdt_mesh_begin_text_parts(gdt_mesh_writer *w, uint64_t *header, gdt_error *err)
+{
+    off_t end;
+    if (w == NULL || w->ply != NULL || w->fragment || w->nvert != 0 || w->in_faces)
+        return gdt_error_set(err, GDT_EINTERNAL, 7710,
+                             "mesh writer: parts begin on a fresh text mesh only");
+    if (w->fail.status != GDT_OK)
+        return refail(w, err);
+    if (flush_buf(w, err) != GDT_OK)
+        return w->fail.status;
+    end = lseek(w->fd, 0, SEEK_CUR);
+    if (end < 0)
+        return wfail(w, err, GDT_EIO, 4712,
+                     "%s: cannot tell its header's length (temporary %s "
+                     "removed): %s",
+                     w->path, w->tmp_path, strerror(errno));
+    *header = (uint64_t)end;
+    return GDT_OK;
+}
+
+gdt_status gdt_mesh_resume_text(gdt_mesh_writer *w, uint64_t offset, uint64_t nvert, uint64_t nface,
+                                gdt_error *err)
+{
+    if (w == NULL || w->ply != NULL || w->fragment || nvert > GDT_PLY_MAX_VERTICES)
+        return gdt_error_set(err, GDT_EINTERNAL, 7710,
+                             "mesh writer: resuming what is not a text mesh in parts");
+    if (w->fail.status != GDT_OK)
+        return refail(w, err);
+    if (flush_buf(w, err) != GDT_OK)
+        return w->fail.status;
+    if (offset > (uint64_t)INT64_MAX || lseek(w->fd, (off_t)offset, SEEK_SET) < 0)
+        return wfail(w, err, GDT_EIO, 4712,
+                     "%s: cannot go to byte %" PRIu64 " (temporary %s removed): %s", w->path,
+                     offset, w->tmp_path, strerror(errno));
+    w->nvert = nvert;
+    w->nface = nface;
+    w->in_faces = 1;
+    return GDT_OK;
+}
+
+/* Another process's handle on the temporary of a text mesh in parts. */
+struct gdt_mesh_part {
+    int fd;
+    char *path;
+    char *buf; /* GDT_MESH_BUFFER_BYTES: copies that copy_file_range cannot make */
+};
+
+gdt_status gdt_mesh_part_open(gdt_mesh_part **out, const char *tmp_path, gdt_error *err)
+{
+    gdt_mesh_part *p = calloc(1, sizeof *p);
+    *out = NULL;
+    if (p == NULL || (p->path = strdup(tmp_path)) == NULL) {
+        free(p);
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    }
+    /* never created here: rank 0 made it, and a part must not bring back a
+     * temporary that was removed after a failure */
+    p->fd = open(tmp_path, O_WRONLY | O_CLOEXEC);
+    if (p->fd < 0) {
+        int e = errno;
+        free(p->path);
+        free(p);
+        return gdt_error_set(err, GDT_EIO, 4720,
+                             "%s: cannot open the mesh's temporary to "
+                             "write a part: %s",
+                             tmp_path, strerror(e));
+    }
+    *out = p;
+    return GDT_OK;
+}
+
+gdt_status gdt_mesh_part_write(gdt_mesh_part *p, const void *bytes, size_t n, uint64_t offset,
+                               gdt_error *err)
+{
+    int e =
+        offset <= (uint64_t)INT64_MAX ? gdt_fd_write_all(p->fd, bytes, n, (int64_t)offset) : EFBIG;
+    if (e != 0)
+        return gdt_error_set(err, GDT_EIO, 4721,
+                             "%s: writing a part at byte %" PRIu64 " failed: %s", p->path, offset,
+                             strerror(e));
+    return GDT_OK;
+}
+
+gdt_status gdt_mesh_part_copy(gdt_mesh_part *p, const char *fragment, uint64_t bytes,
+                              uint64_t offset, gdt_error *err)
+{
+    int in = open(fragment, O_RDONLY | O_CLOEXEC);
+    struct stat sb;
+    uint64_t done = 0;
+    int use_range = 1;
+    gdt_status st = GDT_OK;
+
+    if (in < 0 || fstat(in, &sb) != 0) {
+        int e = errno;
+        if (in >= 0)
+            close(in);
+        return gdt_error_set(err, GDT_EIO, 4805, "%s: cannot open: %s", fragment, strerror(e));
+    }
+    if ((uint64_t)sb.st_size != bytes) {
+        close(in);
+        return gdt_error_set(err, GDT_EJOB, 6802,
+                             "%s: %" PRIu64 " bytes where %" PRIu64 " were written", fragment,
+                             (uint64_t)sb.st_size, bytes);
+    }
+    while (st == GDT_OK && done < bytes) {
+        size_t want = bytes - done < ((uint64_t)1 << 30) ? (size_t)(bytes - done) : (size_t)1 << 30;
+        ssize_t k = -1;
+        if (use_range) {
+            off_t ioff = (off_t)done, ooff = (off_t)(offset + done);
+            k = copy_file_range(in, &ioff, p->fd, &ooff, want, 0);
+            if (k < 0 && (errno == EXDEV || errno == EINVAL || errno == ENOSYS ||
+                          errno == EOPNOTSUPP || errno == EBADF)) {
+                use_range = 0; /* this file system cannot: copy through memory */
+                continue;
+            }
+            if (k < 0 && errno == EINTR)
+                continue;
+        } else {
+            size_t got = 0;
+            int e;
+            if (p->buf == NULL && (p->buf = malloc(GDT_MESH_BUFFER_BYTES)) == NULL)
+                st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+            if (st != GDT_OK)
+                break;
+            if (want > GDT_MESH_BUFFER_BYTES)
+                want = GDT_MESH_BUFFER_BYTES;
+            e = gdt_fd_pread_all(in, p->buf, want, done, &got);
+            if (e != 0 || got == 0) {
+                st = e != 0 ? gdt_error_set(err, GDT_EIO, 4805, "%s: cannot read: %s", fragment,
+                                            strerror(e))
+                            : gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", fragment);
+                break;
+            }
+            st = gdt_mesh_part_write(p, p->buf, got, offset + done, err);
+            k = (ssize_t)got;
+        }
+        if (st == GDT_OK && k < 0)
+            st = gdt_error_set(err, GDT_EIO, 4721, "%s: copying %s into it failed: %s", p->path,
+                               fragment, strerror(errno));
+        else if (st == GDT_OK && k == 0)
+            st = gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", fragment);
+        else if (st == GDT_OK)
+            done += (uint64_t)k;
+    }
+    close(in);
+    return st;
+}
+
+gdt_status gdt_mesh_part_close(gdt_mesh_part *p, gdt_error *err)
+{
+    gdt_status st = GDT_OK;
+    if (p == NULL)
+        return GDT_OK;
+    if (fsync(p->fd) != 0)
+        st = gdt_error_set(err, GDT_EIO, 4722, "%s: fsync of a part failed: %s", p->path,
+                           strerror(errno));
+    if (close(p->fd) != 0 && st == GDT_OK)
+        st = gdt_error_set(err, GDT_EIO, 4722, "%s: close of a part failed: %s", p->path,
+                           strerror(errno));
+    p->fd = -1;
+    gdt_mesh_part_abort(p);
+    return st;
+}
+
+void gdt_mesh_part_abort(gdt_mesh_part *p)
+{
+    if (p == NULL)
+        return;
+    if (p->fd >= 0)
+        close(p->fd);
+    free(p->path);
+    free(p->buf);
+    free(p);
 }

@@ -18,6 +18,14 @@
  *   seconds it spent writing its part, and its message;
  *   rank 0 writes its own tiles' faces meanwhile, finishes the seam merge,
  *   waits for every WROTE and completes the file with the merge's faces.
+ * A text mesh (OBJ, LandXML; m->part_text) goes through fragments
+ * (private/tiled_out.h): during the tile stage each rank formats each of
+ * its tiles' vertices, and faces unless --concavity, into fragments; after
+ * PARTS it makes the missing face fragments and answers TSIZES (status,
+ * its vertex bytes, its face bytes); rank 0, having made its own, gathers
+ * every TSIZES and answers each rank TPLACE (whether to place: no when any
+ * rank failed; where its vertex bytes and its face bytes begin); each rank
+ * places its fragments, then syncs and answers WROTE as above.
  * A failed PARTS (rank 0 could not read a tile's count) asks nothing: the
  * ranks wait for FINAL as before.  Every record has the place and bytes
  * of the sequential writer's, so the file is the same for any rank count. */
@@ -67,6 +75,8 @@ void mr_parts_pack_layout(mr_ctx *m, gdt_pack *p)
     gdt_pack_u64(p, (uint64_t)(c->out_parts != 0));
     if (!c->out_parts)
         return;
+    m->part_text = tr_out_text(c->out);
+    gdt_pack_u64(p, (uint64_t)m->part_text);
     lat = &gdt_cloud_get_info(c->cloud)->lattice;
     tr_out_parts_layout(c->out, &tmp, &header, &nvert);
     gdt_pack_bytes(p, tmp, strlen(tmp));
@@ -86,6 +96,7 @@ gdt_status mr_parts_read_layout(mr_ctx *m, gdt_unpack *u, gdt_error *err)
     m->parts = gdt_unpack_u64(u) != 0;
     if (!m->parts)
         return u->bad ? mr_bad_message(0, TAG_GO, err) : GDT_OK;
+    m->part_text = gdt_unpack_u64(u) != 0;
     tmp = gdt_unpack_bytes(u, &tl);
     m->part_header = gdt_unpack_u64(u);
     m->part_nvert = gdt_unpack_u64(u);
@@ -108,8 +119,7 @@ gdt_status mr_parts_open(mr_ctx *m, gdt_error *err)
 {
     tr_out_src src;
     part_src(m->c, &m->part_lattice, &src);
-    return tr_out_open_part(&m->part_out, &src, m->part_path, m->part_header, m->part_nvert,
-                            err);
+    return tr_out_open_part(&m->part_out, &src, m->part_path, m->part_header, m->part_nvert, err);
 }
 
 void mr_parts_tile_done(mr_ctx *m, uint64_t k)
@@ -122,6 +132,14 @@ void mr_parts_tile_done(mr_ctx *m, uint64_t k)
     gdt_error_clear(&e);
     t0 = gdt_now();
     part_fail(m, tr_out_write_vertices(o, k, &e), &e);
+    if (m->part_text) {
+        /* a text mesh: the faces' fragment now as well (its place is not
+         * needed yet), unless --concavity's peel decides them */
+        if (m->part_st == GDT_OK && !(m->c->trim.concavity > 0))
+            part_fail(m, tr_out_write_faces(o, k, 0, &e), &e);
+        m->part_t += gdt_now() - t0;
+        return;
+    }
     /* Rank 0's tiles come first in the file: the faces of its tile k
      * start after those of its tiles before k, known once they are done
      * (and in tile order), so they are written now, beside the tile stage.
@@ -143,6 +161,81 @@ void mr_parts_tile_done(mr_ctx *m, uint64_t k)
     m->part_t += gdt_now() - t0;
 }
 
+/* Rank 0, a text mesh, after PARTS went out: every rank's fragment
+ * lengths (TSIZES; rank 0's own from its tiles ks[0, n)), their places
+ * (TPLACE to each rank: whether to place, where its vertex and its face
+ * bytes begin), then rank 0's own fragments, the separator and where its
+ * merge faces begin.  st, err: rank 0's state so far (a failure places
+ * nothing anywhere). */
+static gdt_status r0_place_text(mr_ctx *m, const uint64_t *ks, uint64_t n, gdt_status st,
+                                gdt_error *err)
+{
+    tr_run *c = m->c;
+    uint64_t *vb = calloc((size_t)m->size, sizeof *vb), *fb = calloc((size_t)m->size, sizeof *fb);
+    uint64_t header = 0, nvert = 0, vat, fat, sep;
+    const char *tmp = NULL;
+    int ok;
+
+    if ((vb == NULL || fb == NULL) && st == GDT_OK)
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    if (st == GDT_OK)
+        st = tr_out_text_sizes(c->out, ks, n, &vb[0], &fb[0], err);
+    for (int r = 1; r < m->size; r++) {
+        unsigned char *buf = NULL;
+        size_t len = 0;
+        gdt_unpack u;
+        mr_wait_recv(m, r, TAG_TSIZES, &buf, &len);
+        memset(&u, 0, sizeof u);
+        u.p = buf;
+        u.n = len;
+        if (mr_unpack_status(m, &u, r) == GDT_OK) {
+            uint64_t v = gdt_unpack_u64(&u), f = gdt_unpack_u64(&u);
+            if (u.bad)
+                mr_fail(m, r, GDT_EINTERNAL, 7952, "a TSIZES message that does not parse");
+            else if (vb != NULL && fb != NULL)
+                vb[r] = v, fb[r] = f;
+        }
+        free(buf);
+    }
+    ok = st == GDT_OK && m->job_st == GDT_OK;
+    tr_out_parts_layout(c->out, &tmp, &header, &nvert);
+    sep = header;
+    for (int r = 0; ok && r < m->size; r++)
+        sep += vb[r];
+    fat = sep + strlen(gdt_mesh_text_separator(gdt_mesh_format_of(c->opts->output)));
+    vat = header;
+    for (int r = 0; r < m->size; r++) {
+        if (r > 0) {
+            gdt_pack p;
+            gdt_error e2;
+            memset(&p, 0, sizeof p);
+            gdt_error_clear(&e2);
+            gdt_pack_u64(&p, (uint64_t)ok);
+            gdt_pack_u64(&p, vat);
+            gdt_pack_u64(&p, fat);
+            if (mr_send_pack(m, r, TAG_TPLACE, &p, &e2) != GDT_OK) {
+                gdt_error_print(&e2, stderr);
+                gdt_comm_abort(m->comm, (int)e2.status);
+            }
+        } else if (ok) {
+            st = tr_out_place_text(c->out, ks, n, vat, fat, err);
+        }
+        if (ok) {
+            vat += vb[r];
+            fat += fb[r];
+        }
+    }
+    if (ok && st == GDT_OK)
+        st = tr_out_text_tail(c->out, sep, fat, err);
+    free(vb);
+    free(fb);
+    if (st == GDT_OK && m->job_st != GDT_OK) {
+        *err = m->job_err;
+        st = m->job_st;
+    }
+    return st;
+}
+
 gdt_status mr_parts_send(mr_ctx *m, int *wait, gdt_error *err)
 {
     tr_run *c = m->c;
@@ -151,8 +244,8 @@ gdt_status mr_parts_send(mr_ctx *m, int *wait, gdt_error *err)
     uint64_t *labels = NULL; /* --concavity: (tile, label) pairs dropped, by tile */
     size_t nlab = 0, caplab = 0, at = 0;
     const int peel = c->trim.concavity > 0;
-    gdt_status st = first != NULL ? GDT_OK
-                                  : gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    gdt_status st =
+        first != NULL ? GDT_OK : gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
 
     *wait = 0;
     if (st == GDT_OK)
@@ -164,8 +257,7 @@ gdt_status mr_parts_send(mr_ctx *m, int *wait, gdt_error *err)
         if (k < m->r0_fdone)
             kept = m->r0_kept[k];
         else
-            st = tr_out_count_faces(c->out, k, &kept, peel ? &labels : NULL, &nlab, &caplab,
-                                    err);
+            st = tr_out_count_faces(c->out, k, &kept, peel ? &labels : NULL, &nlab, &caplab, err);
         first[k + 1] = first[k] + kept;
     }
     for (int r = 1; r < m->size; r++) {
@@ -198,17 +290,28 @@ gdt_status mr_parts_send(mr_ctx *m, int *wait, gdt_error *err)
         }
     }
     if (st == GDT_OK) {
+        uint64_t *mine = malloc((n + 1) * sizeof *mine), nmine = 0;
+        double t0 = gdt_now();
         *wait = m->size > 1;
         if (m->part_st != GDT_OK) { /* a vertex write of the tile stage failed */
             *err = m->part_err;
             st = m->part_st;
         }
-        double t0 = gdt_now();
-        for (uint64_t k = m->r0_fdone; st == GDT_OK && k < n; k++)
+        if (mine == NULL && st == GDT_OK)
+            st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        for (uint64_t k = 0; mine != NULL && k < n; k++)
             if (mr_owner_of(c->base, n, k, m->size) == 0)
-                st = tr_out_write_faces(c->out, k, first[k], err);
+                mine[nmine++] = k;
+        for (uint64_t i = 0; st == GDT_OK && i < nmine; i++)
+            if (mine[i] >= m->r0_fdone)
+                st = tr_out_write_faces(c->out, mine[i], first[mine[i]], err);
         if (st == GDT_OK)
             tr_out_set_tile_faces(c->out, first[n]);
+        /* a text mesh: the other ranks wait for their places whatever
+         * happened here */
+        if (m->part_text)
+            st = r0_place_text(m, mine, nmine, st, err);
+        free(mine);
         m->part_t += gdt_now() - t0;
     }
     if (c->s.ranks != NULL)
@@ -225,8 +328,7 @@ gdt_status mr_parts_wait(mr_ctx *m, gdt_error *err)
         size_t len = 0, ml = 0;
         unsigned char *buf = NULL;
         gdt_unpack u;
-        gdt_status st = gdt_comm_wait(m->comm, -1, TAG_WROTE, NULL, &ready, &from, &tag, &len,
-                                      err);
+        gdt_status st = gdt_comm_wait(m->comm, -1, TAG_WROTE, NULL, &ready, &from, &tag, &len, err);
         if (st == GDT_OK)
             st = mr_recv(m, from, TAG_WROTE, len, &buf, err);
         if (st != GDT_OK) {
@@ -258,8 +360,8 @@ gdt_status mr_parts_wait(mr_ctx *m, gdt_error *err)
                 mr_fail(m, from, GDT_EINTERNAL, 7952, text);
             } else if (rst != GDT_OK) {
                 char text[GDT_ERROR_MSG_MAX];
-                snprintf(text, sizeof text, "%.*s",
-                         (int)(ml < sizeof text ? ml : sizeof text - 1), (const char *)msg);
+                snprintf(text, sizeof text, "%.*s", (int)(ml < sizeof text ? ml : sizeof text - 1),
+                         (const char *)msg);
                 mr_fail(m, from, rst, code, text);
             }
         }
@@ -270,6 +372,48 @@ gdt_status mr_parts_wait(mr_ctx *m, gdt_error *err)
         return m->job_st;
     }
     return GDT_OK;
+}
+
+/* Another rank, a text mesh: its fragments' lengths to rank 0 (TSIZES),
+ * then, as TPLACE says, its fragments into place.  st, err: its state so
+ * far (sent as the answer when it is a failure). */
+static gdt_status place_text(mr_ctx *m, const uint64_t *ks, uint64_t n, gdt_status st,
+                             gdt_error *err)
+{
+    uint64_t vb = 0, fb = 0, ok, vat, fat;
+    unsigned char *buf = NULL;
+    size_t len = 0;
+    gdt_pack p;
+    gdt_unpack u;
+    gdt_error e2;
+
+    if (st == GDT_OK)
+        st = m->part_out != NULL
+                 ? tr_out_text_sizes(m->part_out, ks, n, &vb, &fb, err)
+                 : gdt_error_set(err, GDT_EINTERNAL, 7830, "PARTS without a part open");
+    memset(&p, 0, sizeof p);
+    mr_pack_status(&p, st, err);
+    gdt_pack_u64(&p, vb);
+    gdt_pack_u64(&p, fb);
+    gdt_error_clear(&e2);
+    if (mr_send_pack(m, 0, TAG_TSIZES, &p, &e2) != GDT_OK) {
+        gdt_error_print(&e2, stderr);
+        gdt_comm_abort(m->comm, (int)e2.status);
+    }
+    mr_wait_recv(m, 0, TAG_TPLACE, &buf, &len);
+    memset(&u, 0, sizeof u);
+    u.p = buf;
+    u.n = len;
+    ok = gdt_unpack_u64(&u);
+    vat = gdt_unpack_u64(&u);
+    fat = gdt_unpack_u64(&u);
+    free(buf);
+    if (st == GDT_OK && u.bad)
+        st = mr_bad_message(0, TAG_TPLACE, err);
+    if (st == GDT_OK && ok)
+        st = tr_out_place_text(m->part_out, ks, n, vat, fat, err);
+    /* not placed because another rank failed: rank 0 has the job's error */
+    return st;
 }
 
 /* Writes the faces of tiles ks[0, n) as PARTS (u, after its status) asks,
@@ -308,6 +452,8 @@ static gdt_status write_part(mr_ctx *m, const uint64_t *ks, uint64_t n, gdt_unpa
     for (uint64_t i = 0; st == GDT_OK && i < n; i++)
         st = ks[i] < ntiles ? tr_out_write_faces(m->part_out, ks[i], first[ks[i]], err)
                             : mr_bad_message(0, TAG_PARTS, err);
+    if (m->part_text)
+        st = place_text(m, ks, n, st, err);
     if (m->part_out != NULL) {
         gdt_error e2;
         gdt_status s2;

@@ -293,8 +293,7 @@ gdt_status tr_run_output_start(tr_run *c, gdt_error *err)
             return st;
     }
     os.dem = c->dem;
-    os.parts = c->out_parts && os.dem == NULL && os.check_ply == NULL &&
-               gdt_mesh_format_of(opts->output) == GDT_MESH_PLY;
+    os.parts = c->out_parts && os.dem == NULL && os.check_ply == NULL;
     c->out_parts = os.parts;
     st = tr_out_start(&c->out, &os, err);
     if (st != GDT_OK)

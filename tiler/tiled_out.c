@@ -23,39 +23,50 @@
  * quit is set once, by the caller. */
 struct tr_out {
     tr_out_src src;
-    gdt_mesh_writer *w;   /* the writer thread's until it is joined */
-    gdt_ply_writer *cw;   /* the check copy (src.check_ply), or NULL; likewise */
+    gdt_mesh_writer *w; /* the writer thread's until it is joined */
+    gdt_ply_writer *cw; /* the check copy (src.check_ply), or NULL; likewise */
     pthread_t tid;
-    int running;          /* a thread was started and not yet joined */
+    int running; /* a thread was started and not yet joined */
     pthread_mutex_t mu;
     pthread_cond_t cv;
-    uint64_t ready;       /* tiles with their .tri file */
-    int quit;             /* the caller gives up: stop at the next tile */
+    uint64_t ready;           /* tiles with their .tri file */
+    int quit;                 /* the caller gives up: stop at the next tile */
     const gdt_trim_graph *tg; /* set once, after the merge (src.trim) */
-    gdt_trim_counts tc;   /* the tiles' faces and drops so far (src.trim) */
-    uint32_t *cut;        /* the current tile's trim section: cut faces */
-    uint32_t *cand;       /* candidates (face, label) */
+    gdt_trim_counts tc;       /* the tiles' faces and drops so far (src.trim) */
+    uint32_t *cut;            /* the current tile's trim section: cut faces */
+    uint32_t *cand;           /* candidates (face, label) */
     size_t cap_cut, cap_cand;
     gdt_status st;
     gdt_error err;
-    double *xyz;          /* 3 TR_CHUNK */
-    gdt_point *pts;       /* TR_CHUNK */
-    int32_t *tri;         /* 3 TR_CHUNK */
-    unsigned char *raw;   /* 12 TR_CHUNK */
-    unsigned char *rbuf;  /* TL_REC TR_CHUNK: the .pts reads, one buffer for every file */
-    uint8_t *drop;        /* TR_CHUNK marks: faces trimmed */
-    gdt_ply_part *part;   /* written in parts (src.parts, or tr_out_open_part): the records
-                           * go here, at part_v (next vertex) and part_f (next face) */
+    double *xyz;         /* 3 TR_CHUNK */
+    gdt_point *pts;      /* TR_CHUNK */
+    int32_t *tri;        /* 3 TR_CHUNK */
+    unsigned char *raw;  /* 12 TR_CHUNK */
+    unsigned char *rbuf; /* TL_REC TR_CHUNK: the .pts reads, one buffer for every file */
+    uint8_t *drop;       /* TR_CHUNK marks: faces trimmed */
+    gdt_ply_part *part;  /* written in parts (src.parts, or tr_out_open_part): the records
+                          * go here, at part_v (next vertex) and part_f (next face) */
     uint64_t part_v, part_f;
     uint64_t part_header, part_nvert;
-    uint64_t tile_faces;  /* src.parts: the faces of every tile (tr_out_set_tile_faces) */
+    uint64_t tile_faces; /* src.parts: the faces of every tile (tr_out_set_tile_faces) */
+    /* a text mesh in parts (OBJ, LandXML): records go into the fragment
+     * frag while it is open, tile k's into tiles/<tile>.vtx and .ftx of
+     * tv[k] and tf[k] bytes (tn[k] faces; tmade[k] bit 0: vertices, bit 1:
+     * faces made), placed through tpart; rank 0's own faces follow the
+     * tiles' from byte tail_at */
+    int text;
+    gdt_mesh_writer *frag;
+    gdt_mesh_part *tpart;
+    uint64_t *tv, *tf, *tn;
+    uint8_t *tmade;
+    uint64_t tail_at;
     const uint64_t *dlab; /* a part without the trim graph: the (tile, label) pairs it
                            * drops, sorted (tr_out_set_dropped) */
     size_t ndlab;
     gdt_raster_vertex *tile_pts; /* with a DEM: the points of the tile whose faces are
                                   * copied (24 bytes a point, not the 32 of a record) */
     size_t cap_tile_pts;
-    unsigned char *mdem;  /* with a DEM: MD_RECORD TR_CHUNK bytes of merge.dem */
+    unsigned char *mdem;         /* with a DEM: MD_RECORD TR_CHUNK bytes of merge.dem */
     void (*on_complete)(void *); /* tr_out_on_complete: called once, or never */
     void *on_complete_ctx;
 };
@@ -88,7 +99,9 @@ static gdt_status put_face_records(tr_out *o, size_t m, const uint8_t *drop, siz
         n++;
     }
     *kept = n;
-    if (o->part != NULL) {
+    if (o->frag != NULL) {
+        st = gdt_mesh_write_faces(o->frag, o->tri, n, err);
+    } else if (o->part != NULL) {
         st = gdt_ply_part_faces(o->part, o->part_f, o->tri, n, err);
         o->part_f += n;
     } else {
@@ -115,14 +128,12 @@ static gdt_status read_trim(tr_out *o, const char *path, uint64_t at, uint64_t n
     if (f == NULL || fstat(fileno(f), &sb) != 0 || fseeko(f, (off_t)at, SEEK_SET) != 0 ||
         (got = fread(th, 1, TT_HEADER, f)) != TT_HEADER) {
         st = got != 0 || f == NULL
-                 ? gdt_error_set(err, GDT_EIO, 4805, "%s: cannot read: %s", path,
-                                 strerror(errno))
+                 ? gdt_error_set(err, GDT_EIO, 4805, "%s: cannot read: %s", path, strerror(errno))
                  : gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
         goto done;
     }
     if (tr_trim_check(th, at, (uint64_t)sb.st_size, nf, tc) != 0) {
-        st = gdt_error_set(err, GDT_EJOB, 6802, "%s: its trim section does not fit the file",
-                           path);
+        st = gdt_error_set(err, GDT_EJOB, 6802, "%s: its trim section does not fit the file", path);
         goto done;
     }
     if (gdt_grow(&o->cut, &o->cap_cut, (size_t)tc->ncut + 1, sizeof *o->cut, 256) != 0 ||
@@ -214,9 +225,9 @@ static gdt_status load_tile_points(tr_out *o, const gdt_tile_desc *d, gdt_error 
         st = tl_rfile_open_buf(&rf, path, d->points, o->rbuf, TR_CHUNK, err);
     while (st == GDT_OK && n < d->points) {
         size_t m = 0;
-        st = tl_rfile_read(&rf, o->pts, (size_t)d->points - n < TR_CHUNK
-                                            ? (size_t)d->points - n : TR_CHUNK,
-                           &m, err);
+        st = tl_rfile_read(&rf, o->pts,
+                           (size_t)d->points - n < TR_CHUNK ? (size_t)d->points - n : TR_CHUNK, &m,
+                           err);
         if (st == GDT_OK && m == 0)
             st = gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
         for (size_t i = 0; i < m; i++) {
@@ -284,8 +295,7 @@ static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
     if (st == GDT_OK)
         st = tr_dread_bytes(&r, hdr, TR_HEADER, &got, err);
     if (st == GDT_OK && (got != TR_HEADER || memcmp(hdr, TR_MAGIC, 8) != 0 ||
-                         tr_get_u64(hdr + 8) != o->src.base[k] ||
-                         tr_get_u64(hdr + 16) != d.points))
+                         tr_get_u64(hdr + 8) != o->src.base[k] || tr_get_u64(hdr + 16) != d.points))
         st = gdt_error_set(err, GDT_EJOB, 6801, "%s: not the tile file this run wrote", path);
     nf = st == GDT_OK ? tr_get_u64(hdr + 24) : 0;
     if (st == GDT_OK && o->src.trim)
@@ -357,15 +367,13 @@ static gdt_status copy_merge_faces(tr_out *o, const char *path, const char *dpat
     if (dpath != NULL) {
         df = fopen(dpath, "rb");
         if (df == NULL || fstat(fileno(df), &sb) != 0) {
-            st = gdt_error_set(err, GDT_EIO, 4805, "%s: cannot open: %s", dpath,
-                               strerror(errno));
+            st = gdt_error_set(err, GDT_EIO, 4805, "%s: cannot open: %s", dpath, strerror(errno));
             goto fail;
         }
         if (fread(hdr, 1, MF_HEADER, df) != MF_HEADER || memcmp(hdr, MD_MAGIC, 8) != 0 ||
             tr_get_u64(hdr + 8) != nf || nf > ((uint64_t)sb.st_size - MF_HEADER) / MD_RECORD ||
             (uint64_t)sb.st_size != MF_HEADER + MD_RECORD * nf) {
-            st = gdt_error_set(err, GDT_EJOB, 6801, "%s: not the merge file this run wrote",
-                               dpath);
+            st = gdt_error_set(err, GDT_EJOB, 6801, "%s: not the merge file this run wrote", dpath);
             goto fail;
         }
         if (o->mdem == NULL && (o->mdem = malloc(MD_RECORD * (size_t)TR_CHUNK)) == NULL) {
@@ -410,7 +418,9 @@ static gdt_status write_vertices(tr_out *o, uint64_t k, gdt_error *err)
             o->xyz[3 * i + 1] = L->oy + L->sy * (double)o->pts[i].y;
             o->xyz[3 * i + 2] = o->pts[i].z;
         }
-        if (o->part != NULL) {
+        if (o->frag != NULL) {
+            st = gdt_mesh_write_vertices(o->frag, o->xyz, m, err);
+        } else if (o->part != NULL) {
             st = gdt_ply_part_vertices(o->part, o->part_v, o->xyz, m, err);
             o->part_v += m;
         } else {
@@ -517,8 +527,8 @@ static gdt_ply_meta check_meta(const gdt_mesh_meta *m)
 static gdt_status write_tiles(tr_out *o, gdt_error *err)
 {
     uint64_t n = o->src.ntiles;
-    gdt_status st = gdt_mesh_create(&o->w, o->src.output, gdt_mesh_format_of(o->src.output),
-                                    &o->src.meta, err);
+    gdt_status st =
+        gdt_mesh_create(&o->w, o->src.output, gdt_mesh_format_of(o->src.output), &o->src.meta, err);
     if (st == GDT_OK && o->src.check_ply != NULL) {
         gdt_ply_meta pm = check_meta(&o->src.meta);
         st = gdt_ply_create(&o->cw, o->src.check_ply, &pm, err);
@@ -552,6 +562,12 @@ static void *out_main(void *arg)
 static void out_free(tr_out *o)
 {
     gdt_ply_part_abort(o->part);
+    gdt_mesh_abort(o->frag);
+    gdt_mesh_part_abort(o->tpart);
+    free(o->tv);
+    free(o->tf);
+    free(o->tn);
+    free(o->tmade);
     gdt_mesh_abort(o->w);
     gdt_ply_abort(o->cw);
     pthread_cond_destroy(&o->cv);
@@ -594,6 +610,20 @@ static gdt_status out_alloc(tr_out **out, const tr_out_src *src, gdt_error *err)
     return GDT_OK;
 }
 
+/* The per-tile fragment records of a text mesh in parts. */
+static gdt_status text_alloc(tr_out *o, gdt_error *err)
+{
+    size_t n = (size_t)o->src.ntiles + 1;
+    o->text = 1;
+    o->tv = calloc(n, sizeof *o->tv);
+    o->tf = calloc(n, sizeof *o->tf);
+    o->tn = calloc(n, sizeof *o->tn);
+    o->tmade = calloc(n, 1);
+    if (o->tv == NULL || o->tf == NULL || o->tn == NULL || o->tmade == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    return GDT_OK;
+}
+
 gdt_status tr_out_start(tr_out **out, const tr_out_src *src, gdt_error *err)
 {
     tr_out *o;
@@ -610,6 +640,28 @@ gdt_status tr_out_start(tr_out **out, const tr_out_src *src, gdt_error *err)
     }
     if (src->check_ply != NULL)
         remove_stale_temps(src->check_ply);
+    if (src->parts && gdt_mesh_format_of(src->output) != GDT_MESH_PLY) {
+        /* a text mesh: the header now; the records in fragments, placed
+         * once their lengths are known; rank 0's own faces last */
+        o->part_nvert = src->base[src->ntiles];
+        st = src->dem == NULL && src->check_ply == NULL
+                 ? gdt_mesh_create(&o->w, src->output, gdt_mesh_format_of(src->output), &src->meta,
+                                   err)
+                 : gdt_error_set(err, GDT_EINTERNAL, 7830,
+                                 "the mesh written in parts must be without a DEM");
+        if (st == GDT_OK)
+            st = gdt_mesh_begin_text_parts(o->w, &o->part_header, err);
+        if (st == GDT_OK)
+            st = text_alloc(o, err);
+        if (st == GDT_OK)
+            st = gdt_mesh_part_open(&o->tpart, gdt_mesh_temp_path(o->w), err);
+        if (st != GDT_OK) {
+            out_free(o);
+            return st;
+        }
+        *out = o;
+        return GDT_OK;
+    }
     if (src->parts) {
         /* the header now; every record through parts (this one for rank 0) */
         gdt_ply_writer *pw;
@@ -623,8 +675,8 @@ gdt_status tr_out_start(tr_out **out, const tr_out_src *src, gdt_error *err)
         if (st == GDT_OK)
             st = gdt_ply_begin_parts(pw, o->part_nvert, &o->part_header, err);
         if (st == GDT_OK)
-            st = gdt_ply_part_open(&o->part, gdt_ply_temp_path(pw), o->part_header,
-                                   o->part_nvert, err);
+            st = gdt_ply_part_open(&o->part, gdt_ply_temp_path(pw), o->part_header, o->part_nvert,
+                                   err);
         if (st != GDT_OK) {
             out_free(o);
             return st;
@@ -637,10 +689,9 @@ gdt_status tr_out_start(tr_out **out, const tr_out_src *src, gdt_error *err)
     return GDT_OK;
 }
 
-void tr_out_parts_layout(const tr_out *o, const char **tmp_path, uint64_t *header,
-                         uint64_t *nvert)
+void tr_out_parts_layout(const tr_out *o, const char **tmp_path, uint64_t *header, uint64_t *nvert)
 {
-    *tmp_path = gdt_ply_temp_path(gdt_mesh_ply_writer(o->w));
+    *tmp_path = gdt_mesh_temp_path(o->w);
     *header = o->part_header;
     *nvert = o->part_nvert;
 }
@@ -655,7 +706,13 @@ gdt_status tr_out_open_part(tr_out **out, const tr_out_src *src, const char *tmp
         return st;
     o->part_header = header;
     o->part_nvert = nvert;
-    st = gdt_ply_part_open(&o->part, tmp_path, header, nvert, err);
+    if (gdt_mesh_format_of(src->output) != GDT_MESH_PLY) {
+        st = text_alloc(o, err);
+        if (st == GDT_OK)
+            st = gdt_mesh_part_open(&o->tpart, tmp_path, err);
+    } else {
+        st = gdt_ply_part_open(&o->part, tmp_path, header, nvert, err);
+    }
     if (st != GDT_OK) {
         out_free(o);
         return st;
@@ -678,10 +735,9 @@ gdt_status tr_out_count_faces(tr_out *o, uint64_t k, uint64_t *kept, uint64_t **
         st = tr_tile_path(o->src.tiles_dir, &d, "tri", &path, err);
     if (st == GDT_OK && (f = fopen(path, "rb")) == NULL)
         st = gdt_error_set(err, GDT_EIO, 4805, "%s: cannot open: %s", path, strerror(errno));
-    if (st == GDT_OK && (fread(hdr, 1, TR_HEADER, f) != TR_HEADER ||
-                         memcmp(hdr, TR_MAGIC, 8) != 0 ||
-                         tr_get_u64(hdr + 8) != o->src.base[k] ||
-                         tr_get_u64(hdr + 16) != d.points))
+    if (st == GDT_OK &&
+        (fread(hdr, 1, TR_HEADER, f) != TR_HEADER || memcmp(hdr, TR_MAGIC, 8) != 0 ||
+         tr_get_u64(hdr + 8) != o->src.base[k] || tr_get_u64(hdr + 16) != d.points))
         st = gdt_error_set(err, GDT_EJOB, 6801, "%s: not the tile file this run wrote", path);
     if (f != NULL)
         fclose(f);
@@ -746,28 +802,127 @@ gdt_trim_counts tr_out_tile_counts(const tr_out *o)
     return o->tc;
 }
 
+/* The fragment of tile k's vertices (faces == 0) or faces: tiles/<tile>.vtx
+ * or .ftx, into *path (the caller frees it). */
+static gdt_status fragment_path(const tr_out *o, uint64_t k, int faces, char **path, gdt_error *err)
+{
+    gdt_tile_desc d;
+    gdt_status st = gdt_tiler_tile_info(o->src.tiler, k, &d, err);
+    *path = NULL;
+    if (st == GDT_OK)
+        st = tr_tile_path(o->src.tiles_dir, &d, faces ? "ftx" : "vtx", path, err);
+    return st;
+}
+
+/* Tile k's vertices (faces == 0) or kept faces into their fragment. */
+static gdt_status make_fragment(tr_out *o, uint64_t k, int faces, gdt_error *err)
+{
+    char *path = NULL;
+    uint64_t bytes = 0;
+    gdt_status st = fragment_path(o, k, faces, &path, err);
+    if (st == GDT_OK)
+        st = gdt_mesh_fragment_create(&o->frag, path, gdt_mesh_format_of(o->src.output),
+                                      faces ? o->part_nvert : o->src.base[k], faces, err);
+    if (st == GDT_OK)
+        st = faces ? copy_faces(o, k, err) : write_vertices(o, k, err);
+    if (st == GDT_OK && faces)
+        o->tn[k] = gdt_mesh_face_count(o->frag);
+    if (o->frag != NULL) {
+        gdt_mesh_writer *fw = o->frag;
+        o->frag = NULL;
+        if (st == GDT_OK)
+            st = gdt_mesh_fragment_close(fw, &bytes, err);
+        else
+            gdt_mesh_abort(fw);
+    }
+    if (st == GDT_OK) {
+        if (faces)
+            o->tf[k] = bytes;
+        else
+            o->tv[k] = bytes;
+        o->tmade[k] |= (uint8_t)(faces ? 2 : 1);
+    }
+    free(path);
+    return st;
+}
+
 gdt_status tr_out_write_vertices(tr_out *o, uint64_t k, gdt_error *err)
 {
-    if (o->part == NULL || k >= o->src.ntiles)
-        return gdt_error_set(err, GDT_EINTERNAL, 7830, "tile %" PRIu64 " written outside parts",
-                             k);
+    if ((o->part == NULL && !o->text) || k >= o->src.ntiles)
+        return gdt_error_set(err, GDT_EINTERNAL, 7830, "tile %" PRIu64 " written outside parts", k);
+    if (o->text)
+        return make_fragment(o, k, 0, err);
     o->part_v = o->src.base[k];
     return write_vertices(o, k, err);
 }
 
 gdt_status tr_out_write_faces(tr_out *o, uint64_t k, uint64_t first_face, gdt_error *err)
 {
-    if (o->part == NULL || k >= o->src.ntiles)
-        return gdt_error_set(err, GDT_EINTERNAL, 7830, "tile %" PRIu64 " written outside parts",
-                             k);
+    if ((o->part == NULL && !o->text) || k >= o->src.ntiles)
+        return gdt_error_set(err, GDT_EINTERNAL, 7830, "tile %" PRIu64 " written outside parts", k);
+    if (o->text) /* made once: during the tile stage, or after the merge's peel */
+        return (o->tmade[k] & 2) != 0 ? GDT_OK : make_fragment(o, k, 1, err);
     o->part_f = first_face;
     return copy_faces(o, k, err);
 }
 
+int tr_out_text(const tr_out *o)
+{
+    return o != NULL && o->text;
+}
+
+gdt_status tr_out_text_sizes(const tr_out *o, const uint64_t *ks, uint64_t n, uint64_t *vbytes,
+                             uint64_t *fbytes, gdt_error *err)
+{
+    *vbytes = *fbytes = 0;
+    for (uint64_t i = 0; i < n; i++) {
+        uint64_t k = ks[i];
+        if (k >= o->src.ntiles || o->tmade[k] != 3)
+            return gdt_error_set(err, GDT_EINTERNAL, 7830,
+                                 "tile %" PRIu64 " of a text mesh has no fragments", k);
+        *vbytes += o->tv[k];
+        *fbytes += o->tf[k];
+    }
+    return GDT_OK;
+}
+
+gdt_status tr_out_place_text(tr_out *o, const uint64_t *ks, uint64_t n, uint64_t vat, uint64_t fat,
+                             gdt_error *err)
+{
+    gdt_status st = GDT_OK;
+    for (uint64_t i = 0; st == GDT_OK && i < n; i++) {
+        uint64_t k = ks[i];
+        for (int faces = 0; st == GDT_OK && faces < 2; faces++) {
+            char *path = NULL;
+            uint64_t len = faces ? o->tf[k] : o->tv[k];
+            st = fragment_path(o, k, faces, &path, err);
+            if (st == GDT_OK)
+                st = gdt_mesh_part_copy(o->tpart, path, len, faces ? fat : vat, err);
+            if (st == GDT_OK)
+                unlink(path); /* placed: its bytes are in the mesh */
+            free(path);
+            if (faces)
+                fat += len;
+            else
+                vat += len;
+        }
+    }
+    return st;
+}
+
+gdt_status tr_out_text_tail(tr_out *o, uint64_t sep_at, uint64_t tail_at, gdt_error *err)
+{
+    const char *sep = gdt_mesh_text_separator(gdt_mesh_format_of(o->src.output));
+    gdt_status st = gdt_mesh_part_write(o->tpart, sep, strlen(sep), sep_at, err);
+    o->tail_at = tail_at;
+    return st;
+}
+
 gdt_status tr_out_close_part(tr_out *o, gdt_error *err)
 {
-    gdt_status st = gdt_ply_part_close(o->part, err);
+    gdt_status st = o->text ? gdt_mesh_part_close(o->tpart, err) : gdt_ply_part_close(o->part, err);
     o->part = NULL;
+    o->tpart = NULL;
     out_free(o);
     return st;
 }
@@ -820,11 +975,47 @@ static void out_join(tr_out *o, int quit)
     o->running = 0;
 }
 
+/* The counts of a mesh written in parts: the merge's (m) and, trimmed,
+ * every tile's (tr_out_add_counts). */
+static void parts_counts(const tr_out *o, const gdt_trim_counts *m, uint64_t merge_faces,
+                         gdt_trim_counts *tc)
+{
+    if (o->src.trim) {
+        *tc = o->tc;
+        tc->faces += m->faces;
+        tc->cut += m->cut;
+        tc->peeled += m->peeled;
+        tc->dropped += m->dropped;
+    } else {
+        memset(tc, 0, sizeof *tc);
+        tc->faces = o->tile_faces + merge_faces;
+    }
+}
+
 gdt_status tr_out_finish(tr_out *o, const char *merge_path, const char *merge_dem,
-                         uint64_t merge_faces,
-                         gdt_trim_counts *tc, gdt_error *err)
+                         uint64_t merge_faces, gdt_trim_counts *tc, gdt_error *err)
 {
     gdt_status st;
+    if (o->w != NULL && o->text) { /* a text mesh in parts: the merge's faces last */
+        gdt_trim_counts m;
+        memset(&m, 0, sizeof m);
+        if (o->tg != NULL)
+            m = gdt_trim_graph_merge_counts(o->tg);
+        st = gdt_mesh_part_close(o->tpart, err); /* the separator rank 0 wrote */
+        o->tpart = NULL;
+        if (st == GDT_OK)
+            st = gdt_mesh_resume_text(o->w, o->tail_at, o->part_nvert, o->tile_faces, err);
+        if (st == GDT_OK)
+            st = stopped(o) ? tr_interrupted(o->src.job, "the output", err)
+                            : copy_merge_faces(o, merge_path, merge_dem, merge_faces, err);
+        if (st == GDT_OK) {
+            st = gdt_mesh_finish(o->w, err);
+            o->w = NULL;
+        }
+        parts_counts(o, &m, merge_faces, tc);
+        out_free(o);
+        return st;
+    }
     if (o->w != NULL && o->part != NULL) { /* written in parts: the merge's faces last */
         gdt_trim_counts m;
         memset(&m, 0, sizeof m);
@@ -839,17 +1030,7 @@ gdt_status tr_out_finish(tr_out *o, const char *merge_path, const char *merge_de
         if (st == GDT_OK)
             st = gdt_mesh_finish_parts(o->w, o->tile_faces + merge_faces - m.dropped, err);
         o->w = NULL;
-        if (o->src.trim) {
-            /* every tile's counts (tr_out_add_counts) and the merge's */
-            *tc = o->tc;
-            tc->faces += m.faces;
-            tc->cut += m.cut;
-            tc->peeled += m.peeled;
-            tc->dropped += m.dropped;
-        } else {
-            memset(tc, 0, sizeof *tc);
-            tc->faces = o->tile_faces + merge_faces;
-        }
+        parts_counts(o, &m, merge_faces, tc);
         out_free(o);
         return st;
     }

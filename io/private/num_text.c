@@ -1,7 +1,7 @@
 /* num_text.c — see num_text.h. */
 #include "num_text.h"
 
-#include <math.h>
+#include <math.h> /* fabs */
 #include <stdint.h>
 #include <string.h>
 
@@ -60,9 +60,12 @@ size_t gdt_num_text(char *out, double d)
     m = (bits & ((UINT64_C(1) << 52) - 1)) | (UINT64_C(1) << 52);
     k = 1075 - (int)((bits >> 52) & 0x7ff);
 
-    /* X = floor(log10 a) exactly: the estimate is corrected by the exact
-     * 17-digit floor, which must lie in [10^16, 10^17) */
-    x = (int)floor(log10(a));
+    /* X = floor(log10 a) exactly: an estimate from the binary exponent
+     * (a = m 2^-k lies in [2^(52-k), 2^(53-k)); 78913 / 2^18 is log10(2)
+     * rounded down; the division truncates toward zero), within one of X,
+     * corrected by the exact 17-digit floor, which must lie in
+     * [10^16, 10^17) */
+    x = (52 - k) * 78913 / 262144;
     for (;;) {
         int s = 16 - x;
         nt_u128 q;

@@ -673,6 +673,197 @@ static void test_crs(tctx *t)
 }
 
 /* Removes the work folder (files, and the locale folder if made). */
+/* ---- a text mesh written in parts ---------------------------------------- */
+
+#define PT_NV 900
+#define PT_NF 700
+
+/* A mesh of PT_NV vertices and PT_NF faces; vertex blocks [vb[i], vb[i+1])
+ * and face blocks [fb[i], fb[i+1]) (the last face block is the writer's
+ * own, written after resuming). */
+static const size_t PT_VB[4] = {0, 250, 251, PT_NV};
+static const size_t PT_FB[5] = {0, 300, 300, 650, PT_NF};
+
+static void parts_data(double *xyz, int32_t *tri)
+{
+    for (size_t i = 0; i < PT_NV; i++) {
+        xyz[3 * i] = 480000.0 + 0.01 * (double)(i * 7919 % 100000);
+        xyz[3 * i + 1] = 4860000.0 + 0.01 * (double)(i * 104729 % 100000);
+        xyz[3 * i + 2] = 19064 * 0.01 + (double)i * 0.25;
+    }
+    for (size_t f = 0; f < PT_NF; f++) {
+        tri[3 * f] = (int32_t)(f % PT_NV);
+        tri[3 * f + 1] = (int32_t)((f * 31 + 1) % PT_NV);
+        tri[3 * f + 2] = (int32_t)((f * 17 + 2) % PT_NV);
+        if (tri[3 * f + 1] == tri[3 * f] || tri[3 * f + 2] == tri[3 * f] ||
+            tri[3 * f + 2] == tri[3 * f + 1]) {
+            tri[3 * f + 1] = (int32_t)((f + 1) % PT_NV);
+            tri[3 * f + 2] = (int32_t)((f + 2) % PT_NV);
+        }
+    }
+}
+
+/* Writes the mesh in parts: fragments made in a scrambled order, placed at
+ * their offsets (one of them shift bytes off), the writer's own faces
+ * last.  returns the writer's status. */
+static gdt_status write_in_parts(tctx *t, const char *path, gdt_mesh_format fmt, const double *xyz,
+                                 const int32_t *tri, int shift)
+{
+    gdt_mesh_meta m = plain_meta();
+    gdt_mesh_writer *w = NULL, *fw = NULL;
+    gdt_mesh_part *part = NULL;
+    gdt_error err;
+    gdt_status st;
+    uint64_t header = 0, vlen[3], flen[3], at;
+    char frag[4200];
+    static const int order[3] = {2, 0, 1};
+    const char *sep = gdt_mesh_text_separator(fmt);
+
+    gdt_error_clear(&err);
+    st = gdt_mesh_create(&w, path, fmt, &m, &err);
+    if (st == GDT_OK)
+        st = gdt_mesh_begin_text_parts(w, &header, &err);
+    for (int j = 0; st == GDT_OK && j < 3; j++) {
+        int i = order[j];
+        snprintf(frag, sizeof frag, "%s/frag.v%d", t->dir, i);
+        st = gdt_mesh_fragment_create(&fw, frag, fmt, PT_VB[i], 0, &err);
+        if (st == GDT_OK)
+            st = gdt_mesh_write_vertices(fw, xyz + 3 * PT_VB[i], PT_VB[i + 1] - PT_VB[i], &err);
+        if (st == GDT_OK)
+            st = gdt_mesh_fragment_close(fw, &vlen[i], &err);
+        else
+            gdt_mesh_abort(fw);
+        snprintf(frag, sizeof frag, "%s/frag.f%d", t->dir, i);
+        if (st == GDT_OK)
+            st = gdt_mesh_fragment_create(&fw, frag, fmt, PT_NV, 1, &err);
+        if (st == GDT_OK)
+            st = gdt_mesh_write_faces(fw, tri + 3 * PT_FB[i], PT_FB[i + 1] - PT_FB[i], &err);
+        if (st == GDT_OK)
+            st = gdt_mesh_fragment_close(fw, &flen[i], &err);
+        else
+            gdt_mesh_abort(fw);
+    }
+    if (st == GDT_OK)
+        st = gdt_mesh_part_open(&part, gdt_mesh_temp_path(w), &err);
+    at = header;
+    for (int i = 0; st == GDT_OK && i < 3; i++) {
+        snprintf(frag, sizeof frag, "%s/frag.v%d", t->dir, i);
+        st = gdt_mesh_part_copy(part, frag, vlen[i], at + (i == 1 ? (uint64_t)shift : 0), &err);
+        at += vlen[i];
+    }
+    if (st == GDT_OK)
+        st = gdt_mesh_part_write(part, sep, strlen(sep), at, &err);
+    at += strlen(sep);
+    for (int i = 0; st == GDT_OK && i < 3; i++) {
+        snprintf(frag, sizeof frag, "%s/frag.f%d", t->dir, i);
+        st = gdt_mesh_part_copy(part, frag, flen[i], at, &err);
+        at += flen[i];
+    }
+    if (st == GDT_OK)
+        st = gdt_mesh_part_close(part, &err);
+    else
+        gdt_mesh_part_abort(part);
+    if (st == GDT_OK)
+        st = gdt_mesh_resume_text(w, at, PT_NV, PT_FB[3], &err);
+    if (st == GDT_OK)
+        st = gdt_mesh_write_faces(w, tri + 3 * PT_FB[3], PT_NF - PT_FB[3], &err);
+    if (st == GDT_OK)
+        st = gdt_mesh_finish(w, &err);
+    else
+        gdt_mesh_abort(w);
+    CHECK(t, st == GDT_OK, "%s in parts: %s", path, err.msg);
+    return st;
+}
+
+static void test_text_parts(tctx *t)
+{
+    static double xyz[3 * PT_NV];
+    static int32_t tri[3 * PT_NF];
+    const gdt_mesh_format fmts[2] = {GDT_MESH_OBJ, GDT_MESH_LANDXML};
+    gdt_mesh_meta m = plain_meta();
+
+    parts_data(xyz, tri);
+    for (int q = 0; q < 2; q++) {
+        char seq[4200], par[4200], off[4200], frag[4200];
+        const char *ext = fmts[q] == GDT_MESH_OBJ ? "obj" : "xml";
+        gdt_mesh_writer *w = NULL;
+        gdt_mesh_part *p = NULL;
+        gdt_error err;
+        gdt_status st;
+        size_t na = 0, nb = 0, nc = 0;
+        char *a, *b, *c;
+        uint64_t len = 0;
+
+        /* one stem: LandXML names its surface after it */
+        snprintf(seq, sizeof seq, "%s/seq.%s", t->dir, ext);
+        snprintf(par, sizeof par, "%s/par", t->dir);
+        mkdir(par, 0777);
+        snprintf(par, sizeof par, "%s/par/seq.%s", t->dir, ext);
+        snprintf(off, sizeof off, "%s/off", t->dir);
+        mkdir(off, 0777);
+        snprintf(off, sizeof off, "%s/off/seq.%s", t->dir, ext);
+        gdt_error_clear(&err);
+        st = gdt_mesh_create(&w, seq, fmts[q], &m, &err);
+        if (st == GDT_OK)
+            st = gdt_mesh_write_vertices(w, xyz, PT_NV, &err);
+        if (st == GDT_OK)
+            st = gdt_mesh_write_faces(w, tri, PT_NF, &err);
+        if (st == GDT_OK)
+            st = gdt_mesh_finish(w, &err);
+        else
+            gdt_mesh_abort(w);
+        CHECK(t, st == GDT_OK, "%s: %s", seq, err.msg);
+        write_in_parts(t, par, fmts[q], xyz, tri, 0);
+        write_in_parts(t, off, fmts[q], xyz, tri, 1);
+        a = slurp(seq, &na);
+        b = slurp(par, &nb);
+        c = slurp(off, &nc);
+        CHECK(t, a != NULL && b != NULL && na == nb && memcmp(a, b, na) == 0,
+              "%s written in parts differs from the sequential file (%zu / %zu bytes)", ext, nb,
+              na);
+        CHECK(t, c != NULL && (nc != na || memcmp(a, c, na) != 0),
+              "%s: a fragment placed one byte off went unnoticed", ext);
+        free(a);
+        free(b);
+        free(c);
+
+        /* a fragment whose length is not the one announced is refused */
+        snprintf(frag, sizeof frag, "%s/frag.v0", t->dir);
+        st = gdt_mesh_fragment_create(&w, frag, fmts[q], 0, 0, &err);
+        if (st == GDT_OK)
+            st = gdt_mesh_write_vertices(w, xyz, 3, &err);
+        if (st == GDT_OK)
+            st = gdt_mesh_fragment_close(w, &len, &err);
+        if (st == GDT_OK)
+            st = gdt_mesh_part_open(&p, seq, &err);
+        CHECK(t, st == GDT_OK, "fragment: %s", err.msg);
+        if (st == GDT_OK) {
+            st = gdt_mesh_part_copy(p, frag, len + 1, 0, &err);
+            CHECK(t, st == GDT_EJOB && err.code == 6802, "a short fragment was copied (%d)",
+                  (int)st);
+            gdt_mesh_part_abort(p);
+        }
+        /* a face fragment takes no vertices */
+        gdt_error_clear(&err);
+        st = gdt_mesh_fragment_create(&w, frag, fmts[q], 0, 1, &err);
+        if (st == GDT_OK) {
+            st = gdt_mesh_write_vertices(w, xyz, 3, &err);
+            CHECK(t, st != GDT_OK && err.code == 7713, "vertices in a face fragment: %s", err.msg);
+            gdt_mesh_abort(w);
+            CHECK(t, !exists(frag), "a failed fragment was left behind");
+        }
+        /* the temporary of a text mesh in parts must already exist */
+        gdt_error_clear(&err);
+        st = gdt_mesh_part_open(&p, off, &err);
+        CHECK(t, st == GDT_OK, "opening a finished file as a part: %s", err.msg);
+        gdt_mesh_part_abort(p);
+        snprintf(frag, sizeof frag, "%s/none.%s.tmp-1", t->dir, ext);
+        st = gdt_mesh_part_open(&p, frag, &err);
+        CHECK(t, st == GDT_EIO && err.code == 4720 && !exists(frag),
+              "a part created a missing temporary: %s", err.msg);
+    }
+}
+
 static void remove_workdir(const tctx *t)
 {
     char cmd[4200];
@@ -706,6 +897,7 @@ int main(int argc, char **argv)
     test_sticky(&t);
     test_locale(&t);
     test_crs(&t);
+    test_text_parts(&t);
 
     rc = gdt_check_finish(&t.c, "test_mesh_out");
     if (rc == 0)

@@ -93,28 +93,37 @@ CASES = {
                                        "{d}/g.las")),
     # every rank of the node takes the node's CPU devices in turn (here: the one)
     "device-local-64": (("b",), ("--tile", "64", "--device", "cpu/local")),
+    # text meshes: each rank formats its tiles into fragments, placed once
+    # every fragment's length is known (the third field: -o's extension)
+    "obj-two-inputs-64": (("a", "b"), ("--tile", "64"), "obj"),
+    "xml-concavity-64": (("a",), ("--tile", "64", "--max-edge", "4", "--concavity", "1.5"),
+                         "xml"),
 }
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_any_rank_count_writes_the_same_bytes(mpi_bin, clouds, tmp_path, case):
-    names, opts = CASES[case]
+    names, opts = CASES[case][:2]
+    ext = CASES[case][2] if len(CASES[case]) > 2 else "ply"
     inputs = [clouds[n] for n in names]
     outs = {}
     for k in (1, 2, 3, 4):
         d = tmp_path / f"k{k}"
         d.mkdir()
-        args = [*inputs, "-o", d / "o.ply", "-q", "--json", d / "run.json",
+        args = [*inputs, "-o", d / f"o.{ext}", "-q", "--json", d / "run.json",
                 *[o.replace("{d}", str(d)) for o in opts]]
         # K = 1: a plain process, no mpirun
         r = run([mpi_bin, *args]) if k == 1 else mpirun(k, mpi_bin, args)
         assert r.returncode == 0, (k, r.stdout + r.stderr)
         assert r.stderr == "", (k, r.stderr)  # -q: nothing, from any rank
         outs[k] = d
-        assert not (d / "o.ply.gdt-job").exists()  # the job is removed as in a plain run
-    ref = (outs[1] / "o.ply").read_bytes()
+        assert not (d / f"o.{ext}.gdt-job").exists()  # the job is removed as in a plain run
+        assert not list(d.glob("**/*.[vf]tx"))  # no fragment of a text mesh is left
+    ref = (outs[1] / f"o.{ext}").read_bytes()
     for k in (2, 3, 4):
-        assert (outs[k] / "o.ply").read_bytes() == ref, k
+        assert (outs[k] / f"o.{ext}").read_bytes() == ref, k
+        if ext == "obj":
+            assert (outs[k] / "o.prj").read_bytes() == (outs[1] / "o.prj").read_bytes(), k
         if "--dem" in opts:
             assert (outs[k] / "x.tif").read_bytes() == (outs[1] / "x.tif").read_bytes(), k
         if "--ground-out" in opts:
@@ -150,8 +159,8 @@ def test_any_rank_count_writes_the_same_bytes(mpi_bin, clouds, tmp_path, case):
             assert all(q["ground_tiles"] > 0 and q["ground_s"] > 0 for q in mpi["per_rank"]), k
         else:
             assert all("ground_tiles" not in q for q in mpi["per_rank"]), k
-        # a PLY is written by the tiles' owners in parts, trimmed or not; with
-        # a DEM, rank 0's writer rasterises as it copies
+        # the mesh is written by the tiles' owners in parts, trimmed or not,
+        # PLY or text; with a DEM, rank 0's writer rasterises as it copies
         plain = "--dem" not in opts
         if "--max-edge" in opts and plain:
             # the rules drop faces (of the tiles, which the owners write)
@@ -446,33 +455,34 @@ def test_another_rank_failing_fails_the_job_with_its_message(mpi_bin, clouds, tm
     assert out.read_bytes() == ref.read_bytes()
 
 
-@pytest.mark.parametrize("after", [0, 40])
-def test_a_failing_part_write_fails_the_job(mpi_bin, clouds, tools_dir, tmp_path, after):
+@pytest.mark.parametrize("ext,after", [("ply", 0), ("ply", 40), ("obj", 0)])
+def test_a_failing_part_write_fails_the_job(mpi_bin, clouds, tools_dir, tmp_path, ext, after):
     """Rank 1's positional writes into the mesh's temporary fail as on a full
     disk (an LD_PRELOAD shim, rank 1 only): its first vertex write (after=0)
-    or a later one, of its vertices or faces (after=40).  The job exits 4
-    with rank 1's message once, nothing is left at the output (no
-    temporary either), and a plain rerun resumes the job to the bytes of an
+    or a later one, of its vertices or faces (after=40); for a text mesh,
+    the copy of its first fragment into place.  The job exits 4 with rank
+    1's message once, nothing is left at the output (no temporary, no .prj
+    either), and a plain rerun resumes the job to the bytes of an
     undisturbed run."""
     shim = tools_dir / "libgdt_fail_write.so"
     if not shim.exists():
         pytest.fail(f"libgdt_fail_write.so not built at {shim}")
-    out, job, log = tmp_path / "o.ply", tmp_path / "job", tmp_path / "refused.log"
+    out, job, log = tmp_path / f"o.{ext}", tmp_path / "job", tmp_path / "refused.log"
     args = [str(clouds["a"]), "-o", str(out), "--tile", "64", "-q", "--job", str(job)]
     r = run(["mpirun", "--oversubscribe", "-np", "1", mpi_bin, *args, ":", "-np", "1", "env",
-             f"LD_PRELOAD={shim}", "GDT_TEST_FAIL_WRITE_MATCH=o.ply.tmp-",
+             f"LD_PRELOAD={shim}", f"GDT_TEST_FAIL_WRITE_MATCH=o.{ext}.tmp-",
              f"GDT_TEST_FAIL_WRITE_AFTER={after}", f"GDT_TEST_FAIL_WRITE_LOG={log}", mpi_bin,
              *args])
     assert log.exists(), r.stdout + r.stderr  # the shim refused a write of rank 1
     assert r.returncode == 4, r.stdout + r.stderr
     assert r.stderr.count("error GDT-4") == 1 and "rank 1: " in r.stderr, r.stderr
     assert "No space left on device" in r.stderr, r.stderr
-    assert not out.exists() and job.is_dir()
+    assert not out.exists() and job.is_dir() and not (tmp_path / "o.prj").exists()
     assert [p.name for p in tmp_path.iterdir() if ".tmp-" in p.name] == []
     r = run([mpi_bin, *args, "--json", tmp_path / "j.json"])
     assert r.returncode == 0, r.stderr
     assert json.loads((tmp_path / "j.json").read_text())["reused"]["tiles"] > 0
-    ref = tmp_path / "ref.ply"
+    ref = tmp_path / f"ref.{ext}"
     r = run([mpi_bin, clouds["a"], "-o", ref, "--tile", "64", "-q"])
     assert r.returncode == 0, r.stderr
     assert out.read_bytes() == ref.read_bytes()

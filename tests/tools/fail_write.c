@@ -1,5 +1,6 @@
 /* fail_write — an LD_PRELOAD library for tests: positional writes (pwrite,
- * pwrite64) to a file whose path contains GDT_TEST_FAIL_WRITE_MATCH fail
+ * pwrite64, copy_file_range into it) to a file whose path contains
+ * GDT_TEST_FAIL_WRITE_MATCH fail
  * with ENOSPC, as on a full disk, after the first GDT_TEST_FAIL_WRITE_AFTER
  * of them (0 when unset) have succeeded; fsync of a file whose path
  * contains GDT_TEST_FAIL_FSYNC_MATCH fails with EIO, as when the disk
@@ -90,6 +91,22 @@ ssize_t pwrite(int fd, const void *buf, size_t n, off_t off)
 ssize_t pwrite64(int fd, const void *buf, size_t n, off_t off)
 {
     return forward("pwrite64", fd, buf, n, off);
+}
+
+ssize_t copy_file_range(int in, off_t *in_off, int out, off_t *out_off, size_t n, unsigned flags)
+{
+    typedef ssize_t (*copy_fn)(int, off_t *, int, off_t *, size_t, unsigned);
+    copy_fn real;
+    if (refuse(out)) {
+        errno = ENOSPC;
+        return -1;
+    }
+    real = (copy_fn)dlsym(RTLD_NEXT, "copy_file_range");
+    if (real == NULL) {
+        errno = ENOSYS;
+        return -1;
+    }
+    return real(in, in_off, out, out_off, n, flags);
 }
 
 int fsync(int fd)

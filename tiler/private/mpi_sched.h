@@ -11,27 +11,29 @@
 #include "private/stages.h"
 
 enum {
-    TAG_GO = 1,       /* 0 -> r */
-    TAG_RECORD = 2,   /* r -> 0 */
-    TAG_DONE = 3,     /* r -> 0 */
-    TAG_FINISHED = 4, /* r -> 0 */
-    TAG_STOP = 5,     /* 0 -> r */
-    TAG_FINAL = 6,    /* 0 -> r */
-    TAG_PLAN = 7,     /* 0 -> r: a shared pass 2 begins */
-    TAG_RECS = 8,     /* 0 -> r: a tile to merge (then TAG_RECDATA chunks) */
-    TAG_RECDATA = 9,  /* 0 -> r */
-    TAG_FILES = 10,   /* r -> 0: a merged tile's files */
-    TAG_P1 = 11,      /* 0 -> r: the rank's share of pass 1 */
-    TAG_P1DONE = 12,  /* r -> 0: what it read, or its failure */
-    TAG_SPILL = 13,   /* r <-> q: pass 2 in shares: status, then records */
-    TAG_P2FAIL = 14,  /* r -> 0: why this rank's share of pass 2 failed */
-    TAG_PARTS = 15,   /* 0 -> r: write your tiles into the mesh (mpi_run.c) */
-    TAG_WROTE = 16,   /* r -> 0: the rank's part is written and synced, or why not */
-    TAG_GROUND = 17,  /* 0 -> r: classify your tiles (mpi_ground.c) */
-    TAG_GREC = 18,    /* r -> 0: ground subsets written */
-    TAG_GDONE = 19,   /* r -> 0: the rank's ground filter ended, or why it failed */
-    TAG_GOUT = 20,    /* 0 -> r: write your share of --ground-out (mpi_ground.c) */
-    TAG_GOUTDONE = 21 /* r -> 0: the share is written and synced, or why not */
+    TAG_GO = 1,        /* 0 -> r */
+    TAG_RECORD = 2,    /* r -> 0 */
+    TAG_DONE = 3,      /* r -> 0 */
+    TAG_FINISHED = 4,  /* r -> 0 */
+    TAG_STOP = 5,      /* 0 -> r */
+    TAG_FINAL = 6,     /* 0 -> r */
+    TAG_PLAN = 7,      /* 0 -> r: a shared pass 2 begins */
+    TAG_RECS = 8,      /* 0 -> r: a tile to merge (then TAG_RECDATA chunks) */
+    TAG_RECDATA = 9,   /* 0 -> r */
+    TAG_FILES = 10,    /* r -> 0: a merged tile's files */
+    TAG_P1 = 11,       /* 0 -> r: the rank's share of pass 1 */
+    TAG_P1DONE = 12,   /* r -> 0: what it read, or its failure */
+    TAG_SPILL = 13,    /* r <-> q: pass 2 in shares: status, then records */
+    TAG_P2FAIL = 14,   /* r -> 0: why this rank's share of pass 2 failed */
+    TAG_PARTS = 15,    /* 0 -> r: write your tiles into the mesh (mpi_run.c) */
+    TAG_WROTE = 16,    /* r -> 0: the rank's part is written and synced, or why not */
+    TAG_GROUND = 17,   /* 0 -> r: classify your tiles (mpi_ground.c) */
+    TAG_GREC = 18,     /* r -> 0: ground subsets written */
+    TAG_GDONE = 19,    /* r -> 0: the rank's ground filter ended, or why it failed */
+    TAG_GOUT = 20,     /* 0 -> r: write your share of --ground-out (mpi_ground.c) */
+    TAG_GOUTDONE = 21, /* r -> 0: the share is written and synced, or why not */
+    TAG_TSIZES = 22,   /* r -> 0: a text mesh's part: its fragments' lengths (mpi_parts.c) */
+    TAG_TPLACE = 23    /* 0 -> r: where to place them */
 };
 
 /* Records per TAG_RECDATA message (32 MiB of gdt_point). */
@@ -42,54 +44,54 @@ typedef struct mr_ctx {
     gdt_comm *comm;
     int rank, size;
     /* rank 0 */
-    uint8_t *done;          /* per tile: its file is there */
+    uint8_t *done;           /* per tile: its file is there */
     uint64_t ntiles, prefix; /* done[0, prefix) are all set */
-    uint64_t done_points;   /* vertices of the done tiles (progress) */
-    int *finished;          /* per rank: FINISHED received */
+    uint64_t done_points;    /* vertices of the done tiles (progress) */
+    int *finished;           /* per rank: FINISHED received */
     int nfinished;
-    gdt_status job_st;      /* the first failure of any rank */
+    gdt_status job_st; /* the first failure of any rank */
     gdt_error job_err;
-    tr_summary remote;      /* the other ranks' counts, summed */
-    uint64_t remote_seam;   /* and their seam vertices */
+    tr_summary remote;    /* the other ranks' counts, summed */
+    uint64_t remote_seam; /* and their seam vertices */
     int stop_sent;
     /* the shared pass 2: its owners weigh the tiles' pass-1 counts */
-    uint64_t *raw_pre;      /* ntiles + 1 prefix sums of the pass-1 counts */
+    uint64_t *raw_pre; /* ntiles + 1 prefix sums of the pass-1 counts */
     uint64_t raw_n;
     uint64_t shipped, files_got;
     tr_pass2_share p2;
-    tr_pass1_share p1;      /* the shared pass 1 */
-    int p1_shared;          /* pass 1 was shared */
-    uint64_t *p1_bounds;    /* its shares of the records (size + 1) */
-    uint64_t *p1_kept;      /* the kept points of each share (size) */
+    tr_pass1_share p1;            /* the shared pass 1 */
+    int p1_shared;                /* pass 1 was shared */
+    uint64_t *p1_bounds;          /* its shares of the records (size + 1) */
+    uint64_t *p1_kept;            /* the kept points of each share (size) */
     gdt_filter_counts *p1_counts; /* the filter's counts of the whole pass, per input */
     /* another rank */
-    int stopped;            /* STOP received */
+    int stopped; /* STOP received */
     /* the mesh in parts (mpi_parts.c), on every rank */
-    int parts;              /* this run writes a plain PLY in parts */
-    char *part_path;        /* another rank: the temporary, from GO */
+    int parts;       /* this run writes the mesh in parts */
+    int part_text;   /* and it is a text mesh (OBJ, LandXML): fragments first */
+    char *part_path; /* another rank: the temporary, from GO */
     uint64_t part_header, part_nvert;
     gdt_lattice part_lattice;
-    tr_out *part_out;       /* another rank: its part, open from GO to PARTS */
-    gdt_status part_st;     /* the first failure of this rank's writes */
+    tr_out *part_out;   /* another rank: its part, open from GO to PARTS */
+    gdt_status part_st; /* the first failure of this rank's writes */
     gdt_error part_err;
-    double part_t;          /* seconds this rank spent writing its part */
+    double part_t;           /* seconds this rank spent writing its part */
     gdt_trim_counts part_tc; /* its tiles' faces and drops (a trimmed mesh) */
-    uint64_t r0_fdone;      /* rank 0: its tiles [0, r0_fdone) have their faces written */
-    uint64_t r0_fnext;      /* and the first face of tile r0_fdone */
-    uint64_t *r0_kept;      /* ntiles: the faces kept of each of those tiles */
+    uint64_t r0_fdone;       /* rank 0: its tiles [0, r0_fdone) have their faces written */
+    uint64_t r0_fnext;       /* and the first face of tile r0_fdone */
+    uint64_t *r0_kept;       /* ntiles: the faces kept of each of those tiles */
     /* the shared ground filter (mpi_ground.c), rank 0 */
     tr_ground_share gs;
-    int g_left;             /* ranks told GROUND that have not sent GDONE */
-    tr_gout_share gos;      /* --ground-out in shares (mpi_ground.c), rank 0 */
-    int go_left;            /* ranks told GOUT that have not sent GOUTDONE */
+    int g_left;        /* ranks told GROUND that have not sent GDONE */
+    tr_gout_share gos; /* --ground-out in shares (mpi_ground.c), rank 0 */
+    int go_left;       /* ranks told GOUT that have not sent GOUTDONE */
 } mr_ctx;
 
 /* Sends the packed message p to dest and frees it. */
 gdt_status mr_send_pack(mr_ctx *m, int dest, int tag, gdt_pack *p, gdt_error *err);
 
 /* Receives the message a probe announced (from, tag, len); *buf is malloc'd. */
-gdt_status mr_recv(mr_ctx *m, int from, int tag, size_t len, unsigned char **buf,
-                   gdt_error *err);
+gdt_status mr_recv(mr_ctx *m, int from, int tag, size_t len, unsigned char **buf, gdt_error *err);
 
 /* Waits (without spinning) for the message with tag from rank from and
  * receives it (*buf malloc'd, *len); ends the job (gdt_comm_abort) when

@@ -32,14 +32,14 @@
 typedef struct tr_out tr_out;
 
 typedef struct tr_out_src {
-    const char *output;          /* the mesh path; its extension picks the format */
-    gdt_mesh_meta meta;          /* its strings outlive the writer */
-    const char *check_ply;       /* NULL, or a PLY path that receives the same records
-                                  * (--check of a text output: the checker reads PLY) */
-    const gdt_tiler *tiler;      /* the tiles (read only while the writer runs) */
+    const char *output;     /* the mesh path; its extension picks the format */
+    gdt_mesh_meta meta;     /* its strings outlive the writer */
+    const char *check_ply;  /* NULL, or a PLY path that receives the same records
+                             * (--check of a text output: the checker reads PLY) */
+    const gdt_tiler *tiler; /* the tiles (read only while the writer runs) */
     const char *tiles_dir;
-    const char *job;             /* for messages */
-    const uint64_t *base;        /* ntiles + 1: output index of each tile's first vertex */
+    const char *job;      /* for messages */
+    const uint64_t *base; /* ntiles + 1: output index of each tile's first vertex */
     uint64_t ntiles;
     volatile sig_atomic_t *stop; /* nonzero: stop (may be NULL) */
     int trim;                    /* the .tri files end with a trim section: faces it
@@ -49,7 +49,7 @@ typedef struct tr_out_src {
     tr_dem *dem;                 /* --dem: each tile's kept certified faces are rasterised
                                     into it as they are copied (NULL: no DEM); must outlive
                                     the writer */
-    int parts;                   /* a PLY (no DEM or check copy; trimmed or not) written
+    int parts;                   /* a mesh (no DEM or check copy; trimmed or not) written
                                   * in parts by the tiles' owners (mpirun): see below */
 } tr_out_src;
 
@@ -77,8 +77,7 @@ void tr_out_set_trim(tr_out *o, const gdt_trim_graph *g);
  * GDT_EJOB 6801-6802 (a job file missing, foreign or short);
  * GDT_EINTERRUPTED 1302. */
 gdt_status tr_out_finish(tr_out *o, const char *merge_path, const char *merge_dem,
-                         uint64_t merge_faces,
-                         gdt_trim_counts *tc, gdt_error *err);
+                         uint64_t merge_faces, gdt_trim_counts *tc, gdt_error *err);
 
 /* fn(ctx) is called once by tr_out_finish, on the caller's thread, when
  * every face is written (and rasterised, with a DEM), before the mesh is
@@ -105,8 +104,7 @@ void tr_out_on_complete(tr_out *o, void (*fn)(void *), void *ctx);
 
 /* The temporary's path (owned by o), the header's length and the vertex
  * count, for tr_out_open_part. */
-void tr_out_parts_layout(const tr_out *o, const char **tmp_path, uint64_t *header,
-                         uint64_t *nvert);
+void tr_out_parts_layout(const tr_out *o, const char **tmp_path, uint64_t *header, uint64_t *nvert);
 
 /* Opens the temporary written in parts (src: tiler, tiles_dir, job, base,
  * ntiles, meta.lattice as on rank 0).  returns: GDT_OK; gdt_ply_part_open's
@@ -142,6 +140,37 @@ void tr_out_add_counts(tr_out *o, const gdt_trim_counts *tc);
  * 47xx). */
 gdt_status tr_out_write_vertices(tr_out *o, uint64_t k, gdt_error *err);
 gdt_status tr_out_write_faces(tr_out *o, uint64_t k, uint64_t first_face, gdt_error *err);
+
+/* ---- A text mesh (OBJ, LandXML) in parts ----
+ *
+ * The same roles, but a text record has no fixed size (gdt_mesh_out.h,
+ * "in parts"): tr_out_write_vertices and tr_out_write_faces make tile k's
+ * fragments (tiles/<tile>.vtx, .ftx; faces once only, so they may be made
+ * during the tile stage and asked for again), and nothing is placed until
+ * every fragment's length is known.  Each rank's tiles are contiguous in
+ * tile order, so each rank places one run of vertex bytes and one of face
+ * bytes: tr_out_text_sizes gives their lengths, tr_out_place_text copies
+ * the fragments (in tile order) to the offsets rank 0 computed, removing
+ * each once placed.  Rank 0 also writes the separator and where its own
+ * faces begin (tr_out_text_tail) before tr_out_finish. */
+
+/* Whether o writes a text mesh in parts. */
+int tr_out_text(const tr_out *o);
+
+/* The vertex and face fragment bytes of tiles ks[0 .. n), each made.
+ * returns: GDT_OK; GDT_EINTERNAL 7830 (a fragment not made). */
+gdt_status tr_out_text_sizes(const tr_out *o, const uint64_t *ks, uint64_t n, uint64_t *vbytes,
+                             uint64_t *fbytes, gdt_error *err);
+
+/* Copies the fragments of tiles ks[0 .. n) (increasing) into the mesh:
+ * vertex bytes from byte vat on, face bytes from fat on.  returns: GDT_OK;
+ * gdt_mesh_part_copy's errors. */
+gdt_status tr_out_place_text(tr_out *o, const uint64_t *ks, uint64_t n, uint64_t vat, uint64_t fat,
+                             gdt_error *err);
+
+/* Rank 0: writes the separator at sep_at (where the vertex bytes end); its
+ * own faces (tr_out_finish) will begin at tail_at.  returns: GDT_OK; 4721. */
+gdt_status tr_out_text_tail(tr_out *o, uint64_t sep_at, uint64_t tail_at, gdt_error *err);
 
 /* Syncs and closes another rank's part; frees o.  returns: GDT_OK; GDT_EIO
  * 4722. */
