@@ -26,6 +26,10 @@
  * every TSIZES and answers each rank TPLACE (whether to place: no when any
  * rank failed; where its vertex bytes and its face bytes begin); each rank
  * places its fragments, then syncs and answers WROTE as above.
+ * With a DEM (m->part_dem; GO carries rank 0's grid) each other rank
+ * rasterises its tiles' kept faces into windows as it writes them
+ * (private/tiled_dem.h), saved before its WROTE; rank 0 puts a rank's
+ * windows into its writer when that WROTE arrives.
  * A failed PARTS (rank 0 could not read a tile's count) asks nothing: the
  * ranks wait for FINAL as before.  Every record has the place and bytes
  * of the sequential writer's, so the file is the same for any rank count. */
@@ -35,9 +39,12 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "gdt_cloud.h"
 #include "private/run_stats.h"
+#include "private/tiled_dem.h"
+#include "private/tiled_files.h"
 #include "private/tiled_out.h"
 
 /* What tr_out needs of the run to write tiles in parts. */
@@ -77,6 +84,13 @@ void mr_parts_pack_layout(mr_ctx *m, gdt_pack *p)
         return;
     m->part_text = tr_out_text(c->out);
     gdt_pack_u64(p, (uint64_t)m->part_text);
+    /* with a DEM, its grid: the other ranks rasterise their tiles on it */
+    m->part_dem = c->dem != NULL;
+    gdt_pack_u64(p, (uint64_t)m->part_dem);
+    if (m->part_dem) {
+        const gdt_raster_grid *g = tr_dem_grid(c->dem);
+        gdt_pack_bytes(p, g, sizeof *g); /* the same build on every rank */
+    }
     lat = &gdt_cloud_get_info(c->cloud)->lattice;
     tr_out_parts_layout(c->out, &tmp, &header, &nvert);
     gdt_pack_bytes(p, tmp, strlen(tmp));
@@ -97,6 +111,14 @@ gdt_status mr_parts_read_layout(mr_ctx *m, gdt_unpack *u, gdt_error *err)
     if (!m->parts)
         return u->bad ? mr_bad_message(0, TAG_GO, err) : GDT_OK;
     m->part_text = gdt_unpack_u64(u) != 0;
+    m->part_dem = gdt_unpack_u64(u) != 0;
+    if (m->part_dem) {
+        size_t gl = 0;
+        const unsigned char *g = gdt_unpack_bytes(u, &gl);
+        if (g == NULL || gl != sizeof m->part_grid)
+            return mr_bad_message(0, TAG_GO, err);
+        memcpy(&m->part_grid, g, sizeof m->part_grid);
+    }
     tmp = gdt_unpack_bytes(u, &tl);
     m->part_header = gdt_unpack_u64(u);
     m->part_nvert = gdt_unpack_u64(u);
@@ -118,8 +140,37 @@ gdt_status mr_parts_read_layout(mr_ctx *m, gdt_unpack *u, gdt_error *err)
 gdt_status mr_parts_open(mr_ctx *m, gdt_error *err)
 {
     tr_out_src src;
+    gdt_status st = GDT_OK;
     part_src(m->c, &m->part_lattice, &src);
-    return tr_out_open_part(&m->part_out, &src, m->part_path, m->part_header, m->part_nvert, err);
+    if (m->part_dem && m->part_windows == NULL)
+        st = tr_dem_create_windows(&m->part_windows, &m->part_grid, err);
+    src.dem = m->part_windows;
+    if (st == GDT_OK)
+        st = tr_out_open_part(&m->part_out, &src, m->part_path, m->part_header, m->part_nvert, err);
+    return st;
+}
+
+/* Rank 0: the DEM windows of rank from's tiles into the DEM, each file
+ * removed once its cells are in. */
+static gdt_status take_windows(mr_ctx *m, int from, gdt_error *err)
+{
+    tr_run *c = m->c;
+    gdt_status st = GDT_OK;
+    for (uint64_t k = 0; st == GDT_OK && k < m->ntiles; k++) {
+        gdt_tile_desc d;
+        char *path = NULL;
+        if (mr_owner_of(c->base, m->ntiles, k, m->size) != from)
+            continue;
+        st = gdt_tiler_tile_info(c->tiler, k, &d, err);
+        if (st == GDT_OK)
+            st = tr_tile_path(c->tiles_dir, &d, "dwin", &path, err);
+        if (st == GDT_OK)
+            st = tr_dem_window_put(c->dem, path, err);
+        if (st == GDT_OK)
+            unlink(path);
+        free(path);
+    }
+    return st;
 }
 
 void mr_parts_tile_done(mr_ctx *m, uint64_t k)
@@ -354,6 +405,13 @@ gdt_status mr_parts_wait(mr_ctx *m, gdt_error *err)
                 m->c->s.ranks[from].t_write = t;
             if (!u.bad && rst == GDT_OK)
                 tr_out_add_counts(m->c->out, &tc); /* the rank's tiles' faces and drops */
+            if (!u.bad && rst == GDT_OK && m->part_dem && m->job_st == GDT_OK) {
+                /* its tiles' cells, while the others still write */
+                gdt_error e3;
+                gdt_error_clear(&e3);
+                if (take_windows(m, from, &e3) != GDT_OK)
+                    mr_fail(m, 0, e3.status, e3.code, e3.msg);
+            }
             if (u.bad) {
                 char text[64];
                 snprintf(text, sizeof text, "a WROTE message that does not parse");
@@ -461,6 +519,8 @@ static gdt_status write_part(mr_ctx *m, const uint64_t *ks, uint64_t n, gdt_unpa
         m->part_tc = tr_out_tile_counts(m->part_out);
         s2 = tr_out_close_part(m->part_out, &e2);
         m->part_out = NULL;
+        tr_dem_abort(m->part_windows); /* its windows are saved */
+        m->part_windows = NULL;
         if (st == GDT_OK && s2 != GDT_OK) {
             st = s2;
             *err = e2;
@@ -513,4 +573,6 @@ void mr_parts_drop(mr_ctx *m)
 {
     tr_out_abort(m->part_out);
     m->part_out = NULL;
+    tr_dem_abort(m->part_windows);
+    m->part_windows = NULL;
 }

@@ -41,8 +41,8 @@ static gdt_status check_output(tr_run *c, gdt_error *err)
     st = gdt_ply_check(&po, path, &res, err);
     if (st == GDT_OK && (res.vertices != c->s.vertices || res.faces != c->s.faces))
         st = gdt_error_set(err, GDT_EINTERNAL, 7821,
-                           "%s: holds %" PRIu64 " vertices and %" PRIu64 " faces, the run made %"
-                           PRIu64 " and %" PRIu64,
+                           "%s: holds %" PRIu64 " vertices and %" PRIu64
+                           " faces, the run made %" PRIu64 " and %" PRIu64,
                            path, res.vertices, res.faces, c->s.vertices, c->s.faces);
     if (st == GDT_EINTERNAL) {
         size_t l = strlen(c->opts->output);
@@ -71,7 +71,7 @@ typedef struct dem_bg {
     int built;   /* the build ran (on the thread or here): st and err hold its result */
     gdt_status st;
     gdt_error err;
-    double t;    /* its seconds */
+    double t; /* its seconds */
 } dem_bg;
 
 static void *dem_build_main(void *arg)
@@ -129,8 +129,7 @@ static gdt_status write_summary(const tr_run *c, gdt_error *err)
     gdt_json_begin_object(&j, NULL);
     gdt_json_string(&j, "mode", "tiled");
     gdt_json_string(&j, "output", c->opts->output);
-    gdt_json_string(&j, "output_format",
-                    gdt_mesh_format_name(gdt_mesh_format_of(c->opts->output)));
+    gdt_json_string(&j, "output_format", gdt_mesh_format_name(gdt_mesh_format_of(c->opts->output)));
     gdt_json_string(&j, "device", s->device);
     if (s->dem_done)
         gdt_dem_report_json(&j, c->opts, &s->dem_geo, &s->dem_stats, s->t_dem);
@@ -202,6 +201,9 @@ static gdt_status write_summary(const tr_run *c, gdt_error *err)
         gdt_json_double(&j, "load_balance", sum > 0 ? max * s->nranks / sum : 1.0);
         /* a plain PLY's blocks are written by the ranks owning their tiles */
         gdt_json_string(&j, "mesh_written_by", c->out_parts ? "tile owners" : "rank 0");
+        /* with the mesh in parts, each rank rasterises its tiles for the DEM */
+        if (c->opts->dem != NULL)
+            gdt_json_string(&j, "dem_rasterised_by", c->out_parts ? "tile owners" : "rank 0");
         if (c->opts->ground_out != NULL)
             gdt_json_string(&j, "ground_out_written_by",
                             s->ground_out_shared ? "ranks in shares" : "rank 0");
@@ -258,14 +260,12 @@ gdt_status tr_run_output_start(tr_run *c, gdt_error *err)
     c->trim = opts->trim;
     c->trim.sx = ci->lattice.sx;
     c->trim.sy = ci->lattice.sy;
-    if (gdt_trim_on(&c->trim) &&
-        (st = gdt_trim_graph_create(&c->tgraph, &c->trim, err)) != GDT_OK)
+    if (gdt_trim_on(&c->trim) && (st = gdt_trim_graph_create(&c->tgraph, &c->trim, err)) != GDT_OK)
         return st;
     memset(&os, 0, sizeof os);
     os.output = opts->output;
-    gdt_run_mesh_meta(c->cloud, &c->log, &opts->trim, c->filter_comment,
-                      sizeof c->filter_comment, c->trim_comment, sizeof c->trim_comment,
-                      c->filter_comments, &os.meta);
+    gdt_run_mesh_meta(c->cloud, &c->log, &opts->trim, c->filter_comment, sizeof c->filter_comment,
+                      c->trim_comment, sizeof c->trim_comment, c->filter_comments, &os.meta);
     if (opts->ground) {
         /* the ground filter and its parameters (--ground pmf) */
         gdt_pmf_describe(&opts->pmf, c->ground_comment, sizeof c->ground_comment);
@@ -293,7 +293,7 @@ gdt_status tr_run_output_start(tr_run *c, gdt_error *err)
             return st;
     }
     os.dem = c->dem;
-    os.parts = c->out_parts && os.dem == NULL && os.check_ply == NULL;
+    os.parts = c->out_parts && os.check_ply == NULL;
     c->out_parts = os.parts;
     st = tr_out_start(&c->out, &os, err);
     if (st != GDT_OK)
@@ -388,13 +388,13 @@ gdt_status tr_run_finish(tr_run *c, gdt_error *err)
                 c->s.resumed ? ", resumed" : "", c->s.checked ? ", checked exactly" : "");
     if (c->s.dem_done)
         gdt_dem_report_line(opts, &c->s.dem_geo, &c->s.dem_stats);
-    gdt_log_note(&c->log,
-                 "times: pass 1 %.2f s, pass 2 %.2f s, tiles %.2f s (core %.2f, post %.2f, of which "
-                 "certify %.2f), "
-                 "merge %.2f s, write %.2f s; tiles reused %" PRIu64 ", computed %" PRIu64,
-                 c->s.t_pass1, c->s.t_pass2, c->s.t_tiles, c->s.t_core, c->s.t_post, c->s.t_certify,
-                 c->s.t_merge,
-                 c->s.t_write, c->s.tiles_reused, c->s.tiles_redone);
+    gdt_log_note(
+        &c->log,
+        "times: pass 1 %.2f s, pass 2 %.2f s, tiles %.2f s (core %.2f, post %.2f, of which "
+        "certify %.2f), "
+        "merge %.2f s, write %.2f s; tiles reused %" PRIu64 ", computed %" PRIu64,
+        c->s.t_pass1, c->s.t_pass2, c->s.t_tiles, c->s.t_core, c->s.t_post, c->s.t_certify,
+        c->s.t_merge, c->s.t_write, c->s.tiles_reused, c->s.tiles_redone);
     if (!opts->keep_job) {
         gdt_tiler_destroy(c->tiler);
         c->tiler = NULL;

@@ -17,8 +17,12 @@
 #include "private/tiled_files.h"
 #include "private/tiler_io.h"
 
+#include <errno.h>
 #include <inttypes.h>
 #include <pthread.h>
+#include <stdio.h>
+#include <sys/stat.h>
+#include <unistd.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -51,23 +55,98 @@ typedef struct td_part {
     td_batch batch;
 } td_part;
 
+/* Another rank's window: the cells [r0, r0 + h) x [c0, c0 + w) around one
+ * tile, dense (each the bits of its float32 value plus one, 0: not
+ * written, as in gdt_dem's blocks) or, past TD_DENSE_MAX cells, as runs. */
+typedef struct td_window {
+    int64_t r0, c0, h, w;
+    uint32_t *cells; /* dense: h w cells */
+    size_t cap;
+    uint64_t set;
+    FILE *runs; /* a window of over TD_DENSE_MAX cells: its runs, appended */
+    char *path; /* the window's file */
+    int failed; /* a write of runs failed (errno in err_no) */
+    int err_no;
+} td_window;
+
+/* Largest window kept dense in memory by default (64 MiB); a larger one
+ * (a raster much finer than the points) is written as it comes, run by
+ * run.  The environment's GDT_DEM_WINDOW_CELLS sets another limit. */
+#define TD_DENSE_MAX ((uint64_t)1 << 24)
+
 struct tr_dem {
     gdt_raster_grid grid;
-    gdt_dem *w;
+    gdt_dem *w;         /* NULL in window mode (tr_dem_create_windows) */
+    td_window win;      /* window mode: the current tile's cells */
+    uint64_t dense_max; /* window mode: the largest dense window, cells */
     pthread_mutex_t mu;
     /* the job the helpers work on */
     pthread_mutex_t job_mu, jmu;
     pthread_cond_t jcv, done_cv;
-    uint64_t gen;  /* job number: a helper works once per new value */
-    int pending;   /* helpers still working on job gen */
+    uint64_t gen; /* job number: a helper works once per new value */
+    int pending;  /* helpers still working on job gen */
     int stop;
-    int helpers;   /* started helper threads */
+    int helpers; /* started helper threads */
     const gdt_raster_vertex *pts;
     size_t npts, m;
     uint64_t base;
     const int32_t *tri;
     td_part *parts; /* [0 .. helpers], part 0 the caller's */
 };
+
+/* Window mode: cells (row, col .. col + n - 1) get z[0 .. n) in the
+ * current window, each once. */
+static gdt_status window_put(tr_dem *d, int64_t row, int64_t col, int64_t n, const float *z,
+                             gdt_error *err)
+{
+    td_window *wn = &d->win;
+    if (row < wn->r0 || row >= wn->r0 + wn->h || col < wn->c0 || n < 0 || col + n > wn->c0 + wn->w)
+        return gdt_error_set(err, GDT_EINTERNAL, 7664,
+                             "DEM: cells (%" PRId64 ", %" PRId64 "..+%" PRId64
+                             ") outside their tile's window",
+                             row, col, n);
+    if (wn->runs != NULL) { /* a run record: row, col, n, then n values' bits */
+        unsigned char h[24];
+        int ok;
+        tr_put_u64(h, (uint64_t)row);
+        tr_put_u64(h + 8, (uint64_t)col);
+        tr_put_u64(h + 16, (uint64_t)n);
+        ok = fwrite(h, 1, 24, wn->runs) == 24;
+        for (int64_t i = 0; ok && i < n; i++) {
+            unsigned char b[4];
+            uint32_t bits;
+            memcpy(&bits, &z[i], sizeof bits);
+            tr_put_u32(b, bits);
+            ok = fwrite(b, 1, 4, wn->runs) == 4;
+        }
+        if (!ok && !wn->failed) {
+            wn->failed = 1;
+            wn->err_no = errno;
+        }
+        wn->set += (uint64_t)n;
+        return GDT_OK; /* a failed write is reported by the save */
+    }
+    for (int64_t i = 0; i < n; i++) {
+        uint32_t *c = wn->cells + (size_t)((row - wn->r0) * wn->w + (col - wn->c0) + i);
+        uint32_t bits;
+        memcpy(&bits, &z[i], sizeof bits);
+        if (*c != 0)
+            return gdt_error_set(err, GDT_EINTERNAL, 7664,
+                                 "DEM: cell (%" PRId64 ", %" PRId64 ") written twice", row,
+                                 col + i);
+        *c = bits + 1u;
+    }
+    wn->set += (uint64_t)n;
+    return GDT_OK;
+}
+
+/* The writer's put, or the window's in window mode (mu held). */
+static gdt_status put_cells(tr_dem *d, int64_t row, int64_t col, int64_t n, const float *z,
+                            gdt_error *err)
+{
+    return d->w != NULL ? gdt_dem_put(d->w, row, col, n, z, err)
+                        : window_put(d, row, col, n, z, err);
+}
 
 static gdt_status batch_flush(td_batch *b, gdt_error *err)
 {
@@ -78,7 +157,7 @@ static gdt_status batch_flush(td_batch *b, gdt_error *err)
         return GDT_OK;
     pthread_mutex_lock(&b->d->mu);
     for (size_t i = 0; i < b->nruns && st == GDT_OK; i++) {
-        st = gdt_dem_put(b->d->w, b->row[i], b->col[i], b->len[i], b->z + off, err);
+        st = put_cells(b->d, b->row[i], b->col[i], b->len[i], b->z + off, err);
         off += (size_t)b->len[i];
     }
     pthread_mutex_unlock(&b->d->mu);
@@ -101,7 +180,7 @@ static gdt_status batch_put(void *ctx, int64_t row, int64_t col, int64_t n, cons
     if ((size_t)n > TD_BATCH_CELLS) { /* not from gdt_raster_triangle (runs of <= 256) */
         gdt_status st;
         pthread_mutex_lock(&b->d->mu);
-        st = gdt_dem_put(b->d->w, row, col, n, z, err);
+        st = put_cells(b->d, row, col, n, z, err);
         pthread_mutex_unlock(&b->d->mu);
         return st;
     }
@@ -224,9 +303,23 @@ static gdt_status locked_put(void *ctx, int64_t row, int64_t col, int64_t n, con
     tr_dem *d = ctx;
     gdt_status st;
     pthread_mutex_lock(&d->mu);
-    st = gdt_dem_put(d->w, row, col, n, z, err);
+    st = put_cells(d, row, col, n, z, err);
     pthread_mutex_unlock(&d->mu);
     return st;
+}
+
+/* A tr_dem with its locks, nothing else; NULL when out of memory. */
+static tr_dem *dem_alloc(void)
+{
+    tr_dem *d = calloc(1, sizeof *d);
+    if (d == NULL)
+        return NULL;
+    pthread_mutex_init(&d->mu, NULL);
+    pthread_mutex_init(&d->job_mu, NULL);
+    pthread_mutex_init(&d->jmu, NULL);
+    pthread_cond_init(&d->jcv, NULL);
+    pthread_cond_init(&d->done_cv, NULL);
+    return d;
 }
 
 gdt_status tr_dem_create(tr_dem **out, const gdt_options *opts, const gdt_cloud_info *ci,
@@ -238,14 +331,9 @@ gdt_status tr_dem_create(tr_dem **out, const gdt_options *opts, const gdt_cloud_
     gdt_status st;
 
     *out = NULL;
-    d = calloc(1, sizeof *d);
+    d = dem_alloc();
     if (d == NULL)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-    pthread_mutex_init(&d->mu, NULL);
-    pthread_mutex_init(&d->job_mu, NULL);
-    pthread_mutex_init(&d->jmu, NULL);
-    pthread_cond_init(&d->jcv, NULL);
-    pthread_cond_init(&d->done_cv, NULL);
     st = gdt_raster_grid_define(&d->grid, &ci->lattice, pl->points > 0 ? pl->min_x : 0,
                                 pl->points > 0 ? pl->min_y : 0, pl->points > 0 ? pl->max_x : 0,
                                 pl->points > 0 ? pl->max_y : 0, vertices, opts->dem_res,
@@ -270,6 +358,287 @@ gdt_status tr_dem_create(tr_dem **out, const gdt_options *opts, const gdt_cloud_
     }
     *out = d;
     return GDT_OK;
+}
+
+gdt_status tr_dem_create_windows(tr_dem **out, const gdt_raster_grid *grid, gdt_error *err)
+{
+    tr_dem *d;
+    gdt_status st;
+    *out = NULL;
+    d = dem_alloc();
+    if (d == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    d->grid = *grid;
+    d->dense_max = TD_DENSE_MAX;
+    {
+        const char *e = getenv("GDT_DEM_WINDOW_CELLS");
+        char *end = NULL;
+        unsigned long long v = e != NULL ? strtoull(e, &end, 10) : 0;
+        if (e != NULL && end != e && *end == '\0' && v > 0)
+            d->dense_max = (uint64_t)v;
+    }
+    st = start_helpers(d, 0, err); /* the caller's batch only */
+    if (st != GDT_OK) {
+        tr_dem_abort(d);
+        return st;
+    }
+    *out = d;
+    return GDT_OK;
+}
+
+int tr_dem_windowed(const tr_dem *d)
+{
+    return d != NULL && d->w == NULL;
+}
+
+const gdt_raster_grid *tr_dem_grid(const tr_dem *d)
+{
+    return &d->grid;
+}
+
+/* floor(n / q), q > 0 */
+static int64_t fdiv(int64_t n, int64_t q)
+{
+    int64_t r = n / q;
+    return (n % q != 0 && n < 0) ? r - 1 : r;
+}
+
+/* A window file: TD_WMAGIC (dense) or TD_RMAGIC (runs), then r0, c0, h,
+ * w, the cells written (u64 LE); then, dense, the h w cells (u32 LE,
+ * row-major, each the bits of its value plus one, 0: not written), or the
+ * runs (row, col, n as u64 LE, then the n values' bits as u32 LE). */
+#define TD_WMAGIC "GDTDWIN1"
+#define TD_RMAGIC "GDTDRUN1"
+#define TD_WHEADER 48
+
+static void window_header(unsigned char *hdr, const td_window *wn)
+{
+    memcpy(hdr, wn->runs != NULL ? TD_RMAGIC : TD_WMAGIC, 8);
+    tr_put_u64(hdr + 8, (uint64_t)wn->r0);
+    tr_put_u64(hdr + 16, (uint64_t)wn->c0);
+    tr_put_u64(hdr + 24, (uint64_t)wn->h);
+    tr_put_u64(hdr + 32, (uint64_t)wn->w);
+    tr_put_u64(hdr + 40, wn->set);
+}
+
+/* Closes a window left open (a failed tile): its file removed. */
+static void window_drop(td_window *wn)
+{
+    if (wn->runs != NULL) {
+        fclose(wn->runs);
+        wn->runs = NULL;
+        if (wn->path != NULL)
+            unlink(wn->path);
+    }
+    free(wn->path);
+    wn->path = NULL;
+}
+
+gdt_status tr_dem_window_begin(tr_dem *d, const gdt_raster_vertex *pts, size_t n, const char *path,
+                               gdt_error *err)
+{
+    const gdt_raster_grid *g = &d->grid;
+    td_window *wn = &d->win;
+    int64_t minx = 0, maxx = -1, miny = 0, maxy = -1, c_lo, c_hi, r_lo, r_hi;
+    size_t cells;
+
+    window_drop(wn);
+    wn->set = 0;
+    wn->h = wn->w = 0;
+    wn->r0 = wn->c0 = 0;
+    wn->failed = 0;
+    wn->path = strdup(path);
+    if (wn->path == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    for (size_t i = 0; i < n; i++) {
+        if (i == 0 || pts[i].x < minx)
+            minx = pts[i].x;
+        if (i == 0 || pts[i].x > maxx)
+            maxx = pts[i].x;
+        if (i == 0 || pts[i].y < miny)
+            miny = pts[i].y;
+        if (i == 0 || pts[i].y > maxy)
+            maxy = pts[i].y;
+    }
+    if (n == 0)
+        return GDT_OK;
+    /* the centres inside the points' box, as gdt_raster_triangle bounds a
+     * face (doubled coordinates: centre of column c at 2 x0 + mx (2c + 1),
+     * of row r at 2 y0 - my (2r + 1)); every face of the tile lies in it */
+    c_lo = -fdiv(-(2 * minx - (2 * g->x0 + g->mx)), 2 * g->mx);
+    c_hi = fdiv(2 * maxx - (2 * g->x0 + g->mx), 2 * g->mx);
+    r_lo = -fdiv(-(2 * g->y0 - g->my - 2 * maxy), 2 * g->my);
+    r_hi = fdiv(2 * g->y0 - g->my - 2 * miny, 2 * g->my);
+    if (c_lo < 0)
+        c_lo = 0;
+    if (c_hi > g->geo.ncols - 1)
+        c_hi = g->geo.ncols - 1;
+    if (r_lo < 0)
+        r_lo = 0;
+    if (r_hi > g->geo.nrows - 1)
+        r_hi = g->geo.nrows - 1;
+    if (c_lo > c_hi || r_lo > r_hi)
+        return GDT_OK;
+    wn->r0 = r_lo;
+    wn->c0 = c_lo;
+    wn->h = r_hi - r_lo + 1;
+    wn->w = c_hi - c_lo + 1;
+    if ((uint64_t)wn->h > d->dense_max / (uint64_t)wn->w) {
+        unsigned char hdr[TD_WHEADER];
+        wn->runs = fopen(path, "wb");
+        window_header(hdr, wn); /* rewritten with the count by the save */
+        if (wn->runs == NULL || fwrite(hdr, 1, TD_WHEADER, wn->runs) != TD_WHEADER) {
+            int e = errno;
+            window_drop(wn);
+            return gdt_error_set(err, GDT_EIO, 4806, "%s: cannot write this DEM window: %s", path,
+                                 strerror(e));
+        }
+        return GDT_OK;
+    }
+    cells = (size_t)wn->h * (size_t)wn->w;
+    if (gdt_grow(&wn->cells, &wn->cap, cells, sizeof *wn->cells, 4096) != 0)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory (a DEM window of %zu cells)",
+                             cells);
+    memset(wn->cells, 0, cells * sizeof *wn->cells);
+    return GDT_OK;
+}
+
+gdt_status tr_dem_window_save(tr_dem *d, gdt_error *err)
+{
+    td_window *wn = &d->win;
+    unsigned char hdr[TD_WHEADER];
+    const char *path = wn->path != NULL ? wn->path : "(no window)";
+    FILE *f = wn->runs;
+    int ok = wn->path != NULL && !wn->failed, e = wn->failed ? wn->err_no : EINVAL;
+
+    window_header(hdr, wn);
+    if (f != NULL) { /* runs: the header again, with the count */
+        ok = ok && fseek(f, 0, SEEK_SET) == 0 && fwrite(hdr, 1, TD_WHEADER, f) == TD_WHEADER;
+    } else if (ok) {
+        size_t cells = (size_t)(wn->h * wn->w);
+        f = fopen(path, "wb");
+        ok = f != NULL && fwrite(hdr, 1, TD_WHEADER, f) == TD_WHEADER;
+        for (size_t i = 0; ok && i < cells; i++) {
+            unsigned char b[4];
+            tr_put_u32(b, wn->cells[i]);
+            ok = fwrite(b, 1, 4, f) == 4;
+        }
+    }
+    if (!ok && !wn->failed)
+        e = errno;
+    if (f != NULL && fclose(f) != 0 && ok) {
+        ok = 0;
+        e = errno;
+    }
+    wn->runs = NULL;
+    if (!ok) {
+        gdt_status st = gdt_error_set(err, GDT_EIO, 4806, "%s: cannot write this DEM window: %s",
+                                      path, strerror(e));
+        if (wn->path != NULL)
+            unlink(wn->path); /* nothing half-written is left */
+        window_drop(wn);
+        return st;
+    }
+    free(wn->path);
+    wn->path = NULL;
+    return GDT_OK;
+}
+
+gdt_status tr_dem_window_put(tr_dem *d, const char *path, gdt_error *err)
+{
+    unsigned char hdr[TD_WHEADER];
+    FILE *f = fopen(path, "rb");
+    gdt_status st = GDT_OK;
+    int64_t r0, c0, h, w;
+    uint64_t set, seen = 0, size;
+    float *row = NULL;
+    unsigned char *raw = NULL;
+    struct stat sb;
+    int runs;
+
+    if (f == NULL || fstat(fileno(f), &sb) != 0) {
+        st = gdt_error_set(err, GDT_EIO, 4805, "%s: cannot open: %s", path, strerror(errno));
+        goto done;
+    }
+    if (fread(hdr, 1, TD_WHEADER, f) != TD_WHEADER ||
+        (memcmp(hdr, TD_WMAGIC, 8) != 0 && memcmp(hdr, TD_RMAGIC, 8) != 0)) {
+        st = gdt_error_set(err, GDT_EJOB, 6801, "%s: not a DEM window this run wrote", path);
+        goto done;
+    }
+    runs = memcmp(hdr, TD_RMAGIC, 8) == 0;
+    r0 = (int64_t)tr_get_u64(hdr + 8);
+    c0 = (int64_t)tr_get_u64(hdr + 16);
+    h = (int64_t)tr_get_u64(hdr + 24);
+    w = (int64_t)tr_get_u64(hdr + 32);
+    set = tr_get_u64(hdr + 40);
+    size = (uint64_t)sb.st_size;
+    if (h < 0 || w < 0 || r0 < 0 || c0 < 0 || h > d->grid.geo.nrows - r0 ||
+        w > d->grid.geo.ncols - c0 ||
+        (!runs && size != TD_WHEADER + 4 * (uint64_t)h * (uint64_t)w)) {
+        st = gdt_error_set(err, GDT_EJOB, 6802,
+                           "%s: its window does not fit the raster or the file", path);
+        goto done;
+    }
+    row = malloc((size_t)(w > 0 ? w : 1) * sizeof *row);
+    raw = malloc((size_t)(w > 0 ? w : 1) * 4);
+    if (row == NULL || raw == NULL) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        goto done;
+    }
+    if (runs) {
+        unsigned char rh[24];
+        size_t got;
+        while (st == GDT_OK && (got = fread(rh, 1, 24, f)) == 24) {
+            int64_t r = (int64_t)tr_get_u64(rh), c = (int64_t)tr_get_u64(rh + 8);
+            int64_t n = (int64_t)tr_get_u64(rh + 16);
+            if (r < r0 || r >= r0 + h || c < c0 || n < 1 || n > w || c - c0 > w - n ||
+                fread(raw, 4, (size_t)n, f) != (size_t)n) {
+                st = gdt_error_set(err, GDT_EJOB, 6802,
+                                   "%s: a run outside its window, or "
+                                   "truncated",
+                                   path);
+                break;
+            }
+            for (int64_t i = 0; i < n; i++) {
+                uint32_t bits = tr_get_u32(raw + 4 * i);
+                memcpy(&row[i], &bits, sizeof bits);
+            }
+            seen += (uint64_t)n;
+            st = locked_put(d, r, c, n, row, err);
+        }
+        if (st == GDT_OK && got != 0)
+            st = gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
+    }
+    for (int64_t r = 0; !runs && st == GDT_OK && r < h; r++) {
+        int64_t start = -1;
+        if (fread(raw, 4, (size_t)w, f) != (size_t)w) {
+            st = gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
+            break;
+        }
+        /* the runs of written cells go to the writer as they stand */
+        for (int64_t c = 0; st == GDT_OK && c <= w; c++) {
+            uint32_t v = c < w ? tr_get_u32(raw + 4 * c) : 0;
+            if (v != 0) {
+                uint32_t bits = v - 1u;
+                memcpy(&row[c], &bits, sizeof bits);
+                if (start < 0)
+                    start = c;
+                seen++;
+            } else if (start >= 0) {
+                st = locked_put(d, r0 + r, c0 + start, c - start, row + start, err);
+                start = -1;
+            }
+        }
+    }
+    if (st == GDT_OK && seen != set)
+        st = gdt_error_set(err, GDT_EJOB, 6802,
+                           "%s: %" PRIu64 " cells where %" PRIu64 " were written", path, seen, set);
+done:
+    if (f != NULL)
+        fclose(f);
+    free(row);
+    free(raw);
+    return st;
 }
 
 gdt_status tr_dem_tile_faces(tr_dem *d, const gdt_raster_vertex *pts, size_t n, uint64_t base,
@@ -343,6 +712,8 @@ void tr_dem_abort(tr_dem *d)
     if (d == NULL)
         return;
     stop_helpers(d);
+    window_drop(&d->win);
+    free(d->win.cells);
     gdt_dem_abort(d->w);
     pthread_mutex_destroy(&d->mu);
     pthread_mutex_destroy(&d->job_mu);

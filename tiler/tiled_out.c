@@ -288,6 +288,14 @@ static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
     r.fd = -1;
     if (st == GDT_OK && o->src.dem != NULL)
         st = load_tile_points(o, &d, err);
+    if (st == GDT_OK && tr_dem_windowed(o->src.dem)) {
+        /* another rank's DEM: the tile's cells, for rank 0 */
+        st = tr_tile_path(o->src.tiles_dir, &d, "dwin", &path, err);
+        if (st == GDT_OK)
+            st = tr_dem_window_begin(o->src.dem, o->tile_pts, (size_t)d.points, path, err);
+        free(path);
+        path = NULL;
+    }
     if (st == GDT_OK)
         st = tr_tile_path(o->src.tiles_dir, &d, "tri", &path, err);
     if (st == GDT_OK)
@@ -343,6 +351,9 @@ static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
         o->tc.faces += nf;
     tr_dread_close(&r);
     free(path);
+    path = NULL;
+    if (st == GDT_OK && tr_dem_windowed(o->src.dem))
+        st = tr_dem_window_save(o->src.dem, err);
     return st;
 }
 
@@ -644,11 +655,11 @@ gdt_status tr_out_start(tr_out **out, const tr_out_src *src, gdt_error *err)
         /* a text mesh: the header now; the records in fragments, placed
          * once their lengths are known; rank 0's own faces last */
         o->part_nvert = src->base[src->ntiles];
-        st = src->dem == NULL && src->check_ply == NULL
+        st = src->check_ply == NULL
                  ? gdt_mesh_create(&o->w, src->output, gdt_mesh_format_of(src->output), &src->meta,
                                    err)
                  : gdt_error_set(err, GDT_EINTERNAL, 7830,
-                                 "the mesh written in parts must be without a DEM");
+                                 "the mesh written in parts must be without a check copy");
         if (st == GDT_OK)
             st = gdt_mesh_begin_text_parts(o->w, &o->part_header, err);
         if (st == GDT_OK)
@@ -666,11 +677,10 @@ gdt_status tr_out_start(tr_out **out, const tr_out_src *src, gdt_error *err)
         /* the header now; every record through parts (this one for rank 0) */
         gdt_ply_writer *pw;
         o->part_nvert = src->base[src->ntiles];
-        st = gdt_mesh_format_of(src->output) == GDT_MESH_PLY && src->dem == NULL &&
-                     src->check_ply == NULL
+        st = src->check_ply == NULL
                  ? gdt_mesh_create(&o->w, src->output, GDT_MESH_PLY, &src->meta, err)
                  : gdt_error_set(err, GDT_EINTERNAL, 7830,
-                                 "the mesh written in parts must be a PLY without a DEM");
+                                 "the mesh written in parts must be without a check copy");
         pw = st == GDT_OK ? gdt_mesh_ply_writer(o->w) : NULL;
         if (st == GDT_OK)
             st = gdt_ply_begin_parts(pw, o->part_nvert, &o->part_header, err);
@@ -1008,6 +1018,8 @@ gdt_status tr_out_finish(tr_out *o, const char *merge_path, const char *merge_de
         if (st == GDT_OK)
             st = stopped(o) ? tr_interrupted(o->src.job, "the output", err)
                             : copy_merge_faces(o, merge_path, merge_dem, merge_faces, err);
+        if (st == GDT_OK && o->on_complete != NULL)
+            o->on_complete(o->on_complete_ctx);
         if (st == GDT_OK) {
             st = gdt_mesh_finish(o->w, err);
             o->w = NULL;
@@ -1024,6 +1036,8 @@ gdt_status tr_out_finish(tr_out *o, const char *merge_path, const char *merge_de
         o->part_f = o->tile_faces;
         st = stopped(o) ? tr_interrupted(o->src.job, "the output", err)
                         : copy_merge_faces(o, merge_path, merge_dem, merge_faces, err);
+        if (st == GDT_OK && o->on_complete != NULL)
+            o->on_complete(o->on_complete_ctx);
         if (st == GDT_OK)
             st = gdt_ply_part_close(o->part, err);
         o->part = NULL;

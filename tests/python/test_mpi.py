@@ -98,6 +98,9 @@ CASES = {
     "obj-two-inputs-64": (("a", "b"), ("--tile", "64"), "obj"),
     "xml-concavity-64": (("a",), ("--tile", "64", "--max-edge", "4", "--concavity", "1.5"),
                          "xml"),
+    # with a DEM: the owners rasterise their tiles into windows rank 0 takes
+    "obj-dem-128": (("a",), ("--tile", "128", "--dem", "{d}/x.tif", "--dem-res", "1.5",
+                             "--preview", "{d}/x.png"), "obj"),
 }
 
 
@@ -118,7 +121,8 @@ def test_any_rank_count_writes_the_same_bytes(mpi_bin, clouds, tmp_path, case):
         assert r.stderr == "", (k, r.stderr)  # -q: nothing, from any rank
         outs[k] = d
         assert not (d / f"o.{ext}.gdt-job").exists()  # the job is removed as in a plain run
-        assert not list(d.glob("**/*.[vf]tx"))  # no fragment of a text mesh is left
+        # no fragment of a text mesh or DEM window is left
+        assert not list(d.glob("**/*.[vf]tx")) and not list(d.glob("**/*.dwin"))
     ref = (outs[1] / f"o.{ext}").read_bytes()
     for k in (2, 3, 4):
         assert (outs[k] / f"o.{ext}").read_bytes() == ref, k
@@ -126,6 +130,8 @@ def test_any_rank_count_writes_the_same_bytes(mpi_bin, clouds, tmp_path, case):
             assert (outs[k] / "o.prj").read_bytes() == (outs[1] / "o.prj").read_bytes(), k
         if "--dem" in opts:
             assert (outs[k] / "x.tif").read_bytes() == (outs[1] / "x.tif").read_bytes(), k
+        if "--preview" in opts:
+            assert (outs[k] / "x.png").read_bytes() == (outs[1] / "x.png").read_bytes(), k
         if "--ground-out" in opts:
             assert (outs[k] / "g.las").read_bytes() == (outs[1] / "g.las").read_bytes(), k
             assert not list(outs[k].glob("**/ground.bits*"))
@@ -160,18 +166,43 @@ def test_any_rank_count_writes_the_same_bytes(mpi_bin, clouds, tmp_path, case):
         else:
             assert all("ground_tiles" not in q for q in mpi["per_rank"]), k
         # the mesh is written by the tiles' owners in parts, trimmed or not,
-        # PLY or text; with a DEM, rank 0's writer rasterises as it copies
-        plain = "--dem" not in opts
-        if "--max-edge" in opts and plain:
+        # PLY or text, and with a DEM they rasterise their tiles for it
+        if "--dem" in opts:
+            assert mpi["dem_rasterised_by"] == "tile owners", k
+        else:
+            assert "dem_rasterised_by" not in mpi, k
+        if "--max-edge" in opts:
             # the rules drop faces (of the tiles, which the owners write)
             assert j["trim"]["dropped_max_edge"] > 0, k
             assert ("--concavity" not in opts) == (j["trim"]["dropped_concavity"] == 0), k
-        assert mpi["mesh_written_by"] == ("tile owners" if plain else "rank 0"), (k, case)
+        assert mpi["mesh_written_by"] == "tile owners", (k, case)
         # the parts' writing is timed: the stage beside the merge, and each rank's share
-        assert ("parts" in j["times"]) == plain, (k, case)
-        assert all(("write_s" in q) == plain for q in mpi["per_rank"]), (k, case)
-        if plain:
-            assert j["times"]["parts"] > 0 and all(q["write_s"] > 0 for q in mpi["per_rank"])
+        assert "parts" in j["times"], (k, case)
+        assert j["times"]["parts"] > 0 and all(q["write_s"] > 0 for q in mpi["per_rank"])
+
+
+def test_dem_windows_written_as_runs(mpi_bin, clouds, tmp_path):
+    """A DEM far finer than the points: a rank's window of a tile's cells
+    is then written run by run as the faces are rasterised, not held in
+    memory (here forced with a small limit); rank 0 reads either kind, and
+    the DEM and mesh are a plain run's, trimmed by --max-edge too."""
+    opts = ["--tile", "64", "--dem-res", "0.05", "--max-edge", "2", "-q"]
+    ref = tmp_path / "ref"
+    ref.mkdir()
+    r = run([mpi_bin, clouds["a"], "-o", ref / "o.ply", "--dem", ref / "o.tif", *opts])
+    assert r.returncode == 0, r.stderr
+    for limit in ("1000", "1"):
+        d = tmp_path / f"w{limit}"
+        d.mkdir()
+        r = subprocess.run(["mpirun", "--oversubscribe", "-x", f"GDT_DEM_WINDOW_CELLS={limit}",
+                            "-np", "3", str(mpi_bin), str(clouds["a"]), "-o", str(d / "o.ply"),
+                            "--dem", str(d / "o.tif"), "--json", str(d / "j.json"), *opts],
+                           capture_output=True, text=True, env=env(), timeout=300)
+        assert r.returncode == 0, r.stdout + r.stderr
+        assert (d / "o.tif").read_bytes() == (ref / "o.tif").read_bytes(), limit
+        assert (d / "o.ply").read_bytes() == (ref / "o.ply").read_bytes(), limit
+        assert json.loads((d / "j.json").read_text())["mpi"]["dem_rasterised_by"] == \
+            "tile owners"
 
 
 def test_shared_pass2_out_of_core(mpi_bin, root, tmp_path):

@@ -67,9 +67,13 @@ typedef struct mr_ctx {
     /* another rank */
     int stopped; /* STOP received */
     /* the mesh in parts (mpi_parts.c), on every rank */
-    int parts;       /* this run writes the mesh in parts */
-    int part_text;   /* and it is a text mesh (OBJ, LandXML): fragments first */
-    char *part_path; /* another rank: the temporary, from GO */
+    int parts;     /* this run writes the mesh in parts */
+    int part_text; /* and it is a text mesh (OBJ, LandXML): fragments first */
+    int part_dem;  /* and there is a DEM: another rank rasterises its tiles
+                    * into windows (private/tiled_dem.h) over part_grid */
+    gdt_raster_grid part_grid;
+    tr_dem *part_windows; /* another rank: its DEM in window mode */
+    char *part_path;      /* another rank: the temporary, from GO */
     uint64_t part_header, part_nvert;
     gdt_lattice part_lattice;
     tr_out *part_out;   /* another rank: its part, open from GO to PARTS */

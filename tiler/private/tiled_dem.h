@@ -64,6 +64,44 @@ gdt_status tr_dem_faces(tr_dem *d, const gdt_raster_vertex *v, size_t m, gdt_err
 gdt_status tr_dem_build(tr_dem *d, gdt_dem_geo *geo, gdt_dem_stats *stats, gdt_error *err);
 gdt_status tr_dem_commit(tr_dem *d, gdt_error *err);
 
+/* ---- Under mpirun: the other ranks rasterise their own tiles ----
+ *
+ * A rank other than 0 has no writer: it rasterises each of its tiles'
+ * kept faces (tr_dem_tile_faces, as the writer of its part copies them)
+ * into a window, the cells around the tile's points, saved as the tile's
+ * .dwin file; rank 0 puts every window's cells into its writer
+ * (tr_dem_window_put) before the merge's faces.  A cell is owned by one
+ * face, so the windows, rank 0's own tiles and the merge's faces write
+ * each cell once, and the DEM is the plain run's. */
+
+/* A DEM in window mode over rank 0's grid (tr_dem_grid).  returns: 7001. */
+gdt_status tr_dem_create_windows(tr_dem **out, const gdt_raster_grid *grid, gdt_error *err);
+
+/* Whether d is in window mode. */
+int tr_dem_windowed(const tr_dem *d);
+
+/* The grid of d. */
+const gdt_raster_grid *tr_dem_grid(const tr_dem *d);
+
+/* Window mode: starts the window of a tile whose points are pts[0 .. n)
+ * (every cell any of its faces can own), all cells unwritten, to be saved
+ * at path.  A window of up to 2^24 cells (or the environment's
+ * GDT_DEM_WINDOW_CELLS) is kept in memory; a larger one (a raster much
+ * finer than the points) is written to path run by run as the faces are
+ * rasterised.  returns: GDT_OK; GDT_EIO 4806; 7001. */
+gdt_status tr_dem_window_begin(tr_dem *d, const gdt_raster_vertex *pts, size_t n, const char *path,
+                               gdt_error *err);
+
+/* Window mode: completes the current window's file.  returns: GDT_OK;
+ * GDT_EIO 4806 (nothing left at its path). */
+gdt_status tr_dem_window_save(tr_dem *d, gdt_error *err);
+
+/* Rank 0: the cells of the window file at path into the writer.  Thread-
+ * safe.  returns: GDT_OK; GDT_EIO 4805; GDT_EJOB 6801, 6802 (not a window,
+ * or one that does not fit the raster); the writer's errors (a cell
+ * written twice among them). */
+gdt_status tr_dem_window_put(tr_dem *d, const char *path, gdt_error *err);
+
 /* Releases d without writing; NULL is accepted. */
 void tr_dem_abort(tr_dem *d);
 
