@@ -9,5 +9,9 @@ gdt_target_flags(gdt_fail_threads)
 add_library(gdt_fail_write MODULE ${CMAKE_CURRENT_SOURCE_DIR}/tools/fail_write.c)
 target_link_libraries(gdt_fail_write PRIVATE ${CMAKE_DL_LIBS})
 gdt_target_flags(gdt_fail_write)
+# LD_PRELOAD shim that makes opening matching files fail (EIO), in one kind of thread.
+add_library(gdt_fail_open MODULE ${CMAKE_CURRENT_SOURCE_DIR}/tools/fail_open.c)
+target_link_libraries(gdt_fail_open PRIVATE ${CMAKE_DL_LIBS} Threads::Threads)
+gdt_target_flags(gdt_fail_open)
 # The tiled run's stages over a subset of the tiles (tests/python/test_stages.py).
 gdt_add_test_exe(stages_subset ${CMAKE_CURRENT_SOURCE_DIR}/tools/stages_subset.c)

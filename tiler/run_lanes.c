@@ -19,6 +19,7 @@
  * error fail_st and fail_err); busy[s] is set from a
  * slot's claim until its post stage was joined (tr_lanes_posted);
  * lane_held counts the slots lanes claimed that the stage has not taken. */
+#define _GNU_SOURCE 1 /* pthread_setname_np */
 #include "private/stages.h"
 
 #include <pthread.h>
@@ -187,6 +188,8 @@ gdt_status tr_lanes_start(tr_run *c, const tr_tile_set *set, uint64_t n, gdt_err
         l->p = p;
         l->core = c->cstart.more[j];
         l->started = pthread_create(&l->tid, NULL, lane_main, l) == 0;
+        if (l->started) /* for debuggers, profilers and the tests' fault shims */
+            pthread_setname_np(l->tid, "gdt-lane");
     }
     return GDT_OK;
 fail:

@@ -756,6 +756,35 @@ def test_damaged_tiler_file_redoes_pass2(tiny, tmp_path, damage):
 
 # ------------------------------------------------------------ several devices
 
+def test_a_lane_failing_fails_the_run_then_it_resumes(small, tools_dir, tmp_path):
+    """With two devices, the further device's lane cannot read its tiles
+    (an LD_PRELOAD shim fails every open of a .pts file on the threads named
+    gdt-lane): the stage reports the lane's failure at that tile, the run
+    exits 4 naming the file, with no output or temporary left and the job
+    kept; a rerun on one device, and one on two devices without the fault,
+    give the uninterrupted run's bytes."""
+    shim = tools_dir / "libgdt_fail_open.so"
+    if not shim.exists():
+        pytest.fail(f"libgdt_fail_open.so not built at {shim}")
+    out, job, log = tmp_path / "o.ply", tmp_path / "job", tmp_path / "refused.log"
+    cmd = small.cmd(small.las, out, "--device", "0,0", "--job", job)
+    r = run(cmd, env={**os.environ, "LD_PRELOAD": str(shim), "GDT_TEST_FAIL_OPEN_MATCH": ".pts",
+                      "GDT_TEST_FAIL_OPEN_THREAD": "gdt-lane",
+                      "GDT_TEST_FAIL_OPEN_LOG": str(log)})
+    assert log.exists(), r.stderr  # a lane tried to read a tile
+    assert r.returncode == 4, r.stderr
+    assert r.stderr.count("error GDT-4504") == 1 and ".pts" in r.stderr, r.stderr
+    assert not out.exists() and job.is_dir()
+    assert [p.name for p in tmp_path.iterdir() if ".tmp-" in p.name] == []
+    r = run(small.cmd(small.las, out, "--job", job, "--keep-job"))
+    assert r.returncode == 0, r.stderr
+    small.assert_same(out, "resumed on one device after a lane failed")
+    out.unlink()
+    r = run(small.cmd(small.las, out, "--job", job, "--device", "0,0"))
+    assert r.returncode == 0, r.stderr
+    small.assert_same(out, "rerun on two devices")
+
+
 def test_two_devices_resume_one_device_and_back(small, tmp_path):
     """The tile stage on two cores (the one PoCL device opened twice, --device
     0,0) gives the bytes of one; killed in its tile stage, the job is finished
