@@ -205,6 +205,38 @@ def test_dem_windows_written_as_runs(mpi_bin, clouds, tmp_path):
             "tile owners"
 
 
+def test_a_rank_that_cannot_save_its_dem_windows_fails_the_job(mpi_bin, clouds, tools_dir,
+                                                                 tmp_path):
+    """Rank 1 cannot create its DEM windows (an LD_PRELOAD shim fails its
+    opens of .dwin files with EIO): the job exits 4 with rank 1's message
+    once, leaves neither mesh nor DEM nor temporary, keeps its job, and a
+    plain rerun writes the bytes of an undisturbed run."""
+    shim = tools_dir / "libgdt_fail_open.so"
+    if not shim.exists():
+        pytest.fail(f"libgdt_fail_open.so not built at {shim}")
+    out, tif, job, log = (tmp_path / "o.ply", tmp_path / "o.tif", tmp_path / "job",
+                          tmp_path / "refused.log")
+    args = [str(clouds["a"]), "-o", str(out), "--dem", str(tif), "--tile", "64", "-q",
+            "--job", str(job)]
+    r = run(["mpirun", "--oversubscribe", "-np", "1", mpi_bin, *args, ":", "-np", "1", "env",
+             f"LD_PRELOAD={shim}", "GDT_TEST_FAIL_OPEN_MATCH=.dwin",
+             f"GDT_TEST_FAIL_OPEN_LOG={log}", mpi_bin, *args])
+    assert log.exists(), r.stdout + r.stderr  # the shim refused an open of rank 1
+    assert r.returncode == 4, r.stdout + r.stderr
+    assert r.stderr.count("error GDT-4806") == 1 and "rank 1: " in r.stderr, r.stderr
+    assert not out.exists() and not tif.exists() and job.is_dir()
+    assert [p.name for p in tmp_path.iterdir() if ".tmp-" in p.name] == []
+    r = run([mpi_bin, *args])
+    assert r.returncode == 0, r.stderr
+    ref = tmp_path / "ref"
+    ref.mkdir()
+    r = run([mpi_bin, clouds["a"], "-o", ref / "o.ply", "--dem", ref / "o.tif", "--tile", "64",
+             "-q"])
+    assert r.returncode == 0, r.stderr
+    assert out.read_bytes() == (ref / "o.ply").read_bytes()
+    assert tif.read_bytes() == (ref / "o.tif").read_bytes()
+
+
 def test_shared_pass2_out_of_core(mpi_bin, root, tmp_path):
     """A budget too small to hold the points: pass 2 spills to .raw files on
     the shared job directory (each rank its share, or rank 0 alone for a

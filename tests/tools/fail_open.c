@@ -1,4 +1,4 @@
-/* fail_open — an LD_PRELOAD library for tests: open and openat of a path
+/* fail_open — an LD_PRELOAD library for tests: open, openat and fopen of a path
  * that contains GDT_TEST_FAIL_OPEN_MATCH fail with EIO, as on a disk that
  * lost a file's blocks, when the calling thread's name (pthread_getname_np)
  * is GDT_TEST_FAIL_OPEN_THREAD (any thread when that is unset).  So a test
@@ -121,4 +121,31 @@ int openat64(int dir, const char *path, int flags, ...)
     mode = mode_of(flags, ap);
     va_end(ap);
     return forward_openat("openat64", dir, path, flags, mode);
+}
+
+typedef FILE *(*fopen_fn)(const char *, const char *);
+
+static FILE *forward_fopen(const char *name, const char *path, const char *mode)
+{
+    fopen_fn real;
+    if (refuse(path)) {
+        errno = EIO;
+        return NULL;
+    }
+    real = (fopen_fn)dlsym(RTLD_NEXT, name);
+    if (real == NULL) {
+        errno = ENOSYS;
+        return NULL;
+    }
+    return real(path, mode);
+}
+
+FILE *fopen(const char *path, const char *mode)
+{
+    return forward_fopen("fopen", path, mode);
+}
+
+FILE *fopen64(const char *path, const char *mode)
+{
+    return forward_fopen("fopen64", path, mode);
 }
