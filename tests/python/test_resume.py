@@ -261,11 +261,14 @@ def test_sigkill_at_random_instants_then_rerun(big, tmp_path):
     # Every stage must have been hit; retry a missed one on a fresh job.  A
     # stage with (nearly) no time of its own in the uninterrupted run cannot
     # be aimed at: the seam merge, for one, finishes beside the tile stage
-    # (each row as soon as its tiles are written), leaving 0-4 ms after it,
-    # so the kills in the tile stage are the ones that stop it.
+    # (each row as soon as its tiles are written), leaving 0-15 ms after it,
+    # so the kills in the tile stage are the ones that stop it.  A kill aimed
+    # by the uninterrupted run's clock lands tens of ms off in a rerun (its
+    # start-up and stages vary by that much), so only stages of 50 ms and
+    # more are required.
     spans = ru.durations(big.timeline, big.time)
     must_hit = [s for s in MUST_HIT if s == "after write" or s not in spans or
-                spans[s][1] >= 0.010]
+                spans[s][1] >= 0.050]
     log.append(f"stages without time of their own (not required): "
                f"{[s for s in MUST_HIT if s not in must_hit]}")
     for stage in must_hit:
