@@ -728,15 +728,10 @@ gdt_status gdt_ply_part_faces(gdt_ply_part *p, uint64_t first, const int32_t *tr
 
 gdt_status gdt_ply_part_close(gdt_ply_part *p, gdt_error *err)
 {
-    gdt_status st = GDT_OK;
+    gdt_status st;
     if (p == NULL)
         return GDT_OK;
-    if (fsync(p->fd) != 0)
-        st = gdt_error_set(err, GDT_EIO, 4722, "%s: fsync of a part failed: %s", p->path,
-                           strerror(errno));
-    if (close(p->fd) != 0 && st == GDT_OK)
-        st = gdt_error_set(err, GDT_EIO, 4722, "%s: close of a part failed: %s", p->path,
-                           strerror(errno));
+    st = gdt_fd_sync_close_part(p->fd, p->path, err);
     p->fd = -1;
     gdt_ply_part_abort(p);
     return st;

@@ -2,6 +2,7 @@
 #include "fd_io.h"
 
 #include <errno.h>
+#include <string.h>
 #include <sys/types.h>
 #include <unistd.h>
 
@@ -41,4 +42,16 @@ int gdt_fd_pread_all(int fd, void *p, size_t n, uint64_t off, size_t *got)
         *got += (size_t)k;
     }
     return 0;
+}
+
+gdt_status gdt_fd_sync_close_part(int fd, const char *path, gdt_error *err)
+{
+    gdt_status st = GDT_OK;
+    if (fsync(fd) != 0)
+        st = gdt_error_set(err, GDT_EIO, 4722, "%s: fsync of a part failed: %s", path,
+                           strerror(errno));
+    if (close(fd) != 0 && st == GDT_OK)
+        st = gdt_error_set(err, GDT_EIO, 4722, "%s: close of a part failed: %s", path,
+                           strerror(errno));
+    return st;
 }
