@@ -25,12 +25,14 @@
 
 #include "gdt_outfile.h"
 #include "private/dem_gdal.h"
+#include "private/plugin.h"
 
 #define BLOCK_CELLS ((size_t)GDT_DEM_BLOCK * GDT_DEM_BLOCK)
 #define BLOCK_BYTES (BLOCK_CELLS * sizeof(uint32_t))
 #define DEFAULT_BUDGET ((uint64_t)256 << 20)
 
 struct gdt_dem {
+    const gdt_dem_gdal_fns *gdal; /* the GDAL plug-in's entry points */
     gdt_dem_geo geo;
     char *path, *tmp_path, *scratch_dir, *preview, *preview_tmp, *wkt, *tiles_path;
     double nodata;
@@ -38,19 +40,19 @@ struct gdt_dem {
     uint64_t mem_budget;
     int64_t bcols, brows, nblocks;
     size_t nslots, used;
-    uint32_t *cells;       /* nslots * BLOCK_CELLS */
-    int64_t *slot_block;   /* block in each slot, -1 free */
-    uint64_t *slot_tick;   /* last use (LRU) */
-    int64_t *hkey;         /* hash map block -> slot, open addressing; -1 empty */
+    uint32_t *cells;     /* nslots * BLOCK_CELLS */
+    int64_t *slot_block; /* block in each slot, -1 free */
+    uint64_t *slot_tick; /* last use (LRU) */
+    int64_t *hkey;       /* hash map block -> slot, open addressing; -1 empty */
     size_t *hval;
     size_t hmask;
-    uint8_t *spilled;      /* bitmap of blocks in the scratch file */
-    int fd;                /* scratch file, -1 until the first spill */
+    uint8_t *spilled; /* bitmap of blocks in the scratch file */
+    int fd;           /* scratch file, -1 until the first spill */
     uint64_t tick;
-    int64_t last_block;    /* the slot of the last block used, a fast path */
+    int64_t last_block; /* the slot of the last block used, a fast path */
     size_t last_slot;
-    int cells_aligned;     /* cells is page-aligned memory of its own (posix_memalign) */
-    uint32_t *xfer;        /* one block read back during gdt_dem_build */
+    int cells_aligned; /* cells is page-aligned memory of its own (posix_memalign) */
+    uint32_t *xfer;    /* one block read back during gdt_dem_build */
     gdt_dem_stats stats;
     int built;             /* gdt_dem_build succeeded: the temporaries are complete */
     gdt_status preview_st; /* the preview's failure in gdt_dem_build, told by the commit */
@@ -132,9 +134,9 @@ static gdt_status open_scratch(gdt_dem *w, gdt_error *err)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     w->fd = mkstemp(tmpl);
     if (w->fd < 0) {
-        gdt_status st = gdt_error_set(err, GDT_EIO, 4650,
-                                      "%s: cannot create a scratch file in %s: %s", w->path,
-                                      w->scratch_dir, strerror(errno));
+        gdt_status st =
+            gdt_error_set(err, GDT_EIO, 4650, "%s: cannot create a scratch file in %s: %s", w->path,
+                          w->scratch_dir, strerror(errno));
         free(tmpl);
         return st;
     }
@@ -148,16 +150,17 @@ static gdt_status scratch_io(gdt_dem *w, int writing, int64_t b, uint32_t *buf, 
     off_t off = (off_t)b * (off_t)BLOCK_BYTES;
     size_t done = 0;
     while (done < BLOCK_BYTES) {
-        ssize_t n = writing ? pwrite(w->fd, (const char *)buf + done, BLOCK_BYTES - done,
-                                     off + (off_t)done)
-                            : pread(w->fd, (char *)buf + done, BLOCK_BYTES - done,
-                                    off + (off_t)done);
+        ssize_t n =
+            writing ? pwrite(w->fd, (const char *)buf + done, BLOCK_BYTES - done, off + (off_t)done)
+                    : pread(w->fd, (char *)buf + done, BLOCK_BYTES - done, off + (off_t)done);
         if (n < 0 && errno == EINTR)
             continue;
         if (n <= 0)
-            return gdt_error_set(err, GDT_EIO, 4651, "%s: %s of the DEM scratch file in %s "
-                                 "failed: %s", w->path, writing ? "write" : "read",
-                                 w->scratch_dir, n < 0 ? strerror(errno) : "unexpected end");
+            return gdt_error_set(err, GDT_EIO, 4651,
+                                 "%s: %s of the DEM scratch file in %s "
+                                 "failed: %s",
+                                 w->path, writing ? "write" : "read", w->scratch_dir,
+                                 n < 0 ? strerror(errno) : "unexpected end");
         done += (size_t)n;
     }
     return GDT_OK;
@@ -183,23 +186,44 @@ static uint32_t *cells_alloc(size_t bytes, int *aligned)
     return p;
 }
 
+void gdt_dem_preload(void)
+{
+    void *sym;
+    gdt_error e;
+    gdt_error_clear(&e);
+    (void)gdt_plugin_symbol(GDT_DEM_GDAL_MODULE, GDT_DEM_GDAL_SYMBOL, "the DEM writer (GDAL)", &sym,
+                            &e);
+}
+
 gdt_status gdt_dem_create(gdt_dem **out, const gdt_dem_geo *geo, const char *path,
                           const gdt_dem_opts *opts, gdt_error *err)
 {
     gdt_dem *w;
+    const gdt_dem_gdal_fns *gdal;
     uint64_t budget = opts->mem_budget != 0 ? opts->mem_budget : DEFAULT_BUDGET;
     size_t hcap = 4;
 
     *out = NULL;
+    {
+        /* the plug-in first: a run that cannot write its DEM fails before
+         * any work */
+        void *sym;
+        gdt_status st = gdt_plugin_symbol(GDT_DEM_GDAL_MODULE, GDT_DEM_GDAL_SYMBOL,
+                                          "the DEM writer (GDAL)", &sym, err);
+        if (st != GDT_OK)
+            return st;
+        gdal = sym;
+    }
     if (!(geo->ncols >= 1 && geo->nrows >= 1 && geo->ncols <= GDT_DEM_MAX_SIDE &&
           geo->nrows <= GDT_DEM_MAX_SIDE &&
           (double)geo->ncols * (double)geo->nrows <= (double)GDT_DEM_MAX_CELLS &&
-          geo->res_x > 0.0 && geo->res_y > 0.0 && isfinite(geo->west) &&
-          isfinite(geo->north) && isfinite(geo->res_x) && isfinite(geo->res_y)))
+          geo->res_x > 0.0 && geo->res_y > 0.0 && isfinite(geo->west) && isfinite(geo->north) &&
+          isfinite(geo->res_x) && isfinite(geo->res_y)))
         return gdt_error_set(err, GDT_EUSAGE, 2611,
                              "%s: a DEM of %lld x %lld cells of %g x %g at (%g, %g) cannot be "
-                             "written", path, (long long)geo->ncols, (long long)geo->nrows,
-                             geo->res_x, geo->res_y, geo->west, geo->north);
+                             "written",
+                             path, (long long)geo->ncols, (long long)geo->nrows, geo->res_x,
+                             geo->res_y, geo->west, geo->north);
     if (!isfinite(opts->nodata) || fabs(opts->nodata) > FLT_MAX ||
         (double)(float)opts->nodata != opts->nodata)
         return gdt_error_set(err, GDT_EUSAGE, 2611,
@@ -208,6 +232,7 @@ gdt_status gdt_dem_create(gdt_dem **out, const gdt_dem_geo *geo, const char *pat
     w = calloc(1, sizeof *w);
     if (w == NULL)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    w->gdal = gdal;
     w->fd = -1;
     w->last_block = -1;
     w->geo = *geo;
@@ -245,8 +270,10 @@ gdt_status gdt_dem_create(gdt_dem **out, const gdt_dem_geo *geo, const char *pat
         w->cells == NULL || w->slot_block == NULL || w->slot_tick == NULL || w->hkey == NULL ||
         w->hval == NULL || w->spilled == NULL) {
         gdt_dem_abort(w);
-        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory (DEM block cache of "
-                             "%zu blocks)", w->nslots);
+        return gdt_error_set(err, GDT_EINTERNAL, 7001,
+                             "out of memory (DEM block cache of "
+                             "%zu blocks)",
+                             w->nslots);
     }
     for (size_t s = 0; s < w->nslots; s++)
         w->slot_block[s] = -1;
@@ -321,8 +348,8 @@ gdt_status gdt_dem_put(gdt_dem *w, int64_t row, int64_t col, int64_t n, const fl
         return GDT_OK;
     if (row < 0 || row >= w->geo.nrows || col < 0 || n > w->geo.ncols - col)
         return gdt_error_set(err, GDT_EINTERNAL, 7661,
-                             "%s: cells (%lld, %lld..%lld) outside the DEM of %lld x %lld",
-                             w->path, (long long)row, (long long)col, (long long)(col + n - 1),
+                             "%s: cells (%lld, %lld..%lld) outside the DEM of %lld x %lld", w->path,
+                             (long long)row, (long long)col, (long long)(col + n - 1),
                              (long long)w->geo.nrows, (long long)w->geo.ncols);
     while (n > 0) {
         int64_t b = (row / GDT_DEM_BLOCK) * w->bcols + col / GDT_DEM_BLOCK;
@@ -332,8 +359,8 @@ gdt_status gdt_dem_put(gdt_dem *w, int64_t row, int64_t col, int64_t n, const fl
         gdt_status st = slot_of(w, b, &s, err);
         if (st != GDT_OK)
             return st;
-        cell = w->cells + s * BLOCK_CELLS + (size_t)(row % GDT_DEM_BLOCK) * GDT_DEM_BLOCK +
-               (size_t)in;
+        cell =
+            w->cells + s * BLOCK_CELLS + (size_t)(row % GDT_DEM_BLOCK) * GDT_DEM_BLOCK + (size_t)in;
         for (int64_t k = 0; k < m; k++) {
             uint32_t bits;
             memcpy(&bits, &z[k], sizeof bits);
@@ -475,16 +502,15 @@ gdt_status gdt_dem_build(gdt_dem *w, gdt_dem_stats *stats, gdt_error *err)
     void *mem_ds = NULL;
 
     if (w->cells == NULL || w->built)
-        return gdt_error_set(err, GDT_EINTERNAL, 7664, "%s: the DEM was built (or failed to build) already",
-                             w->path);
+        return gdt_error_set(err, GDT_EINTERNAL, 7664,
+                             "%s: the DEM was built (or failed to build) already", w->path);
     w->xfer = malloc(BLOCK_BYTES);
     if (w->xfer == NULL) {
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         goto done;
     }
     if (!in_memory) {
-        w->tiles_path = with_suffix(w->scratch_dir, "/gdt-dem-tiles-%ld-XXXXXX",
-                                    (long)getpid());
+        w->tiles_path = with_suffix(w->scratch_dir, "/gdt-dem-tiles-%ld-XXXXXX", (long)getpid());
         if (w->tiles_path == NULL) {
             st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
             goto done;
@@ -499,20 +525,20 @@ gdt_status gdt_dem_build(gdt_dem *w, gdt_dem_stats *stats, gdt_error *err)
         }
         close(fd);
     }
-    st = gdt_dem_gdal_tiles(&w->geo, w->nodata, w->epsg, w->wkt, w->tiles_path, gdal_cache,
-                            next_block, w, &mem_ds, err);
+    st = w->gdal->tiles(&w->geo, w->nodata, w->epsg, w->wkt, w->tiles_path, gdal_cache, next_block,
+                        w, &mem_ds, err);
     free_cache(w);
     if (st == GDT_OK)
-        st = gdt_dem_gdal_cog(w->tiles_path, mem_ds, w->tmp_path, w->path, gdal_cache, err);
+        st = w->gdal->cog(w->tiles_path, mem_ds, w->tmp_path, w->path, gdal_cache, err);
     else
-        gdt_dem_gdal_discard(mem_ds);
+        w->gdal->discard(mem_ds);
     remove_tiles(w);
     /* the preview from the complete temporary; its failure alone is told by
      * the commit, after the DEM is in place */
     if (st == GDT_OK && w->preview != NULL) {
         gdt_error_clear(&w->preview_err);
-        w->preview_st = gdt_dem_gdal_preview(w->tmp_path, w->preview_tmp, w->preview,
-                                             gdal_cache, &w->preview_err);
+        w->preview_st =
+            w->gdal->preview(w->tmp_path, w->preview_tmp, w->preview, gdal_cache, &w->preview_err);
     }
     w->built = st == GDT_OK;
 done:
@@ -523,10 +549,10 @@ done:
 
 gdt_status gdt_dem_commit(gdt_dem *w, gdt_error *err)
 {
-    gdt_status st = w->built ? GDT_OK
-                             : gdt_error_set(err, GDT_EINTERNAL, 7664,
-                                             "%s: the DEM is committed before it is built",
-                                             w->path);
+    gdt_status st = w->built
+                        ? GDT_OK
+                        : gdt_error_set(err, GDT_EINTERNAL, 7664,
+                                        "%s: the DEM is committed before it is built", w->path);
     if (st == GDT_OK)
         st = publish(w->tmp_path, w->path, err);
     if (st == GDT_OK && w->preview != NULL) {

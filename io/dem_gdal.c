@@ -126,8 +126,8 @@ typedef struct ovr_work {
 
 /* Writes the part of every overview level that block (bx, by) gives: buf
  * holds its w x h cells (stride GDT_DEM_BLOCK), nodata where nd_bits. */
-static gdt_status block_overviews(GDALRasterBandH band, int levels, const float *buf, int w,
-                                  int h, int64_t bx, int64_t by, uint32_t nd_bits, float nd,
+static gdt_status block_overviews(GDALRasterBandH band, int levels, const float *buf, int w, int h,
+                                  int64_t bx, int64_t by, uint32_t nd_bits, float nd,
                                   const gdt_dem_geo *geo, ovr_work *o, const char *path,
                                   gdt_error *err)
 {
@@ -205,8 +205,7 @@ gdt_status gdt_dem_gdal_tiles(const gdt_dem_geo *geo, double nodata, int epsg, c
         srs = OSRNewSpatialReference(NULL);
         char *wp = (char *)wkt; /* OSRImportFromWkt reads it, never writes */
         if (srs == NULL ||
-            (epsg > 0 ? OSRImportFromEPSG(srs, epsg) : OSRImportFromWkt(srs, &wp)) !=
-                OGRERR_NONE) {
+            (epsg > 0 ? OSRImportFromEPSG(srs, epsg) : OSRImportFromWkt(srs, &wp)) != OGRERR_NONE) {
             const char *m = CPLGetLastErrorMsg();
             if (epsg > 0)
                 st = gdt_error_set(err, GDT_EINPUT, 3650,
@@ -274,8 +273,8 @@ gdt_status gdt_dem_gdal_tiles(const gdt_dem_geo *geo, double nodata, int epsg, c
             ow.count[q] = malloc(half * sizeof *ow.count[q]);
         }
         ow.out = malloc(half * sizeof *ow.out);
-        if (ow.sum[0] == NULL || ow.sum[1] == NULL || ow.count[0] == NULL ||
-            ow.count[1] == NULL || ow.out == NULL) {
+        if (ow.sum[0] == NULL || ow.sum[1] == NULL || ow.count[0] == NULL || ow.count[1] == NULL ||
+            ow.out == NULL) {
             st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
             goto done;
         }
@@ -315,8 +314,8 @@ gdt_status gdt_dem_gdal_tiles(const gdt_dem_geo *geo, double nodata, int epsg, c
                              (int)(GDT_DEM_BLOCK * sizeof *buf)) != CE_None)
                 st = gdal_fail(err, name, "write a block of the intermediate raster");
             else if (levels > 0 && !empty)
-                st = block_overviews(band, levels, buf, w, h, bx, by, nd_bits, ndf, geo, &ow,
-                                     name, err);
+                st = block_overviews(band, levels, buf, w, h, bx, by, nd_bits, ndf, geo, &ow, name,
+                                     err);
         }
 done:
     if (ds != NULL && in_memory && st == GDT_OK && mem_ds != NULL) {
@@ -381,9 +380,8 @@ gdt_status gdt_dem_gdal_cog(const char *tiles_path, void *mem_ds, const char *tm
     /* the intermediate file's own overviews when it has them (see
      * own_levels), else GDAL's averaging */
     co = CSLSetNameValue(co, "OVERVIEWS",
-                         GDALGetOverviewCount(GDALGetRasterBand(src, 1)) > 0
-                             ? "FORCE_USE_EXISTING"
-                             : "IGNORE_EXISTING");
+                         GDALGetOverviewCount(GDALGetRasterBand(src, 1)) > 0 ? "FORCE_USE_EXISTING"
+                                                                             : "IGNORE_EXISTING");
     /* the blocks are compressed on worker threads but written in block
      * order: the bytes do not depend on the thread count (tested) */
     co = CSLSetNameValue(co, "NUM_THREADS", "ALL_CPUS");
@@ -432,8 +430,10 @@ gdt_status gdt_dem_gdal_preview(const char *dem_path, const char *tmp_path, cons
          * rounded, at least 1 */
         w = (nc * GDT_DEM_PREVIEW_MAX + longest / 2) / longest;
         h = (nr * GDT_DEM_PREVIEW_MAX + longest / 2) / longest;
-        if (w < 1) w = 1;
-        if (h < 1) h = 1;
+        if (w < 1)
+            w = 1;
+        if (h < 1)
+            h = 1;
     }
     snprintf(ws, sizeof ws, "%lld", (long long)w);
     snprintf(hs, sizeof hs, "%lld", (long long)h);
@@ -497,3 +497,7 @@ done:
     scope_leave(&scope);
     return st;
 }
+
+__attribute__((visibility("default"))) extern const gdt_dem_gdal_fns gdt_dem_gdal_api;
+const gdt_dem_gdal_fns gdt_dem_gdal_api = {gdt_dem_gdal_tiles, gdt_dem_gdal_cog,
+                                           gdt_dem_gdal_discard, gdt_dem_gdal_preview};

@@ -91,8 +91,14 @@ typedef struct gdt_dem_stats {
 
 typedef struct gdt_dem gdt_dem;
 
+/* Loads the GDAL plug-in (private/dem_gdal.h) ahead of gdt_dem_create, so
+ * that a run can overlap its loading with other work; failures are left
+ * for gdt_dem_create to report.  Thread-safe. */
+void gdt_dem_preload(void);
+
 /* Starts a DEM at path.  Strings are copied.
  * returns: GDT_OK; GDT_EUSAGE 2611 (a geo or option out of range);
+ *   GDT_EINTERNAL 7004 (the GDAL plug-in cannot be loaded);
  *   GDT_EIO 4650 (scratch file); GDT_EINTERNAL 7001.
  * Ownership: *out is owned by the caller, released by gdt_dem_finish,
  * gdt_dem_commit or gdt_dem_abort (exactly one of them). */

@@ -10,6 +10,7 @@ function(gdt_pcd_pcl_tool name)
 endfunction()
 
 gdt_pcd_pcl_tool(pcd_write_pcl ${CMAKE_CURRENT_SOURCE_DIR}/tools/pcd_write_pcl.cpp)
-gdt_pcd_pcl_tool(pcd_dump_pcl ${CMAKE_CURRENT_SOURCE_DIR}/tools/pcd_dump_pcl.cpp)
+gdt_pcd_pcl_tool(pcd_dump_pcl ${CMAKE_CURRENT_SOURCE_DIR}/tools/pcd_dump_pcl.cpp
+                 ${CMAKE_CURRENT_SOURCE_DIR}/tools/pcd_pcl.cpp)
 gdt_pcd_pcl_tool(pcd_lzf_check ${CMAKE_CURRENT_SOURCE_DIR}/tools/pcd_lzf_check.cpp)
 add_test(NAME pcd_lzf COMMAND pcd_lzf_check 300)

@@ -1,6 +1,9 @@
 // ground_pmf.cpp — the ground filter of gdt_ground.h on PCL's approximate
-// progressive morphological filter.
+// progressive morphological filter, which runs in the module of
+// private/ground_pcl.h, loaded on the first call.
 #include "gdt_ground.h"
+#include "private/ground_pcl.h"
+#include "private/plugin.h"
 
 #include <cinttypes>
 #include <cmath>
@@ -10,10 +13,6 @@
 #include <limits>
 #include <new>
 #include <vector>
-
-#include <pcl/point_cloud.h>
-#include <pcl/point_types.h>
-#include <pcl/segmentation/approximate_progressive_morphological_filter.h>
 
 // A cell index of PCL's grid must be exact in float with its 1/2 added.
 static const int64_t MAX_CELLS_SIDE = (int64_t)1 << 22;
@@ -44,9 +43,11 @@ extern "C" gdt_status gdt_pmf_check(const gdt_pmf_params *p, gdt_error *err)
         double v;
         int positive;
     } const v[] = {
-        {"--pmf-max-window", p->max_window, 1}, {"--pmf-slope", p->slope, 0},
+        {"--pmf-max-window", p->max_window, 1},
+        {"--pmf-slope", p->slope, 0},
         {"--pmf-initial-distance", p->initial_distance, 0},
-        {"--pmf-max-distance", p->max_distance, 0}, {"--pmf-cell", p->cell, 1},
+        {"--pmf-max-distance", p->max_distance, 0},
+        {"--pmf-cell", p->cell, 1},
     };
     for (const auto &e : v) {
         if (!std::isfinite(e.v) || e.v < 0.0 || (e.positive && e.v == 0.0))
@@ -103,10 +104,11 @@ extern "C" gdt_status gdt_pmf_init(gdt_pmf *f, const gdt_pmf_params *p, const gd
     double ry = std::ceil((double)(f->reach_cells + 1) / f->fy) + 1.0;
     double r = rx > ry ? rx : ry;
     if (!(r <= (double)((int64_t)1 << 40)))
-        return gdt_error_set(err, GDT_EUSAGE, 2701,
-                             "--pmf-max-window %g with --pmf-cell %g: the filter reaches %g lattice "
-                             "steps, beyond 2^40",
-                             p->max_window, p->cell, r);
+        return gdt_error_set(
+            err, GDT_EUSAGE, 2701,
+            "--pmf-max-window %g with --pmf-cell %g: the filter reaches %g lattice "
+            "steps, beyond 2^40",
+            p->max_window, p->cell, r);
     f->reach = (int64_t)r;
     return GDT_OK;
 }
@@ -159,60 +161,68 @@ extern "C" gdt_status gdt_pmf_classify(const gdt_pmf *f, const gdt_point *pts0, 
                              cols, rows);
     // PCL's three float grids, our cloud for it, its copy per round and the
     // index lists
-    const double bytes = GDT_PMF_BYTES_PER_CELL * (double)cols * (double)rows +
-                         GDT_PMF_BYTES_PER_POINT * (double)n;
+    const double bytes =
+        GDT_PMF_BYTES_PER_CELL * (double)cols * (double)rows + GDT_PMF_BYTES_PER_POINT * (double)n;
     if (max_bytes > 0 && bytes > (double)max_bytes)
         return gdt_error_set(err, GDT_EUSAGE, 2702,
                              "the ground filter needs %.0f MiB for %zu points on %" PRId64
                              " x %" PRId64 " cells, more than its budget of %.0f MiB: use a "
                              "larger --pmf-cell, a smaller --tile or a larger --mem-budget",
                              bytes / 1048576.0, n, cols, rows, (double)max_bytes / 1048576.0);
-    try {
-        pcl::PointCloud<pcl::PointXYZ>::Ptr pc(new pcl::PointCloud<pcl::PointXYZ>);
-        pc->resize(n + 2);
-        for (size_t i = 0; i < n; i++) {
-            pcl::PointXYZ &q = (*pc)[i];
-            q.x = (float)(gdt_pmf_cell_x(f, at(i).x) - cx0) + 0.5f;
-            q.y = (float)(gdt_pmf_cell_y(f, at(i).y) - cy0) + 0.5f;
-            q.z = (float)(at(i).z - f->z0);
+    gdt_ground_pcl_fn run = nullptr;
+    {
+        void *sym = nullptr;
+        gdt_status st = gdt_plugin_symbol(GDT_GROUND_PCL_MODULE, GDT_GROUND_PCL_SYMBOL,
+                                          "the ground filter (PCL)", &sym, err);
+        if (st != GDT_OK)
+            return st;
+        std::memcpy(&run, &sym, sizeof run);
+    }
+    // PCL's cloud: the points, then the two corners of the window, z NaN:
+    // PCL's box (is_dense, so not skipped there) covers the window; a NaN z
+    // never replaces a cell's lowest z (it neither compares below one nor
+    // fills a cell that a point fills later), and is never below a threshold
+    struct fill_ctx {
+        const gdt_pmf *f;
+        const gdt_point *pts0, *more;
+        size_t n0, n;
+        int64_t cx0, cy0, wx0, wy0, wx1, wy1;
+    } fc = {f, pts0, more, n0, n, cx0, cy0, wx0, wy0, wx1, wy1};
+    auto fill = [](void *ctx, float *xyz, size_t stride) {
+        const fill_ctx &c = *static_cast<const fill_ctx *>(ctx);
+        for (size_t i = 0; i < c.n; i++, xyz += stride) {
+            const gdt_point &p = i < c.n0 ? c.pts0[i] : c.more[i - c.n0];
+            xyz[0] = (float)(gdt_pmf_cell_x(c.f, p.x) - c.cx0) + 0.5f;
+            xyz[1] = (float)(gdt_pmf_cell_y(c.f, p.y) - c.cy0) + 0.5f;
+            xyz[2] = (float)(p.z - c.f->z0);
         }
-        // the two corners of the window, z NaN: PCL's box (is_dense, so not
-        // skipped there) covers the window; a NaN z never replaces a
-        // cell's lowest z (it neither compares below one nor fills a cell
-        // that a point fills later), and is never below a threshold
-        (*pc)[n].x = (float)(wx0 - cx0) + 0.5f;
-        (*pc)[n].y = (float)(wy0 - cy0) + 0.5f;
-        (*pc)[n].z = std::numeric_limits<float>::quiet_NaN();
-        (*pc)[n + 1].x = (float)(wx1 - cx0) + 0.5f;
-        (*pc)[n + 1].y = (float)(wy1 - cy0) + 0.5f;
-        (*pc)[n + 1].z = std::numeric_limits<float>::quiet_NaN();
-        pc->is_dense = true;
-        pcl::ApproximateProgressiveMorphologicalFilter<pcl::PointXYZ> pmf;
-        pmf.setInputCloud(pc);
-        pmf.setMaxWindowSize(f->max_window_cells);
-        pmf.setSlope(f->pcl_slope);
-        pmf.setInitialDistance((float)f->p.initial_distance);
-        pmf.setMaxDistance((float)f->p.max_distance);
-        pmf.setCellSize(1.0f);
-        pmf.setBase(2.0f);
-        pmf.setExponential(f->p.exponential != 0);
-        pmf.setNumberOfThreads(1);
-        pcl::Indices idx;
-        pmf.extract(idx);
-        for (auto i : idx) {
-            if (i < 0 || (size_t)i >= n + 2)
-                return gdt_error_set(err, GDT_EINTERNAL, 7701,
-                                     "PCL's ground filter returned index %d of %zu points",
-                                     (int)i, n);
-            if ((size_t)i < n)
-                ground[i] = 1;
-        }
-    } catch (const std::bad_alloc &) {
+        xyz[0] = (float)(c.wx0 - c.cx0) + 0.5f;
+        xyz[1] = (float)(c.wy0 - c.cy0) + 0.5f;
+        xyz[2] = std::numeric_limits<float>::quiet_NaN();
+        xyz += stride;
+        xyz[0] = (float)(c.wx1 - c.cx0) + 0.5f;
+        xyz[1] = (float)(c.wy1 - c.cy0) + 0.5f;
+        xyz[2] = std::numeric_limits<float>::quiet_NaN();
+    };
+    gdt_ground_pcl_job job;
+    std::memset(&job, 0, sizeof job);
+    job.n = n + 2;
+    job.fill = fill;
+    job.fill_ctx = &fc;
+    job.ground = ground;
+    job.nflag = n;
+    job.max_window_cells = f->max_window_cells;
+    job.exponential = f->p.exponential != 0;
+    job.slope = f->pcl_slope;
+    job.initial_distance = (float)f->p.initial_distance;
+    job.max_distance = (float)f->p.max_distance;
+    char msg[256] = "";
+    switch (run(&job, msg, sizeof msg)) {
+    case GDT_GROUND_PCL_OK: break;
+    case GDT_GROUND_PCL_NOMEM:
         return gdt_error_set(err, GDT_EINTERNAL, 7001,
                              "out of memory in the ground filter (%zu points)", n);
-    } catch (const std::exception &e) {
-        return gdt_error_set(err, GDT_EINTERNAL, 7701, "PCL's ground filter failed: %s",
-                             e.what());
+    default: return gdt_error_set(err, GDT_EINTERNAL, 7701, "%s", msg);
     }
     return GDT_OK;
 }

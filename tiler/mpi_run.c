@@ -356,6 +356,7 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
         if (c->s.ranks == NULL)
             st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     }
+    c->cstart.preload_dem = c->opts->dem != NULL; /* rank 0 writes the DEM */
     if (st == GDT_OK)
         st = tr_run_start_core(c, err);
     if (st == GDT_OK)

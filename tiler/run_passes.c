@@ -13,6 +13,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "gdt_dem.h"
 #include "gdt_ocl.h"
 #include "private/cli_modes.h"
 #include "private/comm.h"
@@ -76,13 +77,12 @@ static gdt_status adopt_ground_bits(tr_run *c, gdt_status *ad, gdt_error *e2, gd
     if (st != GDT_OK)
         return st;
     gdt_error_clear(&e3);
-    if (rec == NULL ||
-        sscanf(rec, "%" SCNu64 " %" SCNu64, &want_size, &want_sum) != 2)
+    if (rec == NULL || sscanf(rec, "%" SCNu64 " %" SCNu64, &want_size, &want_sum) != 2)
         *ad = gdt_error_set(e2, GDT_EJOB, 6501,
                             "the job records no ground classes of the input points "
                             "(--ground-out)");
-    else if (tl_file_sum(c->ground_bits, gdt_job_file_seed(c->job_id, 0, GDT_JOB_FILE_BITS),
-                         &size, &sum, &e3) != GDT_OK ||
+    else if (tl_file_sum(c->ground_bits, gdt_job_file_seed(c->job_id, 0, GDT_JOB_FILE_BITS), &size,
+                         &sum, &e3) != GDT_OK ||
              size != want_size || sum != want_sum)
         *ad = gdt_error_set(e2, GDT_EJOB, 6501, "%s: missing or damaged", c->ground_bits);
     else {
@@ -110,20 +110,19 @@ static gdt_status adopt_pass2(tr_run *c, int *ok, gdt_error *err)
     /* fs[2k] .pts and fs[2k + 1] .edge of tile k */
     for (uint64_t i = 0; st == GDT_OK && ad == GDT_OK && i < 2 * ntiles; i++) {
         int found = 0;
-        st = gdt_job_get_file(c->jobdb, i / 2, i % 2 ? GDT_JOB_FILE_EDGE : GDT_JOB_FILE_PTS,
-                              &found, &fs[i].size, &fs[i].sum, err);
+        st = gdt_job_get_file(c->jobdb, i / 2, i % 2 ? GDT_JOB_FILE_EDGE : GDT_JOB_FILE_PTS, &found,
+                              &fs[i].size, &fs[i].sum, err);
         if (st == GDT_OK && !found)
-            ad = gdt_error_set(&e2, GDT_EJOB, 6501,
-                               "the job records no %s file of tile %" PRIu64,
+            ad = gdt_error_set(&e2, GDT_EJOB, 6501, "the job records no %s file of tile %" PRIu64,
                                i % 2 ? ".edge" : ".pts", i / 2);
     }
     /* the ground filter's records first: the tiler's adoption is final */
     if (st == GDT_OK && ad == GDT_OK && c->opts->ground) {
         char *counts = NULL;
         st = gdt_job_get_meta(c->jobdb, "ground_counts", &counts, err);
-        if (st == GDT_OK && (counts == NULL ||
-                             sscanf(counts, "%" SCNu64 " %" SCNu64, &c->s.ground_points,
-                                    &c->s.nonground_points) != 2))
+        if (st == GDT_OK &&
+            (counts == NULL || sscanf(counts, "%" SCNu64 " %" SCNu64, &c->s.ground_points,
+                                      &c->s.nonground_points) != 2))
             ad = gdt_error_set(&e2, GDT_EJOB, 6501, "the job records no ground counts");
         free(counts);
         if (st == GDT_OK && ad == GDT_OK && c->opts->ground_out != NULL)
@@ -164,6 +163,10 @@ static void *core_start_main(void *arg)
      * whoever set it up (a sanitizer's runtime) releases at thread exit. */
     if (have)
         sigaltstack(&ss, NULL);
+    /* GDAL's hundred libraries load here too, beside pass 1, not on the
+     * way of the tile stage */
+    if (cs->preload_dem)
+        gdt_dem_preload();
     return NULL;
 }
 
@@ -242,8 +245,8 @@ gdt_status tr_run_start_core(tr_run *c, gdt_error *err)
     /* the environment first: a look at the devices starts OpenCL */
     gdt_ocl_prepare_env(c->cstart.opts.cache_dir, c->cstart.opts.log);
     if (gdt_ocl_spec_is_list(c->opts->device)) {
-        gdt_status st = gdt_ocl_device_list(c->opts->device, &c->cstart.specs,
-                                            &c->cstart.nspecs, err);
+        gdt_status st =
+            gdt_ocl_device_list(c->opts->device, &c->cstart.specs, &c->cstart.nspecs, err);
         if (st != GDT_OK)
             return st;
         c->cstart.opts.device = c->cstart.specs[0];
@@ -300,8 +303,7 @@ static void tiler_opts(tr_run *c, const gdt_cloud *cloud, gdt_tiler_opts *to)
         gdt_pmf f;
         gdt_error e;
         gdt_error_clear(&e);
-        if (gdt_pmf_init(&f, &opts->pmf, &gdt_cloud_get_info(cloud)->lattice, 0.0, &e) ==
-            GDT_OK)
+        if (gdt_pmf_init(&f, &opts->pmf, &gdt_cloud_get_info(cloud)->lattice, 0.0, &e) == GDT_OK)
             to->edge_min = f.reach;
         to->subsets = 1;
         /* --ground-out: the pass-2 records (duplicates too) stay for the
@@ -408,10 +410,9 @@ gdt_status tr_run_pass1(tr_run *c, gdt_error *err)
     c->s.t_pass1 = gdt_tiler_get_stats(c->tiler)->t_pass1;
     /* the seam merge's frame is the lattice minus the plan's minimum: a
      * wider cloud is refused before the tile stage, not at its end */
-    if (c->plan->points > 0 &&
-        (st = gdt_cloud_check_span(c->cloud, c->plan->max_x - c->plan->min_x,
-                                   c->plan->max_y - c->plan->min_y, "the tiled run",
-                                   err)) != GDT_OK)
+    if (c->plan->points > 0 && (st = gdt_cloud_check_span(c->cloud, c->plan->max_x - c->plan->min_x,
+                                                          c->plan->max_y - c->plan->min_y,
+                                                          "the tiled run", err)) != GDT_OK)
         return st;
     /* a --dem-res the lattice refuses (or a raster too large) is refused
      * now, before pass 2; the grid itself is defined with the distinct
@@ -517,8 +518,7 @@ gdt_status tr_run_pass2(tr_run *c, gdt_error *err)
 }
 
 /* A new tiler from rank 0's state (the cloud opened first, headers only). */
-static gdt_status replace_tiler(tr_run *c, const unsigned char *state, size_t len,
-                                gdt_error *err)
+static gdt_status replace_tiler(tr_run *c, const unsigned char *state, size_t len, gdt_error *err)
 {
     const gdt_options *opts = c->opts;
     gdt_cloud_opts co;
@@ -541,8 +541,7 @@ static gdt_status replace_tiler(tr_run *c, const unsigned char *state, size_t le
     return st;
 }
 
-gdt_status tr_run_attach_ground(tr_run *c, const unsigned char *state, size_t len,
-                                gdt_error *err)
+gdt_status tr_run_attach_ground(tr_run *c, const unsigned char *state, size_t len, gdt_error *err)
 {
     gdt_status st = replace_tiler(c, state, len, err);
     if (st != GDT_OK)

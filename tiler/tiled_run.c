@@ -14,7 +14,7 @@ gdt_status gdt_cli_tiled(const gdt_options *opts, gdt_error *err)
     if (opts->comm != NULL && gdt_comm_size(opts->comm) > 1)
         return gdt_cli_tiled_mpi(opts, opts->comm, err);
     st = tr_run_init(&c, opts, err);
-
+    c.cstart.preload_dem = opts->dem != NULL; /* this process writes the DEM */
     if (st == GDT_OK)
         st = tr_run_start_core(&c, err);
     if (st == GDT_OK)

@@ -1,5 +1,9 @@
 /* dem_gdal.h — the GDAL side of the DEM writer (gdt_dem.h): the only code
- * of gdt-tile that calls GDAL.  Every entry point keeps GDAL's messages
+ * of gdt-tile that calls GDAL.  It is a plug-in (private/plugin.h):
+ * dem_gdal.c is built into libgdt-tile-gdal.so, which only runs that write
+ * a DEM load (GDAL and its hundred libraries cost every start about
+ * 0.1 s); dem.c reaches it through the table gdt_dem_gdal_api, the one
+ * symbol the module exports.  Every entry point keeps GDAL's messages
  * off stderr (a quiet error handler for the duration of the call) and
  * turns a GDAL failure into a gdt_error carrying GDAL's last message.
  * Thread-safe across threads as GDAL is; GDAL's block cache size is
@@ -15,8 +19,8 @@
 /* Fills buf (GDT_DEM_BLOCK x GDT_DEM_BLOCK float32, row-major, stride
  * GDT_DEM_BLOCK) with block (bx, by); *empty = 1 when every cell is
  * nodata (buf is then not used).  Each block is asked for once. */
-typedef gdt_status (*gdt_dem_block_fn)(void *ctx, int64_t bx, int64_t by, float *buf,
-                                       int *empty, gdt_error *err);
+typedef gdt_status (*gdt_dem_block_fn)(void *ctx, int64_t bx, int64_t by, float *buf, int *empty,
+                                       gdt_error *err);
 
 /* The intermediate raster the COG is copied from: the full resolution
  * (512 x 512 blocks) with its own overview levels (see dem_gdal.c),
@@ -53,5 +57,20 @@ void gdt_dem_gdal_discard(void *mem_ds);
  * returns: GDT_OK; GDT_EIO 4652, 4653. */
 gdt_status gdt_dem_gdal_preview(const char *dem_path, const char *tmp_path, const char *path,
                                 uint64_t gdal_cache, gdt_error *err);
+
+#define GDT_DEM_GDAL_MODULE "libgdt-tile-gdal.so"
+#define GDT_DEM_GDAL_SYMBOL "gdt_dem_gdal_api"
+
+/* The entry points above, as the module exports them. */
+typedef struct gdt_dem_gdal_fns {
+    gdt_status (*tiles)(const gdt_dem_geo *geo, double nodata, int epsg, const char *wkt,
+                        const char *tiles_path, uint64_t gdal_cache, gdt_dem_block_fn fn, void *ctx,
+                        void **mem_ds, gdt_error *err);
+    gdt_status (*cog)(const char *tiles_path, void *mem_ds, const char *tmp_path, const char *path,
+                      uint64_t gdal_cache, gdt_error *err);
+    void (*discard)(void *mem_ds);
+    gdt_status (*preview)(const char *dem_path, const char *tmp_path, const char *path,
+                          uint64_t gdal_cache, gdt_error *err);
+} gdt_dem_gdal_fns;
 
 #endif

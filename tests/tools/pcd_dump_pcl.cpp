@@ -11,7 +11,7 @@
 
 #include <pcl/console/print.h>
 
-#include "private/pcd_pcl.h"
+#include "pcd_pcl.h"
 
 namespace
 {

@@ -227,6 +227,8 @@ typedef struct tr_core_start {
     gdt_status st;
     pthread_t thread;
     int running;
+    int preload_dem; /* the process writes a DEM: the thread also loads the DEM
+                      * writer's plug-in (set before tr_run_start_core) */
 } tr_core_start;
 
 /* The context of one run.  Zeroed and filled by tr_run_init; released by

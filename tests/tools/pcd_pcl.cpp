@@ -1,5 +1,5 @@
-// Reference PCD reader through PCL; contract in private/pcd_pcl.h.
-#include "private/pcd_pcl.h"
+// Reference PCD reader through PCL; contract in pcd_pcl.h.
+#include "pcd_pcl.h"
 
 #include <cstring>
 #include <exception>
