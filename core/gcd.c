@@ -505,6 +505,11 @@ uint64_t gdt_core_device_peak(const gdt_core *core)
     return gdt_ocl_peak_bytes(core->ocl);
 }
 
+double gdt_core_device_busy(gdt_core *core)
+{
+    return gdt_ocl_busy_seconds(core->ocl);
+}
+
 void gdt_core_profile_dump(gdt_core *core, FILE *f)
 {
     gdt_ocl_profile_dump(core->ocl, f);

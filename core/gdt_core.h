@@ -189,6 +189,10 @@ int gdt_core_auto_tile(int is_cpu, uint64_t device_mem, uint64_t max_alloc, uint
 /* With opts.profile: the device time of every kernel so far, to f. */
 void gdt_core_profile_dump(gdt_core *core, FILE *f);
 
+/* Seconds the core's device has been busy with the core's commands so far
+ * (gdt_ocl_busy_seconds; waits for the core's queue). */
+double gdt_core_device_busy(gdt_core *core);
+
 /* Releases the core and every device resource.  core may be NULL. */
 void gdt_core_destroy(gdt_core *core);
 

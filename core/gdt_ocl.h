@@ -239,6 +239,13 @@ gdt_status gdt_ocl_run(gdt_ocl *ocl, gdt_ocl_kernel *k, size_t global, size_t lo
                        gdt_error *err);
 gdt_status gdt_ocl_finish(gdt_ocl *ocl, gdt_error *err);
 
+/* The device-busy time so far: the sum of the execution times (the
+ * device's own profiling clock, start to end) of every command run on the
+ * queue, kernels and transfers; waits for the queue first.  The queue is
+ * in order, so commands never overlap and the sum is time the device was
+ * working for this queue. */
+double gdt_ocl_busy_seconds(gdt_ocl *ocl);
+
 /* With opts.profile: per kernel, the number of launches and the device time
  * they took, one line each, slowest first, to f (waits for the queue). */
 void gdt_ocl_profile_dump(gdt_ocl *ocl, FILE *f);

@@ -72,7 +72,87 @@ struct gdt_ocl {
     gdt_ocl_program *programs;
     gdt_ocl_buf *bufs;
     int profile;
+    /* Device-busy accounting: every command carries an event (the queue
+     * profiles); the events of commands not yet known complete wait in
+     * pend; busy_collect adds their execution times to busy_s once a
+     * blocking call or a finish has completed them (the queue is in
+     * order, so every earlier command is then complete too). */
+    cl_event *pend;
+    size_t npend, cappend;
+    double busy_s;
 };
+
+#define OCL_PEND_MAX 65536 /* pending events before a finish collects them */
+
+/* Where the next command's event goes: a new slot of pend, or NULL when
+ * none can be had (the command then runs without one and its time is not
+ * counted). */
+static cl_event *ev_slot(gdt_ocl *ocl)
+{
+    if (ocl->npend == ocl->cappend) {
+        size_t cap = ocl->cappend ? 2 * ocl->cappend : 256;
+        cl_event *p;
+        if (cap > OCL_PEND_MAX)
+            return NULL;
+        p = realloc(ocl->pend, cap * sizeof *p);
+        if (p == NULL)
+            return NULL;
+        ocl->pend = p;
+        ocl->cappend = cap;
+    }
+    return &ocl->pend[ocl->npend];
+}
+
+/* Counts the event just written to ev_begin's slot as pending. */
+static void ev_keep(gdt_ocl *ocl, cl_event *slot)
+{
+    if (slot != NULL && *slot != NULL)
+        ocl->npend++;
+}
+
+/* Adds the execution time of every pending event (all complete: called
+ * after a blocking call or a finish) to busy_s and releases them. */
+static void busy_collect(gdt_ocl *ocl)
+{
+    for (size_t i = 0; i < ocl->npend; i++) {
+        cl_ulong t0 = 0, t1 = 0;
+        if (clGetEventProfilingInfo(ocl->pend[i], CL_PROFILING_COMMAND_START, sizeof t0, &t0,
+                                    NULL) == CL_SUCCESS &&
+            clGetEventProfilingInfo(ocl->pend[i], CL_PROFILING_COMMAND_END, sizeof t1, &t1,
+                                    NULL) == CL_SUCCESS &&
+            t1 > t0)
+            ocl->busy_s += 1e-9 * (double)(t1 - t0);
+        clReleaseEvent(ocl->pend[i]);
+    }
+    ocl->npend = 0;
+}
+
+/* Before a command: when the pending list is full, wait for the queue
+ * and collect it, so that the list stays bounded. */
+static void busy_make_room(gdt_ocl *ocl)
+{
+    if (ocl->npend == OCL_PEND_MAX && clFinish(ocl->queue) == CL_SUCCESS)
+        busy_collect(ocl);
+}
+
+/* The slot for the next command's event, after making room; NULL: the
+ * command goes without one. */
+static cl_event *ev_begin(gdt_ocl *ocl)
+{
+    cl_event *ev;
+    busy_make_room(ocl);
+    ev = ev_slot(ocl);
+    if (ev != NULL)
+        *ev = NULL;
+    return ev;
+}
+
+double gdt_ocl_busy_seconds(gdt_ocl *ocl)
+{
+    if (ocl->npend > 0 && clFinish(ocl->queue) == CL_SUCCESS)
+        busy_collect(ocl);
+    return ocl->busy_s;
+}
 
 const char *gdt_ocl_error_name(int code)
 {
@@ -776,8 +856,8 @@ gdt_status gdt_ocl_create(gdt_ocl **out, const gdt_ocl_opts *opts, gdt_error *er
         goto fail;
     }
     ocl->profile = opts->profile;
-    ocl->queue = clCreateCommandQueue(ocl->ctx, ocl->device,
-                                      opts->profile ? CL_QUEUE_PROFILING_ENABLE : 0, &rc);
+    /* always profiling: the device-busy time (gdt_ocl_busy_seconds) */
+    ocl->queue = clCreateCommandQueue(ocl->ctx, ocl->device, CL_QUEUE_PROFILING_ENABLE, &rc);
     if (rc != CL_SUCCESS) {
         st = cl_fail(err, "clCreateCommandQueue", ocl->name, rc);
         goto fail;
@@ -815,8 +895,14 @@ void gdt_ocl_destroy(gdt_ocl *ocl)
         free(p->file);
         free(p);
     }
-    if (ocl->queue)
+    if (ocl->queue) {
+        if (clFinish(ocl->queue) == CL_SUCCESS)
+            busy_collect(ocl);
+        for (size_t i = 0; i < ocl->npend; i++) /* a failed finish: released uncounted */
+            clReleaseEvent(ocl->pend[i]);
         clReleaseCommandQueue(ocl->queue);
+    }
+    free(ocl->pend);
     if (ocl->ctx)
         clReleaseContext(ocl->ctx);
     free(ocl->kernel_dir);
@@ -1179,6 +1265,8 @@ gdt_status gdt_ocl_buf_sync_host(gdt_ocl *ocl, gdt_ocl_buf *b, gdt_error *err)
     rc = clEnqueueUnmapMemObject(ocl->queue, b->mem, p, 0, NULL, NULL);
     if (rc == CL_SUCCESS)
         rc = clFinish(ocl->queue);
+    if (rc == CL_SUCCESS)
+        busy_collect(ocl);
     return rc == CL_SUCCESS ? GDT_OK : cl_fail(err, "clEnqueueUnmapMemObject", b->what, rc);
 }
 
@@ -1215,6 +1303,8 @@ gdt_status gdt_ocl_unmap(gdt_ocl *ocl, gdt_ocl_buf *b, void *host, gdt_error *er
     cl_int rc = clEnqueueUnmapMemObject(ocl->queue, b->mem, host, 0, NULL, NULL);
     if (rc == CL_SUCCESS)
         rc = clFinish(ocl->queue);
+    if (rc == CL_SUCCESS)
+        busy_collect(ocl);
     return rc == CL_SUCCESS ? GDT_OK : cl_fail(err, "clEnqueueUnmapMemObject", b->what, rc);
 }
 
@@ -1226,7 +1316,14 @@ gdt_status gdt_ocl_write(gdt_ocl *ocl, gdt_ocl_buf *b, size_t offset, const void
         return GDT_OK;
     if (check_range(b, offset, bytes, "write", err) != GDT_OK)
         return err->status;
-    rc = clEnqueueWriteBuffer(ocl->queue, b->mem, CL_TRUE, offset, bytes, src, 0, NULL, NULL);
+    {
+        cl_event *ev = ev_begin(ocl);
+        rc = clEnqueueWriteBuffer(ocl->queue, b->mem, CL_TRUE, offset, bytes, src, 0, NULL, ev);
+        if (rc == CL_SUCCESS) {
+            ev_keep(ocl, ev);
+            busy_collect(ocl);
+        }
+    }
     return rc == CL_SUCCESS ? GDT_OK : cl_fail(err, "clEnqueueWriteBuffer", b->what, rc);
 }
 
@@ -1238,7 +1335,14 @@ gdt_status gdt_ocl_read(gdt_ocl *ocl, gdt_ocl_buf *b, size_t offset, void *dst, 
         return GDT_OK;
     if (check_range(b, offset, bytes, "read", err) != GDT_OK)
         return err->status;
-    rc = clEnqueueReadBuffer(ocl->queue, b->mem, CL_TRUE, offset, bytes, dst, 0, NULL, NULL);
+    {
+        cl_event *ev = ev_begin(ocl);
+        rc = clEnqueueReadBuffer(ocl->queue, b->mem, CL_TRUE, offset, bytes, dst, 0, NULL, ev);
+        if (rc == CL_SUCCESS) {
+            ev_keep(ocl, ev);
+            busy_collect(ocl);
+        }
+    }
     return rc == CL_SUCCESS ? GDT_OK : cl_fail(err, "clEnqueueReadBuffer", b->what, rc);
 }
 
@@ -1252,8 +1356,13 @@ gdt_status gdt_ocl_fill_u32(gdt_ocl *ocl, gdt_ocl_buf *b, size_t offset, uint32_
         return err->status;
     if (offset % 4 != 0 || bytes % 4 != 0)
         return gdt_error_set(err, GDT_EINTERNAL, 7501, "unaligned fill of buffer %s", b->what);
-    rc = clEnqueueFillBuffer(ocl->queue, b->mem, &value, sizeof value, offset, bytes, 0, NULL,
-                             NULL);
+    {
+        cl_event *ev = ev_begin(ocl);
+        rc = clEnqueueFillBuffer(ocl->queue, b->mem, &value, sizeof value, offset, bytes, 0, NULL,
+                                 ev);
+        if (rc == CL_SUCCESS)
+            ev_keep(ocl, ev);
+    }
     return rc == CL_SUCCESS ? GDT_OK : cl_fail(err, "clEnqueueFillBuffer", b->what, rc);
 }
 
@@ -1266,8 +1375,13 @@ gdt_status gdt_ocl_copy(gdt_ocl *ocl, gdt_ocl_buf *src, size_t src_off, gdt_ocl_
     if (check_range(src, src_off, bytes, "copy", err) != GDT_OK ||
         check_range(dst, dst_off, bytes, "copy", err) != GDT_OK)
         return err->status;
-    rc = clEnqueueCopyBuffer(ocl->queue, src->mem, dst->mem, src_off, dst_off, bytes, 0, NULL,
-                             NULL);
+    {
+        cl_event *ev = ev_begin(ocl);
+        rc = clEnqueueCopyBuffer(ocl->queue, src->mem, dst->mem, src_off, dst_off, bytes, 0, NULL,
+                                 ev);
+        if (rc == CL_SUCCESS)
+            ev_keep(ocl, ev);
+    }
     return rc == CL_SUCCESS ? GDT_OK : cl_fail(err, "clEnqueueCopyBuffer", dst->what, rc);
 }
 
@@ -1332,15 +1446,24 @@ gdt_status gdt_ocl_run(gdt_ocl *ocl, gdt_ocl_kernel *k, size_t global, size_t lo
         clReleaseEvent(ev);
         k->launches++;
         k->seconds += 1e-9 * (double)(t1 - t0);
+        ocl->busy_s += 1e-9 * (double)(t1 - t0);
         return GDT_OK;
     }
-    rc = clEnqueueNDRangeKernel(ocl->queue, k->k, 1, NULL, &g, local ? &l : NULL, 0, NULL, NULL);
+    {
+        cl_event *ev = ev_begin(ocl);
+        rc = clEnqueueNDRangeKernel(ocl->queue, k->k, 1, NULL, &g, local ? &l : NULL, 0, NULL,
+                                    ev);
+        if (rc == CL_SUCCESS)
+            ev_keep(ocl, ev);
+    }
     return rc == CL_SUCCESS ? GDT_OK : cl_fail(err, "clEnqueueNDRangeKernel", k->name, rc);
 }
 
 gdt_status gdt_ocl_finish(gdt_ocl *ocl, gdt_error *err)
 {
     cl_int rc = clFinish(ocl->queue);
+    if (rc == CL_SUCCESS)
+        busy_collect(ocl);
     return rc == CL_SUCCESS ? GDT_OK : cl_fail(err, "clFinish", NULL, rc);
 }
 

@@ -51,7 +51,8 @@ static void pack_report(gdt_pack *p, const tr_run *c, uint64_t tiles, uint64_t v
                           q->outside_known, q->halo_hit, q->halo_tests, q->pred.orient_calls,
                           q->pred.incircle_calls, q->pred.incircle_exact,
                           q->pred.tiebreak_calls};
-    const double t[] = {s->t_tiles, s->t_core, s->t_certify, s->t_post};
+    const double t[] = {s->t_tiles, s->t_core,   s->t_certify,
+                        s->t_post,  s->t_device, s->t_device_span};
     for (size_t i = 0; i < sizeof v / sizeof v[0]; i++)
         gdt_pack_u64(p, v[i]);
     for (size_t i = 0; i < sizeof t / sizeof t[0]; i++)
@@ -99,6 +100,10 @@ static void unpack_report(gdt_unpack *u, tr_summary *sum, uint64_t *seam, tr_ran
     r->t_core = gdt_unpack_f64(u);
     r->t_certify = gdt_unpack_f64(u);
     r->t_post = gdt_unpack_f64(u);
+    r->t_device = gdt_unpack_f64(u);
+    r->t_device_span = gdt_unpack_f64(u);
+    sum->t_device += r->t_device;
+    sum->t_device_span += r->t_device_span;
     sum->t_core += r->t_core;
     sum->t_certify += r->t_certify;
     sum->t_post += r->t_post;
@@ -451,6 +456,8 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
         r0->t_core = s->t_core;
         r0->t_certify = s->t_certify;
         r0->t_post = s->t_post;
+        r0->t_device = s->t_device;
+        r0->t_device_span = s->t_device_span;
         r0->replayed = gdt_cloud_replayed(c->cloud);
         snprintf(r0->device, sizeof r0->device, "%.*s", (int)sizeof r0->device - 1, s->device);
         s->certified += o->certified;
@@ -473,6 +480,8 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
         s->t_core += o->t_core;
         s->t_certify += o->t_certify;
         s->t_post += o->t_post;
+        s->t_device += o->t_device;
+        s->t_device_span += o->t_device_span;
     }
     {
         int wait = 0;

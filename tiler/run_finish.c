@@ -180,6 +180,9 @@ static gdt_status write_summary(const tr_run *c, gdt_error *err)
     gdt_json_double(&j, "core", s->t_core);
     gdt_json_double(&j, "certify", s->t_certify);
     gdt_json_double(&j, "post", s->t_post);
+    gdt_json_double(&j, "device_busy", s->t_device);
+    gdt_json_double(&j, "device_busy_share",
+                    s->t_device_span > 0.0 ? s->t_device / s->t_device_span : 0.0);
     gdt_json_double(&j, "merge", s->t_merge);
     gdt_json_double(&j, "write", s->t_write);
     if (s->nranks > 1 && c->out_parts) /* beside the merge, not after it */
@@ -221,6 +224,9 @@ static gdt_status write_summary(const tr_run *c, gdt_error *err)
             gdt_json_double(&j, "core_s", q->t_core);
             gdt_json_double(&j, "certify_s", q->t_certify);
             gdt_json_double(&j, "post_s", q->t_post);
+            gdt_json_double(&j, "device_busy_s", q->t_device);
+            gdt_json_double(&j, "device_busy_share",
+                            q->t_device_span > 0.0 ? q->t_device / q->t_device_span : 0.0);
             gdt_json_uint(&j, "replayed_inputs", q->replayed);
             if (c->out_parts)
                 gdt_json_double(&j, "write_s", q->t_write);
@@ -391,9 +397,11 @@ gdt_status tr_run_finish(tr_run *c, gdt_error *err)
     gdt_log_note(
         &c->log,
         "times: pass 1 %.2f s, pass 2 %.2f s, tiles %.2f s (core %.2f, post %.2f, of which "
-        "certify %.2f), "
+        "certify %.2f; device busy %.2f s, %.0f%% of the stage), "
         "merge %.2f s, write %.2f s; tiles reused %" PRIu64 ", computed %" PRIu64,
         c->s.t_pass1, c->s.t_pass2, c->s.t_tiles, c->s.t_core, c->s.t_post, c->s.t_certify,
+        c->s.t_device,
+        c->s.t_device_span > 0.0 ? 100.0 * c->s.t_device / c->s.t_device_span : 0.0,
         c->s.t_merge, c->s.t_write, c->s.tiles_reused, c->s.tiles_redone);
     if (!opts->keep_job) {
         gdt_tiler_destroy(c->tiler);

@@ -650,8 +650,28 @@ static gdt_status tiles_loop(tr_run *c, const tr_tile_set *set, uint64_t n,
     return st;
 }
 
+/* The busy time of every core of the tile stage so far, their number in
+ * *ndev (waits for their queues: call it while no lane runs). */
+static double devices_busy(tr_run *c, size_t *ndev)
+{
+    double b = 0.0;
+    *ndev = 0;
+    if (c->core != NULL) {
+        b += gdt_core_device_busy(c->core);
+        ++*ndev;
+    }
+    for (size_t j = 0; j < c->cstart.nmore; j++)
+        if (c->cstart.more[j] != NULL) {
+            b += gdt_core_device_busy(c->cstart.more[j]);
+            ++*ndev;
+        }
+    return b;
+}
+
 gdt_status tr_run_tiles(tr_run *c, const tr_tile_set *set, gdt_error *err)
 {
+    size_t ndev;
+    double busy0;
     static const tr_tile_set all = {NULL, 0, NULL, NULL, NULL, NULL, NULL};
     uint64_t ntiles = gdt_tiler_tile_count(c->tiler), n;
     tr_core_counts counts;
@@ -661,6 +681,7 @@ gdt_status tr_run_tiles(tr_run *c, const tr_tile_set *set, gdt_error *err)
     if (set == NULL)
         set = &all;
     n = set->k != NULL ? set->n : ntiles;
+    busy0 = devices_busy(c, &ndev);
     t0 = gdt_now();
     memset(&counts, 0, sizeof counts);
     gdt_progress_stage(&c->prog, "tiles", c->s.vertices, "points");
@@ -681,6 +702,8 @@ gdt_status tr_run_tiles(tr_run *c, const tr_tile_set *set, gdt_error *err)
     if (st != GDT_OK)
         return st;
     c->s.t_tiles = gdt_now() - t0;
+    c->s.t_device += devices_busy(c, &ndev) - busy0;
+    c->s.t_device_span += c->s.t_tiles * (double)ndev;
     reclaim_start(c);
     return GDT_OK;
 }

@@ -153,6 +153,14 @@ def test_any_rank_count_writes_the_same_bytes(mpi_bin, clouds, tmp_path, case):
         assert sum(q["vertices"] for q in mpi["per_rank"]) == j["vertices"]
         assert sum(q["certified_faces"] for q in mpi["per_rank"]) == j["certified_faces"]
         assert mpi["load_balance"] >= 1.0
+        # every rank that triangulated a tile kept its device busy, and the
+        # job's busy time is the ranks' sum
+        busy = [q["device_busy_s"] for q in mpi["per_rank"]]
+        assert all(q["device_busy_s"] > 0 for q in mpi["per_rank"]
+                   if q["tiles"] > q["tiles_reused"]), (k, busy)
+        assert abs(sum(busy) - j["times"]["device_busy"]) < 1e-6 * max(1.0, sum(busy)), k
+        assert all(0 <= q["device_busy_share"] <= 1.0 for q in mpi["per_rank"]), k
+        assert 0 <= j["times"]["device_busy_share"] <= 1.0, k
         # LAZ chunks are decoded once: each rank's pass 2 reads its share of
         # pass 1 back from its replay (rank 0 alone reads a LAZ of one chunk)
         want = [1 if names == ("laz",) or (names == ("laz1",) and q == 0) else 0

@@ -706,6 +706,33 @@ def test_several_devices_give_the_same_bytes(gdt_bin, tmp_path, devices):
         assert sa.get(key) == sb.get(key), key
 
 
+@pytest.mark.parametrize("devices", [None, "0,0"])
+def test_device_busy_share_is_reported(gdt_bin, tmp_path, devices):
+    """--json reports the devices' busy time in the tile stage (the summed
+    execution times of the commands on each core's queue) and its share of
+    the stage's time per device; -v prints both.  The share is a fraction:
+    above 0 when tiles were triangulated, at most 1 (each queue is in order,
+    so a device's commands never overlap), and 0 when every tile is reused."""
+    cloud = tu.gen_cloud(tmp_path / "c.las", 60000, 5, "lidar")
+    out, js, job = tmp_path / "o.ply", tmp_path / "o.json", tmp_path / "job"
+    extra = ["--device", devices] if devices else []
+    r = tu.run([gdt_bin, cloud, "--tile", "128", "-o", out, "--json", js, "-v", "--keep-job",
+                "--job", job, *extra])
+    assert r.returncode == 0, r.stderr
+    t = json.loads(js.read_text())["times"]
+    ndev = 2 if devices else 1
+    assert 0 < t["device_busy"] <= t["tiles"] * ndev * 1.001, t
+    assert 0 < t["device_busy_share"] <= 1.0, t
+    assert abs(t["device_busy_share"] - t["device_busy"] / (t["tiles"] * ndev)) < 1e-6, t
+    assert "device busy" in r.stderr and "% of the stage" in r.stderr, r.stderr
+    # a rerun that reuses every tile keeps its devices idle
+    r = tu.run([gdt_bin, cloud, "--tile", "128", "-o", out, "--json", js, "-q", "--job", job,
+                *extra])
+    assert r.returncode == 0, r.stderr
+    t = json.loads(js.read_text())["times"]
+    assert t["device_busy"] == 0 and t["device_busy_share"] == 0, t
+
+
 @pytest.mark.parametrize("spec,code", [("0,,0", 2), ("0,x", 2), ("gpu:all", 5)])
 def test_bad_device_lists(gdt_bin, tmp_path, spec, code):
     """A malformed list is a usage error before any work; a list element that

@@ -64,6 +64,7 @@
 typedef struct tr_rank_stats {
     uint64_t tiles, vertices, certified, reused;
     double t_tiles, t_core, t_certify, t_post;
+    double t_device, t_device_span; /* as tr_summary's, for its own devices */
     double t_write; /* its parts of a mesh written in parts: vertices, faces, sync */
     uint64_t ground_tiles; /* --ground: tiles it classified (or adopted) */
     double t_ground;       /* and its time in the filter */
@@ -77,6 +78,10 @@ typedef struct tr_summary {
     uint64_t points_read, vertices, tiles, faces, certified, merge_faces;
     uint64_t max_tile_points, max_halo_points, gcd_tiles, insert_tiles;
     double t_pass1, t_pass2, t_tiles, t_core, t_certify, t_post, t_merge, t_write, t_check, t_total;
+    /* the devices' busy time in the tile stage (gdt_core_device_busy, summed
+     * over the cores) and the stage's time times the number of cores: their
+     * ratio is the share of the stage the devices worked */
+    double t_device, t_device_span;
     double t_parts; /* MPI, a mesh in parts: from PARTS to the last part synced */
     gdt_cert_stats cert;
     gdt_merge_stats merge;
