@@ -87,8 +87,8 @@ struct tr_dem {
     int pending;  /* helpers still working on job gen */
     int stop;
     int helpers; /* started helper threads */
-    const gdt_raster_vertex *pts;
-    size_t npts, m;
+    tr_dem_tile tile; /* the current job's tile */
+    size_t m;
     uint64_t base;
     const int32_t *tri;
     td_part *parts; /* [0 .. helpers], part 0 the caller's */
@@ -194,23 +194,24 @@ static gdt_status batch_put(void *ctx, int64_t row, int64_t col, int64_t n, cons
 }
 
 /* Rasterises faces [lo, hi) of tri through batch b. */
-static gdt_status raster_range(tr_dem *d, td_batch *b, const gdt_raster_vertex *pts, size_t n,
-                               uint64_t base, const int32_t *tri, size_t lo, size_t hi,
-                               gdt_error *err)
+static gdt_status raster_range(tr_dem *d, td_batch *b, const tr_dem_tile *t, uint64_t base,
+                               const int32_t *tri, size_t lo, size_t hi, gdt_error *err)
 {
     gdt_status st = GDT_OK;
     for (size_t f = lo; f < hi && st == GDT_OK; f++) {
         gdt_raster_vertex v[3];
         for (int i = 0; i < 3; i++) {
             int64_t k = (int64_t)tri[3 * f + (size_t)i] - (int64_t)base;
-            if (k < 0 || (uint64_t)k >= n) {
+            if (k < 0 || (uint64_t)k >= t->n) {
                 st = gdt_error_set(err, GDT_EINTERNAL, 7663,
                                    "DEM: a certified face names vertex %d, outside its "
                                    "tile's %" PRIu64 "..%" PRIu64,
-                                   (int)tri[3 * f + (size_t)i], base, base + n - 1);
+                                   (int)tri[3 * f + (size_t)i], base, base + t->n - 1);
                 break;
             }
-            v[i] = pts[k];
+            v[i].x = t->ox + (int64_t)t->pts[k].x;
+            v[i].y = t->oy + (int64_t)t->pts[k].y;
+            v[i].z = t->pts[k].z;
         }
         if (st == GDT_OK)
             st = gdt_raster_triangle(&d->grid, NULL, v, batch_put, b, err);
@@ -227,7 +228,7 @@ static void run_part(tr_dem *d, td_part *p, int parts)
 {
     size_t lo = d->m * (size_t)p->index / (size_t)parts;
     size_t hi = d->m * (size_t)(p->index + 1) / (size_t)parts;
-    p->st = raster_range(d, &p->batch, d->pts, d->npts, d->base, d->tri, lo, hi, &p->err);
+    p->st = raster_range(d, &p->batch, &d->tile, d->base, d->tri, lo, hi, &p->err);
 }
 
 static void *helper_main(void *arg)
@@ -434,9 +435,9 @@ static void window_drop(td_window *wn)
     wn->path = NULL;
 }
 
-gdt_status tr_dem_window_begin(tr_dem *d, const gdt_raster_vertex *pts, size_t n, const char *path,
-                               gdt_error *err)
+gdt_status tr_dem_window_begin(tr_dem *d, const tr_dem_tile *t, const char *path, gdt_error *err)
 {
+    const size_t n = t->n;
     const gdt_raster_grid *g = &d->grid;
     td_window *wn = &d->win;
     int64_t minx = 0, maxx = -1, miny = 0, maxy = -1, c_lo, c_hi, r_lo, r_hi;
@@ -451,14 +452,15 @@ gdt_status tr_dem_window_begin(tr_dem *d, const gdt_raster_vertex *pts, size_t n
     if (wn->path == NULL)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     for (size_t i = 0; i < n; i++) {
-        if (i == 0 || pts[i].x < minx)
-            minx = pts[i].x;
-        if (i == 0 || pts[i].x > maxx)
-            maxx = pts[i].x;
-        if (i == 0 || pts[i].y < miny)
-            miny = pts[i].y;
-        if (i == 0 || pts[i].y > maxy)
-            maxy = pts[i].y;
+        const int64_t x = t->ox + (int64_t)t->pts[i].x, y = t->oy + (int64_t)t->pts[i].y;
+        if (i == 0 || x < minx)
+            minx = x;
+        if (i == 0 || x > maxx)
+            maxx = x;
+        if (i == 0 || y < miny)
+            miny = y;
+        if (i == 0 || y > maxy)
+            maxy = y;
     }
     if (n == 0)
         return GDT_OK;
@@ -641,22 +643,21 @@ done:
     return st;
 }
 
-gdt_status tr_dem_tile_faces(tr_dem *d, const gdt_raster_vertex *pts, size_t n, uint64_t base,
-                             const int32_t *tri, size_t m, int alone, gdt_error *err)
+gdt_status tr_dem_tile_faces(tr_dem *d, const tr_dem_tile *t, uint64_t base, const int32_t *tri,
+                             size_t m, int alone, gdt_error *err)
 {
     gdt_status st;
     int parts;
 
     pthread_mutex_lock(&d->job_mu);
     if (alone || d->helpers == 0 || m < 2 * (size_t)TD_MIN_PART) {
-        st = raster_range(d, &d->parts[0].batch, pts, n, base, tri, 0, m, err);
+        st = raster_range(d, &d->parts[0].batch, t, base, tri, 0, m, err);
         pthread_mutex_unlock(&d->job_mu);
         return st;
     }
     parts = d->helpers + 1;
     pthread_mutex_lock(&d->jmu);
-    d->pts = pts;
-    d->npts = n;
+    d->tile = *t;
     d->base = base;
     d->tri = tri;
     d->m = m;

@@ -63,7 +63,7 @@ struct tr_out {
     const uint64_t *dlab; /* a part without the trim graph: the (tile, label) pairs it
                            * drops, sorted (tr_out_set_dropped) */
     size_t ndlab;
-    gdt_raster_vertex *tile_pts; /* with a DEM: the points of the tile whose faces are
+    tr_dem_pt *tile_pts; /* with a DEM: the points of the tile whose faces are
                                   * copied (24 bytes a point, not the 32 of a record) */
     size_t cap_tile_pts;
     unsigned char *mdem;         /* with a DEM: MD_RECORD TR_CHUNK bytes of merge.dem */
@@ -207,7 +207,8 @@ static gdt_status copy_face_records(tr_out *o, FILE *f, FILE *df, const char *pa
     return GDT_OK;
 }
 
-/* With a DEM: tile k's points (d->points of them) into o->tile_pts. */
+/* With a DEM: tile k's points (d->points of them) into o->tile_pts,
+ * relative to the tile's local origin. */
 static gdt_status load_tile_points(tr_out *o, const gdt_tile_desc *d, gdt_error *err)
 {
     tl_rfile rf;
@@ -230,9 +231,16 @@ static gdt_status load_tile_points(tr_out *o, const gdt_tile_desc *d, gdt_error 
                            err);
         if (st == GDT_OK && m == 0)
             st = gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
-        for (size_t i = 0; i < m; i++) {
-            o->tile_pts[n + i].x = o->pts[i].x;
-            o->tile_pts[n + i].y = o->pts[i].y;
+        for (size_t i = 0; st == GDT_OK && i < m; i++) {
+            const int64_t x = o->pts[i].x - d->local_x0, y = o->pts[i].y - d->local_y0;
+            if (x < 0 || y < 0 || x > (int64_t)UINT32_MAX || y > (int64_t)UINT32_MAX) {
+                st = gdt_error_set(err, GDT_EJOB, 6802,
+                                   "%s: point (%" PRId64 ", %" PRId64 ") outside its tile",
+                                   path, o->pts[i].x, o->pts[i].y);
+                break;
+            }
+            o->tile_pts[n + i].x = (uint32_t)x;
+            o->tile_pts[n + i].y = (uint32_t)y;
             o->tile_pts[n + i].z = o->pts[i].z;
         }
         n += m;
@@ -282,17 +290,24 @@ static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
     uint64_t nf, ic = 0, ia = 0;
     size_t kept = 0;
     tr_trim_counts tc = {0, 0, 0};
+    tr_dem_tile tile = {NULL, 0, 0, 0};
     gdt_status st = gdt_tiler_tile_info(o->src.tiler, k, &d, err);
 
     memset(&r, 0, sizeof r);
     r.fd = -1;
     if (st == GDT_OK && o->src.dem != NULL)
         st = load_tile_points(o, &d, err);
+    if (st == GDT_OK) {
+        tile.pts = o->tile_pts;
+        tile.n = (size_t)d.points;
+        tile.ox = d.local_x0;
+        tile.oy = d.local_y0;
+    }
     if (st == GDT_OK && tr_dem_windowed(o->src.dem)) {
         /* another rank's DEM: the tile's cells, for rank 0 */
         st = tr_tile_path(o->src.tiles_dir, &d, "dwin", &path, err);
         if (st == GDT_OK)
-            st = tr_dem_window_begin(o->src.dem, o->tile_pts, (size_t)d.points, path, err);
+            st = tr_dem_window_begin(o->src.dem, &tile, path, err);
         free(path);
         path = NULL;
     }
@@ -342,8 +357,7 @@ static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
             pthread_mutex_lock(&o->mu);
             alone = o->ready < o->src.ntiles;
             pthread_mutex_unlock(&o->mu);
-            st = tr_dem_tile_faces(o->src.dem, o->tile_pts, (size_t)d.points, o->src.base[k],
-                                   o->tri, kept, alone, err);
+            st = tr_dem_tile_faces(o->src.dem, &tile, o->src.base[k], o->tri, kept, alone, err);
         }
         done += m;
     }

@@ -42,15 +42,32 @@ gdt_status tr_dem_create(tr_dem **out, const gdt_options *opts, const gdt_cloud_
                          const gdt_tile_plan *pl, uint64_t vertices, const char *scratch_dir,
                          gdt_error *err);
 
+/* A tile's point as the rasteriser takes it: its lattice coordinates
+ * relative to the tile's local origin (gdt_tile_desc local_x0, local_y0:
+ * within [0, 2^31), as the core's) and its z.  16 bytes instead of a
+ * gdt_raster_vertex's 24: the writer holds a whole tile of them. */
+typedef struct tr_dem_pt {
+    uint32_t x, y;
+    double z;
+} tr_dem_pt;
+
+/* The tile points of tr_dem_tile_faces and tr_dem_window_begin: pts[0..n),
+ * point i at global lattice (ox + pts[i].x, oy + pts[i].y). */
+typedef struct tr_dem_tile {
+    const tr_dem_pt *pts;
+    size_t n;
+    int64_t ox, oy;
+} tr_dem_tile;
+
 /* Rasterises m faces tri[3m] (output vertex indices) of a tile whose points
- * pts[0..n) (global lattice, z) have the output indices base..base+n-1;
+ * t (tr_dem_tile) have the output indices base..base+n-1;
  * alone: on the caller's thread only (the helpers stay idle), else split
  * with the helper threads.  The DEM is the same either way.
  * Thread-safe.
  * returns: GDT_OK; GDT_EINTERNAL 7663 (an index outside the tile); the
  * writer's errors. */
-gdt_status tr_dem_tile_faces(tr_dem *d, const gdt_raster_vertex *pts, size_t n, uint64_t base,
-                             const int32_t *tri, size_t m, int alone, gdt_error *err);
+gdt_status tr_dem_tile_faces(tr_dem *d, const tr_dem_tile *t, uint64_t base, const int32_t *tri,
+                             size_t m, int alone, gdt_error *err);
 
 /* Rasterises m faces given by their vertices v[3 m] (global lattice, z).
  * Thread-safe.  returns: GDT_OK; the writer's errors. */
@@ -83,13 +100,13 @@ int tr_dem_windowed(const tr_dem *d);
 /* The grid of d. */
 const gdt_raster_grid *tr_dem_grid(const tr_dem *d);
 
-/* Window mode: starts the window of a tile whose points are pts[0 .. n)
+/* Window mode: starts the window of a tile whose points are t
  * (every cell any of its faces can own), all cells unwritten, to be saved
  * at path.  A window of up to 2^24 cells (or the environment's
  * GDT_DEM_WINDOW_CELLS) is kept in memory; a larger one (a raster much
  * finer than the points) is written to path run by run as the faces are
  * rasterised.  returns: GDT_OK; GDT_EIO 4806; 7001. */
-gdt_status tr_dem_window_begin(tr_dem *d, const gdt_raster_vertex *pts, size_t n, const char *path,
+gdt_status tr_dem_window_begin(tr_dem *d, const tr_dem_tile *t, const char *path,
                                gdt_error *err);
 
 /* Window mode: completes the current window's file.  returns: GDT_OK;
