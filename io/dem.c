@@ -205,8 +205,8 @@ gdt_status gdt_dem_create(gdt_dem **out, const gdt_dem_geo *geo, const char *pat
 
     *out = NULL;
     {
-        /* the plug-in first: a run that cannot write its DEM fails before
-         * any work */
+        /* the plug-in first: without it the writer fails before it
+         * allocates anything (the run keeps its job for a rerun) */
         void *sym;
         gdt_status st = gdt_plugin_symbol(GDT_DEM_GDAL_MODULE, GDT_DEM_GDAL_SYMBOL,
                                           "the DEM writer (GDAL)", &sym, err);
