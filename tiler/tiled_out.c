@@ -64,7 +64,7 @@ struct tr_out {
                            * drops, sorted (tr_out_set_dropped) */
     size_t ndlab;
     tr_dem_pt *tile_pts; /* with a DEM: the points of the tile whose faces are
-                                  * copied (24 bytes a point, not the 32 of a record) */
+                          * copied (16 bytes a point, not the 32 of a record) */
     size_t cap_tile_pts;
     unsigned char *mdem;         /* with a DEM: MD_RECORD TR_CHUNK bytes of merge.dem */
     void (*on_complete)(void *); /* tr_out_on_complete: called once, or never */
