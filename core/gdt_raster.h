@@ -62,6 +62,8 @@ typedef struct gdt_raster_grid {
     int64_t y0;          /* lattice y of the north edge of row 0 */
     gdt_dem_geo geo;     /* ncols, nrows; CRS corner; res_x = res_y = R */
     double inv_dx, inv_dy; /* 1 / (2 mx), 1 / (2 my): estimates for cell indices */
+    uint64_t mag_dx, mag_dy; /* floor((2^64 - 1) / d) + 1 for d = 2 mx, 2 my: exact
+                              * quotients of 32-bit numerators; 0 = not set */
 } gdt_raster_grid;
 
 /* A TIN vertex: global lattice integers (|x|, |y| < 2^53, as gdt_point)

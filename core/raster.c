@@ -41,6 +41,24 @@ static int64_t ceil_div_inv(int64_t n, int64_t d, double inv)
     return -floor_div_inv(-n, d, inv);
 }
 
+/* floor(n / d) for d > 0 with mag = floor((2^64 - 1) / d) + 1: for
+ * 0 <= n < 2^32 and 2 <= d <= 2^32 the quotient is the high half of n mag,
+ * exactly (Lemire, Kaser & Kurz, "Faster remainder by direct computation",
+ * 2019); other n, or mag 0, go through floor_div_inv. */
+static int64_t floor_div_mag(int64_t n, int64_t d, double inv, uint64_t mag)
+{
+    if (mag != 0 && n >= 0 && n < (INT64_C(1) << 32))
+        return (int64_t)(((unsigned __int128)mag * (uint64_t)n) >> 64);
+    return floor_div_inv(n, d, inv);
+}
+
+static int64_t ceil_div_mag(int64_t n, int64_t d, double inv, uint64_t mag)
+{
+    if (mag != 0 && n >= 0 && n + d - 1 < (INT64_C(1) << 32))
+        return (int64_t)(((unsigned __int128)mag * (uint64_t)(n + d - 1)) >> 64);
+    return ceil_div_inv(n, d, inv);
+}
+
 int gdt_raster_unit(const gdt_lattice *lat, int64_t *ux, int64_t *uy)
 {
     if (lat->sx == lat->sy) {
@@ -140,6 +158,8 @@ gdt_status gdt_raster_grid_define(gdt_raster_grid *g, const gdt_lattice *lat, in
     g->my = (int64_t)myd;
     g->inv_dx = 1.0 / (double)(2 * g->mx);
     g->inv_dy = 1.0 / (double)(2 * g->my);
+    g->mag_dx = UINT64_MAX / (uint64_t)(2 * g->mx) + 1;
+    g->mag_dy = UINT64_MAX / (uint64_t)(2 * g->my) + 1;
     al_x = anchor_of(lat->ox, lat->sx, &ax);
     al_y = anchor_of(lat->oy, lat->sy, &ay);
     kc0 = floor_div(min_x - ax, g->mx);
@@ -271,14 +291,14 @@ gdt_status gdt_raster_triangle(const gdt_raster_grid *g, gdt_pred_stats *st,
     /* columns first: most faces that own no centre are rejected there */
     inv_x = g->inv_dx > 0 ? g->inv_dx : 1.0 / (double)dx; /* a grid not from _define */
     inv_y = g->inv_dy > 0 ? g->inv_dy : 1.0 / (double)(2 * g->my);
-    c_lo = ceil_div_inv(minx - xc0, dx, inv_x);
-    c_hi = floor_div_inv(maxx - xc0, dx, inv_x);
+    c_lo = ceil_div_mag(minx - xc0, dx, inv_x, g->mag_dx);
+    c_hi = floor_div_mag(maxx - xc0, dx, inv_x, g->mag_dx);
     if (c_lo < 0) c_lo = 0;
     if (c_hi > g->geo.ncols - 1) c_hi = g->geo.ncols - 1;
     if (c_lo > c_hi)
         return GDT_OK;
-    r_lo = ceil_div_inv(2 * g->y0 - g->my - maxy, 2 * g->my, inv_y);
-    r_hi = floor_div_inv(2 * g->y0 - g->my - miny, 2 * g->my, inv_y);
+    r_lo = ceil_div_mag(2 * g->y0 - g->my - maxy, 2 * g->my, inv_y, g->mag_dy);
+    r_hi = floor_div_mag(2 * g->y0 - g->my - miny, 2 * g->my, inv_y, g->mag_dy);
     if (r_lo < 0) r_lo = 0;
     if (r_hi > g->geo.nrows - 1) r_hi = g->geo.nrows - 1;
     if (r_lo > r_hi)

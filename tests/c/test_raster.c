@@ -251,6 +251,19 @@ static void test_coverage(int64_t grid_span, int64_t base, int64_t m, int npts, 
                                       "variant %d: cell %zu value %.9g vs %.9g", variant, i,
                                       cv.val[i], cv2.val[i]);
     }
+    /* the cell ranges from the exact multiply-high quotients and from the
+     * generic division are the same */
+    {
+        gdt_raster_grid g0 = g;
+        g0.mag_dx = g0.mag_dy = 0;
+        for (size_t i = 0; i < mesh.ntris; i++)
+            order[i] = i;
+        rasterise_all(&g0, pts, &mesh, order, 0, &cv2);
+        GDT_CHECK(&C, memcmp(cv.count, cv2.count, (size_t)(cv.ncols * cv.nrows) * sizeof *cv.count) == 0,
+                  "without the multiply-high quotients: other owners");
+        GDT_CHECK(&C, memcmp(cv.val, cv2.val, (size_t)(cv.ncols * cv.nrows) * sizeof *cv.val) == 0,
+                  "without the multiply-high quotients: other values");
+    }
     free(order);
     free(cv.count);
     free(cv.val);
