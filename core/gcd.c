@@ -319,6 +319,7 @@ gdt_status gdt_core_create(gdt_core **out, const gdt_core_opts *opts, gdt_error 
 {
     gdt_core *c = NULL;
     gdt_ocl_opts oo;
+    gdt_ocl **shared = NULL;
     gdt_status st;
     char extra[128];
 
@@ -337,7 +338,22 @@ gdt_status gdt_core_create(gdt_core **out, const gdt_core_opts *opts, gdt_error 
     oo.force_no_fp64 = c->opts.force_no_fp64;
     oo.profile = c->opts.profile;
     oo.log = c->log;
+    if (c->opts.nshare > 0) {
+        shared = calloc(c->opts.nshare, sizeof *shared);
+        if (shared == NULL) {
+            st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+            goto fail;
+        }
+        for (size_t i = 0; i < c->opts.nshare; i++)
+            shared[i] = c->opts.share[i] != NULL ? c->opts.share[i]->ocl : NULL;
+        oo.share = shared;
+        oo.nshare = c->opts.nshare;
+    }
     st = gdt_ocl_create(&c->ocl, &oo, err);
+    free(shared);
+    shared = NULL;
+    c->opts.share = NULL; /* not kept: only for the creation */
+    c->opts.nshare = 0;
     if (st != GDT_OK)
         goto fail;
     /* Sizes from the device's type and limits.  CPU devices run one
@@ -508,6 +524,26 @@ uint64_t gdt_core_device_peak(const gdt_core *core)
 double gdt_core_device_busy(gdt_core *core)
 {
     return gdt_ocl_busy_seconds(core->ocl);
+}
+
+int gdt_core_shares_device(const gdt_core *core)
+{
+    return gdt_ocl_is_shared_queue(core->ocl);
+}
+
+int gdt_core_same_device(const gdt_core *a, const gdt_core *b)
+{
+    return gdt_ocl_same_device(a->ocl, b->ocl);
+}
+
+int gdt_core_on_cpu(const gdt_core *core)
+{
+    return gdt_ocl_is_cpu(core->ocl);
+}
+
+uint64_t gdt_core_device_memory(const gdt_core *core)
+{
+    return gdt_ocl_global_mem(core->ocl);
 }
 
 void gdt_core_profile_dump(gdt_core *core, FILE *f)

@@ -96,6 +96,11 @@ typedef struct gdt_core_opts {
     int gpu_layout;          /* test: the launch sizes and the phase-1 column
                                 layout chosen for a GPU, on any device (the
                                 result is the same bytes whatever the layout) */
+    /* Cores already made (nshare of them): when the device is one of
+     * theirs, this core is a further command queue of that device's
+     * context and uses its built kernels (gdt_ocl_create, opts->share). */
+    struct gdt_core *const *share;
+    size_t nshare;
 } gdt_core_opts;
 
 /* Per-phase figures of one gdt_core_triangulate call (cf. Fig. 11 of the
@@ -189,9 +194,24 @@ int gdt_core_auto_tile(int is_cpu, uint64_t device_mem, uint64_t max_alloc, uint
 /* With opts.profile: the device time of every kernel so far, to f. */
 void gdt_core_profile_dump(gdt_core *core, FILE *f);
 
-/* Seconds the core's device has been busy with the core's commands so far
- * (gdt_ocl_busy_seconds; waits for the core's queue). */
+/* Seconds the core's device has been busy so far (gdt_ocl_busy_seconds;
+ * waits for the queue): with several cores on one device (opts.share), the
+ * first returns the device's time, counted once, and the others 0; call it
+ * on the first while no thread uses the others. */
 double gdt_core_device_busy(gdt_core *core);
+
+/* 1 when the core is a further queue of a device an earlier core was made
+ * on (opts.share), else 0. */
+int gdt_core_shares_device(const gdt_core *core);
+
+/* 1 when both cores run on the same device, else 0. */
+int gdt_core_same_device(const gdt_core *a, const gdt_core *b);
+
+/* 1 when the core's device is a CPU device, else 0. */
+int gdt_core_on_cpu(const gdt_core *core);
+
+/* CL_DEVICE_GLOBAL_MEM_SIZE of the core's device (0: not reported). */
+uint64_t gdt_core_device_memory(const gdt_core *core);
 
 /* Releases the core and every device resource.  core may be NULL. */
 void gdt_core_destroy(gdt_core *core);

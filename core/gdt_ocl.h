@@ -70,6 +70,10 @@ typedef struct gdt_ocl_opts {
     int profile;            /* nonzero: time every launch (gdt_ocl_profile_dump) */
     gdt_log *log;           /* notes (-v) and warnings; may be NULL */
     int local_rank;         /* this process's rank on its node (the "local" SPECs) */
+    /* Contexts already made (nshare of them, may be NULL): when the selected
+     * device is one of theirs, the new one is a further queue on it (below). */
+    gdt_ocl *const *share;
+    size_t nshare;
 } gdt_ocl_opts;
 
 /* Points POCL_CACHE_DIR at the kernel cache (above) once per process; later
@@ -81,7 +85,7 @@ void gdt_ocl_prepare_env(const char *cache_dir, gdt_log *log);
 
 /* Several devices (the tiled run's --device): a comma-separated list of
  * SPECs ("0,1"; the same device may be named twice, each name is one
- * context), or an element "all", "cpu:all" or "gpu:all" (every device, or
+ * command queue), or an element "all", "cpu:all" or "gpu:all" (every device, or
  * every one of that type, in enumeration order).  At most
  * GDT_OCL_MAX_DEVICES. */
 #define GDT_OCL_MAX_DEVICES 64
@@ -103,7 +107,14 @@ int gdt_ocl_spec_is_list(const char *value);
 gdt_status gdt_ocl_device_list(const char *value, char ***specs, size_t *n, gdt_error *err);
 void gdt_ocl_device_list_free(char **specs, size_t n);
 
-/* Creates a context on the selected device.
+/* Creates a context on the selected device, or, when opts->share holds one
+ * on the same device, a further command queue in that context ("a queue of
+ * a shared device"): it uses the context's built programs (gdt_ocl_build
+ * compiles nothing when the first one built the same file with the same
+ * options; kernels and buffers are its own, so each queue is driven by its
+ * own thread), and the device's busy time is counted once for all its
+ * queues (gdt_ocl_busy_seconds).  The first context may be destroyed before
+ * the others.
  * Ownership: *out is allocated here; release with gdt_ocl_destroy.
  * Errors: GDT_EUSAGE 2110 (malformed SPEC), GDT_EDEVICE 5101 (no
  * platform/device, or none the SPEC names), 5102 (OpenCL call failed),
@@ -239,12 +250,23 @@ gdt_status gdt_ocl_run(gdt_ocl *ocl, gdt_ocl_kernel *k, size_t global, size_t lo
                        gdt_error *err);
 gdt_status gdt_ocl_finish(gdt_ocl *ocl, gdt_error *err);
 
-/* The device-busy time so far: the sum of the execution times (the
- * device's own profiling clock, start to end) of every command run on the
- * queue, kernels and transfers; waits for the queue first.  The queue is
- * in order, so commands never overlap and the sum is time the device was
- * working for this queue. */
+/* The device-busy time so far: the time (the device's own profiling
+ * clock) during which at least one command of the device's queues, kernels
+ * and transfers, was executing; waits for the queues first.  With one
+ * queue it is the sum of the commands' execution times (the queue is in
+ * order: its commands never overlap).  Several queues on a shared device:
+ * the first context made on it returns the union of all their commands'
+ * intervals and every further queue returns 0, so summing over contexts
+ * counts each device once; call it on the first while no thread drives
+ * another of the device's queues. */
 double gdt_ocl_busy_seconds(gdt_ocl *ocl);
+
+/* 1 when a and b drive the same device, else 0. */
+int gdt_ocl_same_device(const gdt_ocl *a, const gdt_ocl *b);
+
+/* 1 when ocl is a further queue of a device another context was made on
+ * (gdt_ocl_create with opts->share), else 0. */
+int gdt_ocl_is_shared_queue(const gdt_ocl *ocl);
 
 /* With opts.profile: per kernel, the number of launches and the device time
  * they took, one line each, slowest first, to f (waits for the queue). */

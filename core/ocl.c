@@ -38,6 +38,7 @@ struct gdt_ocl_kernel {
 struct gdt_ocl_program {
     cl_program prog;
     char *file;
+    char *opts; /* the build options (a further queue reuses a program built with the same) */
     size_t nkernels;
     gdt_ocl_kernel *kernels;
     gdt_ocl_program *next;
@@ -51,6 +52,40 @@ struct gdt_ocl_buf {
     const char *what;
     gdt_ocl_buf *prev, *next;
 };
+
+/* What the queues of one device share once it has more than one: the
+ * built programs, and the device-busy union of their commands' intervals.
+ *
+ * Invariants (under mu): q[0..nq) are the live contexts of the device;
+ * iv[0..n) are execution intervals (device clock) not yet folded; folded_s
+ * is the length of the union of every interval folded so far, all of which
+ * end at or before folded_end.  A queue's commands are collected in order
+ * and never overlap; one whose commands are not all collected
+ * (bu_pending) starts its next one at or after its bu_last_end, and one
+ * with none pending starts its next one after now, after every collected
+ * end.  So an interval that ends at or before the least bu_last_end of the
+ * pending queues can overlap no interval still to come: fold folds those. */
+typedef struct ocl_shared_prog {
+    char *file, *opts;
+    cl_program prog; /* retained */
+} ocl_shared_prog;
+
+static char *dup_str(const char *s);
+
+#define OCL_QUEUES_MAX 64
+#define OCL_FOLD_AT 8192 /* stored intervals before a fold is tried */
+
+typedef struct ocl_shared {
+    pthread_mutex_t mu;
+    gdt_ocl *q[OCL_QUEUES_MAX];
+    size_t nq;
+    ocl_shared_prog *progs;
+    size_t nprogs;
+    cl_ulong (*iv)[2];
+    size_t n, cap;
+    double folded_s;
+    cl_ulong folded_end;
+} ocl_shared;
 
 struct gdt_ocl {
     cl_platform_id platform;
@@ -80,6 +115,11 @@ struct gdt_ocl {
     cl_event *pend;
     size_t npend, cappend;
     double busy_s;
+    /* A device with several queues (gdt_ocl_create with opts->share). */
+    ocl_shared *sh;       /* NULL while the device has this queue alone */
+    int further;          /* a further queue: the context is another's */
+    int bu_pending;       /* under sh->mu: commands not yet collected */
+    cl_ulong bu_last_end; /* under sh->mu: end of the last collected command */
 };
 
 #define OCL_PEND_MAX 65536 /* pending events before a finish collects them */
@@ -106,21 +146,121 @@ static cl_event *ev_slot(gdt_ocl *ocl)
 /* Counts the event just written to ev_begin's slot as pending. */
 static void ev_keep(gdt_ocl *ocl, cl_event *slot)
 {
-    if (slot != NULL && *slot != NULL)
+    if (slot != NULL && *slot != NULL) {
         ocl->npend++;
+        if (ocl->sh != NULL && !ocl->bu_pending) {
+            pthread_mutex_lock(&ocl->sh->mu);
+            ocl->bu_pending = 1;
+            pthread_mutex_unlock(&ocl->sh->mu);
+        }
+    }
+}
+
+static int iv_cmp(const void *a, const void *b)
+{
+    const cl_ulong *x = a, *y = b;
+    return x[0] < y[0] ? -1 : x[0] > y[0] ? 1 : x[1] < y[1] ? -1 : x[1] > y[1];
+}
+
+/* Folds the stored intervals that no interval still to come can overlap
+ * (all of them with all set: every queue is idle), see ocl_shared; the
+ * rest stay, merged.  sh->mu held. */
+static void shared_fold(ocl_shared *sh, int all)
+{
+    cl_ulong t = ~(cl_ulong)0;
+    size_t keep = 0;
+    if (!all)
+        for (size_t i = 0; i < sh->nq; i++)
+            if (sh->q[i]->bu_pending && sh->q[i]->bu_last_end < t)
+                t = sh->q[i]->bu_last_end;
+    if (sh->n == 0)
+        return;
+    qsort(sh->iv, sh->n, sizeof sh->iv[0], iv_cmp);
+    for (size_t i = 0; i < sh->n;) {
+        cl_ulong a = sh->iv[i][0], b = sh->iv[i][1];
+        size_t j = i + 1;
+        while (j < sh->n && sh->iv[j][0] <= b) {
+            if (sh->iv[j][1] > b)
+                b = sh->iv[j][1];
+            j++;
+        }
+        if (b <= t) {
+            if (a < sh->folded_end)
+                a = sh->folded_end;
+            if (b > a)
+                sh->folded_s += 1e-9 * (double)(b - a);
+            if (b > sh->folded_end)
+                sh->folded_end = b;
+        } else {
+            sh->iv[keep][0] = a;
+            sh->iv[keep][1] = b;
+            keep++;
+        }
+        i = j;
+    }
+    sh->n = keep;
+}
+
+/* The execution interval of a complete command's event, device clock;
+ * 0 when the device does not report one. */
+static int ev_interval(cl_event ev, cl_ulong *t0, cl_ulong *t1)
+{
+    *t0 = *t1 = 0;
+    return clGetEventProfilingInfo(ev, CL_PROFILING_COMMAND_START, sizeof *t0, t0, NULL) ==
+               CL_SUCCESS &&
+           clGetEventProfilingInfo(ev, CL_PROFILING_COMMAND_END, sizeof *t1, t1, NULL) ==
+               CL_SUCCESS &&
+           *t1 > *t0;
+}
+
+/* busy_collect on a shared device: the intervals go to the union. */
+static void shared_collect(gdt_ocl *ocl)
+{
+    ocl_shared *sh = ocl->sh;
+    pthread_mutex_lock(&sh->mu);
+    for (size_t i = 0; i < ocl->npend; i++) {
+        cl_ulong t0, t1;
+        if (ev_interval(ocl->pend[i], &t0, &t1)) {
+            if (sh->n == sh->cap) {
+                size_t cap = sh->cap ? 2 * sh->cap : 1024;
+                void *g = realloc(sh->iv, cap * sizeof sh->iv[0]);
+                if (g != NULL) {
+                    sh->iv = g;
+                    sh->cap = cap;
+                }
+            }
+            if (sh->n < sh->cap) {
+                sh->iv[sh->n][0] = t0;
+                sh->iv[sh->n][1] = t1;
+                sh->n++;
+            } else {
+                /* no memory to hold it: counted alone (an overlap with
+                 * another queue is then counted twice) */
+                sh->folded_s += 1e-9 * (double)(t1 - t0);
+            }
+            if (t1 > ocl->bu_last_end)
+                ocl->bu_last_end = t1;
+        }
+        clReleaseEvent(ocl->pend[i]);
+    }
+    ocl->npend = 0;
+    ocl->bu_pending = 0;
+    if (sh->n >= OCL_FOLD_AT)
+        shared_fold(sh, 0);
+    pthread_mutex_unlock(&sh->mu);
 }
 
 /* Adds the execution time of every pending event (all complete: called
  * after a blocking call or a finish) to busy_s and releases them. */
 static void busy_collect(gdt_ocl *ocl)
 {
+    if (ocl->sh != NULL) {
+        shared_collect(ocl);
+        return;
+    }
     for (size_t i = 0; i < ocl->npend; i++) {
-        cl_ulong t0 = 0, t1 = 0;
-        if (clGetEventProfilingInfo(ocl->pend[i], CL_PROFILING_COMMAND_START, sizeof t0, &t0,
-                                    NULL) == CL_SUCCESS &&
-            clGetEventProfilingInfo(ocl->pend[i], CL_PROFILING_COMMAND_END, sizeof t1, &t1,
-                                    NULL) == CL_SUCCESS &&
-            t1 > t0)
+        cl_ulong t0, t1;
+        if (ev_interval(ocl->pend[i], &t0, &t1))
             ocl->busy_s += 1e-9 * (double)(t1 - t0);
         clReleaseEvent(ocl->pend[i]);
     }
@@ -149,9 +289,128 @@ static cl_event *ev_begin(gdt_ocl *ocl)
 
 double gdt_ocl_busy_seconds(gdt_ocl *ocl)
 {
-    if (ocl->npend > 0 && clFinish(ocl->queue) == CL_SUCCESS)
-        busy_collect(ocl);
-    return ocl->busy_s;
+    ocl_shared *sh = ocl->sh;
+    double v;
+    if (sh == NULL) {
+        if (ocl->npend > 0 && clFinish(ocl->queue) == CL_SUCCESS)
+            busy_collect(ocl);
+        return ocl->busy_s;
+    }
+    if (ocl->further)
+        return 0.0;
+    /* no thread drives the device's other queues now (the contract) */
+    for (size_t i = 0;; i++) {
+        gdt_ocl *q;
+        pthread_mutex_lock(&sh->mu);
+        q = i < sh->nq ? sh->q[i] : NULL;
+        pthread_mutex_unlock(&sh->mu);
+        if (q == NULL)
+            break;
+        if (q->npend > 0 && clFinish(q->queue) == CL_SUCCESS)
+            busy_collect(q);
+    }
+    pthread_mutex_lock(&sh->mu);
+    shared_fold(sh, 1);
+    v = sh->folded_s;
+    pthread_mutex_unlock(&sh->mu);
+    return v;
+}
+
+int gdt_ocl_same_device(const gdt_ocl *a, const gdt_ocl *b)
+{
+    return a->device == b->device;
+}
+
+int gdt_ocl_is_shared_queue(const gdt_ocl *ocl)
+{
+    return ocl->further;
+}
+
+static void shared_free(ocl_shared *sh)
+{
+    for (size_t i = 0; i < sh->nprogs; i++) {
+        free(sh->progs[i].file);
+        free(sh->progs[i].opts);
+        if (sh->progs[i].prog)
+            clReleaseProgram(sh->progs[i].prog);
+    }
+    free(sh->progs);
+    free(sh->iv);
+    pthread_mutex_destroy(&sh->mu);
+    free(sh);
+}
+
+/* Makes ocl a further queue of base's device: base's shared state, made
+ * on the first such call from base's programs and its busy time so far
+ * (base is idle: the contract of gdt_ocl_create). */
+static gdt_status shared_attach(gdt_ocl *ocl, gdt_ocl *base, gdt_error *err)
+{
+    ocl_shared *sh = base->sh;
+    if (sh == NULL) {
+        size_t np = 0;
+        sh = calloc(1, sizeof *sh);
+        if (sh == NULL)
+            return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        for (gdt_ocl_program *p = base->programs; p != NULL; p = p->next)
+            np++;
+        sh->progs = calloc(np ? np : 1, sizeof *sh->progs);
+        if (sh->progs == NULL || pthread_mutex_init(&sh->mu, NULL) != 0) {
+            free(sh->progs);
+            free(sh);
+            return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        }
+        for (gdt_ocl_program *p = base->programs; p != NULL; p = p->next) {
+            ocl_shared_prog *sp = &sh->progs[sh->nprogs];
+            sp->file = dup_str(p->file);
+            sp->opts = dup_str(p->opts);
+            if (sp->file == NULL || sp->opts == NULL) {
+                free(sp->file);
+                free(sp->opts);
+                shared_free(sh);
+                return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+            }
+            sp->prog = p->prog;
+            clRetainProgram(sp->prog);
+            sh->nprogs++;
+        }
+        if (base->npend > 0 && clFinish(base->queue) == CL_SUCCESS)
+            busy_collect(base);
+        sh->folded_s = base->busy_s;
+        sh->q[sh->nq++] = base;
+        base->sh = sh;
+    }
+    pthread_mutex_lock(&sh->mu);
+    if (sh->nq == OCL_QUEUES_MAX) {
+        pthread_mutex_unlock(&sh->mu);
+        return gdt_error_set(err, GDT_EDEVICE, 5101,
+                             "OpenCL device %s: more than %d command queues asked for", base->name,
+                             OCL_QUEUES_MAX);
+    }
+    sh->q[sh->nq++] = ocl;
+    ocl->sh = sh;
+    ocl->further = 1;
+    pthread_mutex_unlock(&sh->mu);
+    return GDT_OK;
+}
+
+/* Takes ocl out of its device's shared state; the last one frees it. */
+static void shared_detach(gdt_ocl *ocl)
+{
+    ocl_shared *sh = ocl->sh;
+    int last;
+    if (sh == NULL)
+        return;
+    pthread_mutex_lock(&sh->mu);
+    for (size_t i = 0; i < sh->nq; i++)
+        if (sh->q[i] == ocl) {
+            sh->q[i] = sh->q[--sh->nq];
+            break;
+        }
+    last = sh->nq == 0;
+    pthread_mutex_unlock(&sh->mu);
+    ocl->sh = NULL;
+    if (last)
+        shared_free(sh);
 }
 
 const char *gdt_ocl_error_name(int code)
@@ -770,7 +1029,7 @@ gdt_status gdt_ocl_probe(const gdt_ocl_opts *opts, gdt_ocl_device_info *info, gd
 gdt_status gdt_ocl_create(gdt_ocl **out, const gdt_ocl_opts *opts, gdt_error *err)
 {
     gdt_ocl_opts defaults;
-    gdt_ocl *ocl = NULL;
+    gdt_ocl *ocl = NULL, *base = NULL;
     dev_entry *devs = NULL;
     size_t n = 0, pick = 0;
     char ext[8192], pname[256], dname[256];
@@ -792,6 +1051,9 @@ gdt_status gdt_ocl_create(gdt_ocl **out, const gdt_ocl_opts *opts, gdt_error *er
     st = select_device(devs, n, opts->device, opts->local_rank, &pick, err);
     if (st != GDT_OK)
         goto fail;
+    for (size_t i = 0; i < opts->nshare && base == NULL; i++)
+        if (opts->share[i] != NULL && opts->share[i]->device == devs[pick].device)
+            base = opts->share[i];
     ocl = calloc(1, sizeof *ocl);
     if (ocl == NULL) {
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
@@ -850,10 +1112,16 @@ gdt_status gdt_ocl_create(gdt_ocl **out, const gdt_ocl_opts *opts, gdt_error *er
     if (ocl->device_max_wg < 1)
         ocl->device_max_wg = 1;
 
-    ocl->ctx = clCreateContext(NULL, 1, &ocl->device, NULL, NULL, &rc);
-    if (rc != CL_SUCCESS) {
-        st = cl_fail(err, "clCreateContext", ocl->name, rc);
-        goto fail;
+    if (base != NULL) {
+        /* a further queue of a device this process has a context on */
+        ocl->ctx = base->ctx;
+        clRetainContext(ocl->ctx);
+    } else {
+        ocl->ctx = clCreateContext(NULL, 1, &ocl->device, NULL, NULL, &rc);
+        if (rc != CL_SUCCESS) {
+            st = cl_fail(err, "clCreateContext", ocl->name, rc);
+            goto fail;
+        }
     }
     ocl->profile = opts->profile;
     /* always profiling: the device-busy time (gdt_ocl_busy_seconds) */
@@ -862,10 +1130,16 @@ gdt_status gdt_ocl_create(gdt_ocl **out, const gdt_ocl_opts *opts, gdt_error *er
         st = cl_fail(err, "clCreateCommandQueue", ocl->name, rc);
         goto fail;
     }
-    gdt_log_note(opts->log, "OpenCL device %s (%u compute units, %s, kernels from %s)", ocl->name,
-                 ocl->compute_units,
-                 ocl->fp64 ? "double-precision filter" : "integer predicates only",
-                 ocl->kernel_dir);
+    if (base != NULL) {
+        st = shared_attach(ocl, base, err);
+        if (st != GDT_OK)
+            goto fail;
+        gdt_log_note(opts->log, "OpenCL device %s: a further command queue", ocl->name);
+    } else
+        gdt_log_note(opts->log, "OpenCL device %s (%u compute units, %s, kernels from %s)",
+                     ocl->name, ocl->compute_units,
+                     ocl->fp64 ? "double-precision filter" : "integer predicates only",
+                     ocl->kernel_dir);
     free(devs);
     *out = ocl;
     return GDT_OK;
@@ -893,6 +1167,7 @@ void gdt_ocl_destroy(gdt_ocl *ocl)
         if (p->prog)
             clReleaseProgram(p->prog);
         free(p->file);
+        free(p->opts);
         free(p);
     }
     if (ocl->queue) {
@@ -900,8 +1175,10 @@ void gdt_ocl_destroy(gdt_ocl *ocl)
             busy_collect(ocl);
         for (size_t i = 0; i < ocl->npend; i++) /* a failed finish: released uncounted */
             clReleaseEvent(ocl->pend[i]);
+        ocl->npend = 0;
         clReleaseCommandQueue(ocl->queue);
     }
+    shared_detach(ocl);
     free(ocl->pend);
     if (ocl->ctx)
         clReleaseContext(ocl->ctx);
@@ -1032,19 +1309,33 @@ gdt_status gdt_ocl_build(gdt_ocl *ocl, const char *file, const char *extra,
         goto fail;
     }
     p->file = dup_str(file);
-    if (p->file == NULL) {
+    p->opts = dup_str(opts);
+    if (p->file == NULL || p->opts == NULL) {
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         goto fail;
     }
-    {
+    /* a further queue: the program the device's first context built from
+     * the same file and options (the source text, headers included, is
+     * part of neither, but both were read from the same directory at the
+     * start of the same run) */
+    if (ocl->sh != NULL)
+        for (size_t i = 0; i < ocl->sh->nprogs && p->prog == NULL; i++)
+            if (strcmp(ocl->sh->progs[i].file, file) == 0 &&
+                strcmp(ocl->sh->progs[i].opts, opts) == 0) {
+                p->prog = ocl->sh->progs[i].prog;
+                clRetainProgram(p->prog);
+            }
+    if (p->prog != NULL) {
+        rc = CL_SUCCESS;
+    } else {
         const char *srcs[1] = {src};
         p->prog = clCreateProgramWithSource(ocl->ctx, 1, srcs, NULL, &rc);
+        if (rc != CL_SUCCESS) {
+            st = cl_fail(err, "clCreateProgramWithSource", file, rc);
+            goto fail;
+        }
+        rc = clBuildProgram(p->prog, 1, &ocl->device, opts, NULL, NULL);
     }
-    if (rc != CL_SUCCESS) {
-        st = cl_fail(err, "clCreateProgramWithSource", file, rc);
-        goto fail;
-    }
-    rc = clBuildProgram(p->prog, 1, &ocl->device, opts, NULL, NULL);
     if (rc != CL_SUCCESS) {
         size_t loglen = 0;
         clGetProgramBuildInfo(p->prog, ocl->device, CL_PROGRAM_BUILD_LOG, 0, NULL, &loglen);
@@ -1116,6 +1407,7 @@ fail:
         if (p->prog)
             clReleaseProgram(p->prog);
         free(p->file);
+        free(p->opts);
         free(p);
     }
     free(log);

@@ -31,7 +31,7 @@ typedef enum opt_id {
     OPT_KEEP_CLASS, OPT_DROP_CLASS, OPT_RETURNS, OPT_KEEP_WITHHELD, OPT_MAX_EDGE,
     OPT_CONCAVITY, OPT_DEM, OPT_DEM_RES, OPT_DEM_NODATA, OPT_PREVIEW, OPT_GROUND,
     OPT_PMF_MAX_WINDOW, OPT_PMF_SLOPE, OPT_PMF_INITIAL, OPT_PMF_MAX_DISTANCE, OPT_PMF_CELL,
-    OPT_PMF_EXPONENTIAL, OPT_GROUND_OUT
+    OPT_PMF_EXPONENTIAL, OPT_GROUND_OUT, OPT_QUEUES
 } opt_id;
 
 /* The option table: every option once, with its argument, default and help. */
@@ -64,6 +64,9 @@ static const opt_spec OPTIONS[] = {
      "OpenCL device: index, PLATFORM:DEVICE, 'cpu' or 'gpu'; under mpirun 'gpu/local' "
      "(or 'cpu/local', 'local') gives a node's ranks its devices in turn; the tiled run "
      "takes several: a comma-separated list ('0,1') or 'gpu:all' ('cpu:all', 'all')"},
+    {OPT_QUEUES, "--queues", NULL, "N", "auto",
+     "command queues per device in the tile stage, 1..8: tiles run on N queues of each device "
+     "at once (auto: 2 on a GPU whose memory holds two tiles, else 1)"},
     {OPT_THREADS, "--threads", NULL, "K", "all cores", "host worker threads, 1..1024"},
     {OPT_MEM, "--mem-budget", NULL, "SIZE", "auto",
      "memory budget, at least 16M, e.g. 512M or 4G (binary units)"},
@@ -324,6 +327,10 @@ static gdt_status apply(gdt_options *opts, const opt_spec *o, const char *val, g
         st = parse_long(o->lng, val, 1, 1024, &l, err);
         opts->threads = (int)l;
         break;
+    case OPT_QUEUES:
+        st = parse_long(o->lng, val, 1, GDT_CLI_MAX_QUEUES, &l, err);
+        opts->queues = (int)l;
+        break;
     case OPT_MEM: st = parse_size(o->lng, val, &opts->mem_budget, err); break;
     case OPT_QUANTUM:
         st = parse_positive_double(o->lng, val, &opts->quantum, err);
@@ -564,6 +571,12 @@ static gdt_status refuse_unavailable(const gdt_options *opts, gdt_error *err)
                              "--device %s: several devices share the tiled run's tiles; "
                              "--single-tile runs one tile on one device",
                              opts->device);
+    if (opts->queues > 0 &&
+        ((opts->mode != GDT_MODE_RUN && opts->mode != GDT_MODE_RESUME) || opts->single_tile))
+        return gdt_error_set(err, GDT_EUSAGE, 2103,
+                             "--queues %d: several queues share the tiled run's tiles; it does "
+                             "not apply to --info, --reference or --single-tile",
+                             opts->queues);
     if (gdt_trim_on(&opts->trim) && opts->mode == GDT_MODE_RESUME)
         return gdt_error_set(err, GDT_EUSAGE, 2802,
                              "--resume DIR trims the mesh as its job recorded (no --max-edge "

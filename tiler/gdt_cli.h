@@ -21,6 +21,9 @@
 extern "C" {
 #endif
 
+/* The most command queues --queues gives a device. */
+#define GDT_CLI_MAX_QUEUES 8
+
 typedef enum gdt_mode {
     GDT_MODE_RUN = 0,   /* the tiled pipeline */
     GDT_MODE_INFO,      /* --info */
@@ -47,6 +50,7 @@ typedef struct gdt_options {
     const char *resume;      /* --resume DIR */
     const char *device;      /* --device SPEC; NULL = first device */
     int threads;             /* --threads K; 0 = number of cores */
+    int queues;              /* --queues N, command queues per device; 0 = auto */
     uint64_t mem_budget;     /* --mem-budget bytes; 0 = automatic */
     double quantum;          /* --quantum Q (CRS units) */
     gdt_dup_policy dup;      /* --dup */

@@ -144,20 +144,89 @@ static gdt_status adopt_pass2(tr_run *c, int *ok, gdt_error *err)
     return st;
 }
 
+/* The command queues a device gets, given its first core: --queues, or,
+ * on a device that is not a CPU, two when its memory holds the buffers of
+ * two tiles (the bound gdt_core_auto_tile uses), so that one tile's
+ * transfers and host work overlap another's kernels; a CPU device's
+ * kernels already use every core. */
+static int device_queues(const tr_core_start *cs, const gdt_core *core)
+{
+    uint64_t mem, need;
+    if (cs->queues > 0)
+        return cs->queues;
+    if (gdt_core_on_cpu(core) || cs->tile <= 0)
+        return 1;
+    mem = gdt_core_device_memory(core);
+    need = gdt_core_tile_bytes(cs->tile, (uint64_t)cs->tile * (uint64_t)cs->tile / 2);
+    return mem != 0 && need <= mem / 8 * 3 ? 2 : 1;
+}
+
+/* A core on spec, a further queue of its device when one of the n cores in
+ * all runs on it; added to more. */
+static void add_core(tr_core_start *cs, const char *spec, gdt_core *const *all, size_t n)
+{
+    gdt_core_opts o = cs->opts;
+    o.device = spec;
+    o.share = all;
+    o.nshare = n;
+    if (cs->nmore == cs->cap_more) {
+        cs->st = gdt_error_set(&cs->err, GDT_EINTERNAL, 7001, "too many cores");
+        return;
+    }
+    cs->st = gdt_core_create(&cs->more[cs->nmore], &o, &cs->err);
+    if (cs->st == GDT_OK)
+        cs->nmore++;
+}
+
 static void *core_start_main(void *arg)
 {
     tr_core_start *cs = arg;
     stack_t ss;
     int have = sigaltstack(NULL, &ss) == 0;
+    gdt_core **all = NULL; /* core, then more: the cores made so far */
+    const char **spec_of = NULL;
+    size_t nall = 0, nfirst;
+
     cs->st = gdt_core_create(&cs->core, &cs->opts, &cs->err);
-    /* several devices: a core on each of the others */
-    for (size_t j = 1; cs->st == GDT_OK && j < cs->nspecs; j++) {
-        gdt_core_opts o = cs->opts;
-        o.device = cs->specs[j];
-        cs->st = gdt_core_create(&cs->more[j - 1], &o, &cs->err);
-        if (cs->st == GDT_OK)
-            cs->nmore = j;
+    if (cs->st == GDT_OK) {
+        all = calloc(cs->cap_more + 1, sizeof *all);
+        spec_of = calloc(cs->cap_more + 1, sizeof *spec_of);
+        if (all == NULL || spec_of == NULL)
+            cs->st = gdt_error_set(&cs->err, GDT_EINTERNAL, 7001, "out of memory");
+        else {
+            all[nall] = cs->core;
+            spec_of[nall++] = cs->opts.device;
+        }
     }
+    /* several devices: a core on each of the others (a device named again
+     * gets a further queue) */
+    for (size_t j = 1; cs->st == GDT_OK && j < cs->nspecs; j++) {
+        add_core(cs, cs->specs[j], all, nall);
+        if (cs->st == GDT_OK) {
+            all[nall] = cs->more[cs->nmore - 1];
+            spec_of[nall++] = cs->specs[j];
+        }
+    }
+    /* then every device's further queues, up to what it gets */
+    nfirst = nall;
+    for (size_t i = 0; cs->st == GDT_OK && i < nfirst; i++) {
+        int want, got = 0;
+        if (gdt_core_shares_device(all[i]))
+            continue;
+        want = device_queues(cs, all[i]);
+        for (size_t k = 0; k < nall; k++)
+            got += gdt_core_same_device(all[k], all[i]);
+        for (; cs->st == GDT_OK && got < want; got++) {
+            add_core(cs, spec_of[i], &all[i], 1);
+            if (cs->st == GDT_OK)
+                all[nall++] = cs->more[cs->nmore - 1];
+        }
+        if (cs->st == GDT_OK && got > 1)
+            gdt_log_note(cs->opts.log, "%s: %d command queues in the tile stage",
+                         gdt_core_device_name(all[i]), got);
+    }
+    free(all);
+    free(spec_of);
     /* The compiler inside the OpenCL runtime gives the thread an alternate
      * signal stack of its own; put back the one the thread had, which
      * whoever set it up (a sanitizer's runtime) releases at thread exit. */
@@ -217,6 +286,7 @@ static void choose_tile(tr_run *c)
         gdt_ocl_opts oo;
         gdt_ocl_device_info info;
         gdt_error e;
+        uint64_t q;
         int t;
         memset(&oo, 0, sizeof oo);
         oo.device = cs->nspecs > 0 ? cs->specs[j] : cs->opts.device;
@@ -227,7 +297,10 @@ static void choose_tile(tr_run *c)
             c->tile = GDT_CORE_CPU_TILE;
             return;
         }
-        t = gdt_core_auto_tile(info.is_cpu, info.global_mem, info.max_alloc, host / ndev);
+        /* every queue of the device holds a tile (auto: two on a GPU) */
+        q = c->opts->queues > 0 ? (uint64_t)c->opts->queues : info.is_cpu ? 1 : 2;
+        t = gdt_core_auto_tile(info.is_cpu, info.global_mem / q, info.max_alloc,
+                               host / ndev / q);
         if (t < c->tile)
             c->tile = t;
         gdt_log_note(&c->log, "--tile %d for %s (%s, %.1f GiB of device memory)", t, info.name,
@@ -250,16 +323,19 @@ gdt_status tr_run_start_core(tr_run *c, gdt_error *err)
         if (st != GDT_OK)
             return st;
         c->cstart.opts.device = c->cstart.specs[0];
-        if (c->cstart.nspecs > 1) {
-            c->cstart.more = calloc(c->cstart.nspecs - 1, sizeof *c->cstart.more);
-            if (c->cstart.more == NULL)
-                return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-        }
         gdt_log_note(&c->log, "--device %s: %zu cores in the tile stage", c->opts->device,
                      c->cstart.nspecs);
     }
+    /* room for the other devices' cores and every device's further queues */
+    c->cstart.cap_more =
+        (c->cstart.nspecs > 0 ? c->cstart.nspecs : 1) * (size_t)GDT_CLI_MAX_QUEUES - 1;
+    c->cstart.more = calloc(c->cstart.cap_more, sizeof *c->cstart.more);
+    if (c->cstart.more == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    c->cstart.queues = c->opts->queues;
     if (!c->opts->tile_set)
         choose_tile(c);
+    c->cstart.tile = c->tile;
     core_start_begin(&c->cstart);
     return gdt_certifier_create(&c->certifier, gdt_cli_threads(c->opts->threads), err);
 }

@@ -650,8 +650,9 @@ static gdt_status tiles_loop(tr_run *c, const tr_tile_set *set, uint64_t n,
     return st;
 }
 
-/* The busy time of every core of the tile stage so far, their number in
- * *ndev (waits for their queues: call it while no lane runs). */
+/* The busy time of every device of the tile stage so far, their number in
+ * *ndev (waits for their queues: call it while no lane runs; a device with
+ * several queues is counted once, by its first core). */
 static double devices_busy(tr_run *c, size_t *ndev)
 {
     double b = 0.0;
@@ -661,7 +662,7 @@ static double devices_busy(tr_run *c, size_t *ndev)
         ++*ndev;
     }
     for (size_t j = 0; j < c->cstart.nmore; j++)
-        if (c->cstart.more[j] != NULL) {
+        if (c->cstart.more[j] != NULL && !gdt_core_shares_device(c->cstart.more[j])) {
             b += gdt_core_device_busy(c->cstart.more[j]);
             ++*ndev;
         }

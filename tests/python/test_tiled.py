@@ -685,15 +685,18 @@ def test_without_tile_the_device_chooses(gdt_bin, tmp_path):
     assert c["tile"] == 1024 and c["tile_auto"] is False and "--tile 1024 for" not in r.stderr
 
 
-@pytest.mark.parametrize("devices", [pytest.param("0,0", marks=pytest.mark.sanitize),
-                                     "0,0,0", "cpu:all", "all"])
-def test_several_devices_give_the_same_bytes(gdt_bin, tmp_path, devices):
-    """Tiles shared by several cores (one PoCL device opened several times, or
-    every device of a type) give the bytes of one device, --json figures
-    included."""
+@pytest.mark.parametrize("extra", [pytest.param(["--device", "0,0"], marks=pytest.mark.sanitize),
+                                   ["--device", "0,0,0"], ["--device", "cpu:all"],
+                                   ["--device", "all"],
+                                   pytest.param(["--queues", "2"], marks=pytest.mark.sanitize),
+                                   ["--queues", "3", "--device", "0,0"]])
+def test_several_devices_give_the_same_bytes(gdt_bin, tmp_path, extra):
+    """Tiles shared by several cores (several command queues of the one PoCL
+    device, or every device of a type) give the bytes of one device, --json
+    figures included."""
     cloud = tu.gen_cloud(tmp_path / "c.las", 20000, 9, "lidar", "--dup-fraction", "0.02")
     outs = []
-    for tag, extra in (("one", []), ("many", ["--device", devices])):
+    for tag, extra in (("one", []), ("many", extra)):
         out, js = tmp_path / f"{tag}.ply", tmp_path / f"{tag}.json"
         r = tu.run([gdt_bin, cloud, "--tile", "64", "--cell", "0.1", "-o", out, "--json", js,
                     "-q", *extra])
@@ -706,21 +709,21 @@ def test_several_devices_give_the_same_bytes(gdt_bin, tmp_path, devices):
         assert sa.get(key) == sb.get(key), key
 
 
-@pytest.mark.parametrize("devices", [None, "0,0"])
-def test_device_busy_share_is_reported(gdt_bin, tmp_path, devices):
-    """--json reports the devices' busy time in the tile stage (the summed
-    execution times of the commands on each core's queue) and its share of
-    the stage's time per device; -v prints both.  The share is a fraction:
-    above 0 when tiles were triangulated, at most 1 (each queue is in order,
-    so a device's commands never overlap), and 0 when every tile is reused."""
+@pytest.mark.parametrize("extra", [[], ["--device", "0,0"], ["--queues", "3"]])
+def test_device_busy_share_is_reported(gdt_bin, tmp_path, extra):
+    """--json reports the device's busy time in the tile stage (the time at
+    least one of its queues was executing a command) and its share of the
+    stage's time; -v prints both.  The share is a fraction: above 0 when
+    tiles were triangulated, at most 1 also with several queues on the one
+    device (their commands' overlaps are counted once), and 0 when every
+    tile is reused."""
     cloud = tu.gen_cloud(tmp_path / "c.las", 60000, 5, "lidar")
     out, js, job = tmp_path / "o.ply", tmp_path / "o.json", tmp_path / "job"
-    extra = ["--device", devices] if devices else []
     r = tu.run([gdt_bin, cloud, "--tile", "128", "-o", out, "--json", js, "-v", "--keep-job",
                 "--job", job, *extra])
     assert r.returncode == 0, r.stderr
     t = json.loads(js.read_text())["times"]
-    ndev = 2 if devices else 1
+    ndev = 1  # the one PoCL device, however many queues
     assert 0 < t["device_busy"] <= t["tiles"] * ndev * 1.001, t
     assert 0 < t["device_busy_share"] <= 1.0, t
     assert abs(t["device_busy_share"] - t["device_busy"] / (t["tiles"] * ndev)) < 1e-6, t
@@ -747,6 +750,34 @@ def test_bad_device_lists(gdt_bin, tmp_path, spec, code):
     assert r.returncode == code, r.stderr
     assert spec in r.stderr
     assert not (tmp_path / "o.ply").exists()
+
+
+@pytest.mark.parametrize("args", [["--queues", "0"], ["--queues", "9"], ["--queues", "x"],
+                                  ["--queues", "2", "--single-tile"],
+                                  ["--queues", "2", "--reference"]])
+def test_bad_queue_counts(gdt_bin, tmp_path, args):
+    """--queues takes 1..8, for the tiled run only: anything else is a usage
+    error naming the option, before any output."""
+    cloud = tu.gen_cloud(tmp_path / "c.las", 500, 2, "uniform")
+    r = tu.run([gdt_bin, cloud, "-o", tmp_path / "o.ply", *args])
+    assert r.returncode == 2, r.stderr
+    assert "--queues" in r.stderr
+    assert not (tmp_path / "o.ply").exists()
+
+
+def test_queues_share_the_device(gdt_bin, tmp_path):
+    """--queues N gives the device N command queues in the tile stage, the
+    further ones in its context with its built kernels (-v says so), and a
+    device named twice in --device gets one further queue, not a second
+    context; a CPU device gets one queue unless asked."""
+    cloud = tu.gen_cloud(tmp_path / "c.las", 5000, 3, "lidar")
+    for args, queues in (([], 1), (["--queues", "3"], 3), (["--device", "0,0"], 2),
+                         (["--device", "0,0", "--queues", "3"], 3)):
+        r = tu.run([gdt_bin, cloud, "--tile", "128", "-o", tmp_path / "o.ply", "-v", *args])
+        assert r.returncode == 0, r.stderr
+        assert r.stderr.count("a further command queue") == queues - 1, (args, r.stderr)
+        assert (f"{queues} command queues in the tile stage" in r.stderr) == (queues > 1), \
+            (args, r.stderr)
 
 
 def test_single_tile_refuses_a_device_list(gdt_bin, tmp_path):

@@ -226,8 +226,12 @@ typedef struct tr_core_start {
                            (gdt_ocl_device_list), opts.device = specs[0]; owned */
     size_t nspecs;
     gdt_core *core;     /* on opts.device */
-    gdt_core **more;    /* on specs[1..nspecs): the tile stage's lanes; owned */
+    gdt_core **more;    /* on specs[1..nspecs), then the further queues of every
+                           device (core_queues): the tile stage's lanes; owned */
     size_t nmore;       /* created */
+    size_t cap_more;    /* room in more */
+    int queues;         /* --queues (0: auto) */
+    int tile;           /* the tile side (auto queues: whether two tiles fit) */
     gdt_error err;
     gdt_status st;
     pthread_t thread;
