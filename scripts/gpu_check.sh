@@ -4,7 +4,8 @@
 # printed as one table.
 #
 #   scripts/gpu_check.sh --make-bundle DIR [--build-dir B]   (here, with the build)
-#   DIR/gpu_check.sh [--cpu] [--sizes LIST] [--perf-sizes LIST] [--timeout S] [--own-libc]
+#   DIR/gpu_check.sh [--cpu] [--sizes LIST] [--perf-sizes LIST] [--e2e-sizes LIST]
+#                    [--timeout S] [--own-libc]
 #
 # --make-bundle copies into DIR what a bare machine lacks: the core driver
 # gcd_run (tests/tools/gcd_run.c) with every shared library it loads (the
@@ -12,8 +13,10 @@
 # dynamic loader, used when the machine's glibc is older than this one's, or
 # with --own-libc), CGAL's triangulation as a static program
 # (tests/tools/cgal_bench.cpp, target cgal_bench_static, built when CGAL and
-# the static GMP and MPFR are installed), the kernel sources and this
-# script.  Nothing is installed anywhere.
+# the static GMP and MPFR are installed), the program gdt-tile itself (its
+# launcher and module with their libraries; not the PCL and GDAL plug-ins,
+# which a plain run does not load), the kernel sources and this script.
+# Nothing is installed anywhere.
 #
 # Run from a bundle, on a machine with an NVIDIA driver: it finds the
 # driver's OpenCL library (libnvidia-opencl.so.1) and writes an ICD file
@@ -26,11 +29,16 @@
 #     1M 4M 16M 64M), and CGAL's time (Delaunay_triangulation_2, Epick, one
 #     thread, best of 1) on the same points on this machine's CPU, with the
 #     ratio CGAL / core (above 1: the core is faster);
+#   - end to end, gdt-tile on a generated LiDAR-like cloud (binary PCD) at
+#     each of --e2e-sizes (default 16M), the tile side its own choice for
+#     the device, with one and with two command queues (--queues): wall
+#     time, the tile stage, the core's time in it and the share of the tile
+#     stage the device was busy;
 #   - the device's name and memory;
 # as one table.  The sizes are meant to finish within 8 minutes on an
 # H100/H200-class machine; each gcd_run is cut at --timeout (420 s).
 # --cpu runs the same on this machine's OpenCL CPU device (PoCL), sizes
-# scaled down unless given (default 20K 50K, perf 50K 200K), which is how
+# scaled down unless given (default 20K 50K, perf 50K 200K, e2e 100K), which is how
 # the script itself is tested.  Exit: 0 every check passed; 1 a check
 # failed; 2 usage; 3 no OpenCL GPU driver.
 set -euo pipefail
@@ -39,26 +47,32 @@ HERE=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 
 usage() {
   echo "usage: gpu_check.sh --make-bundle DIR [--build-dir B] | [--cpu] [--sizes LIST]" \
-       "[--perf-sizes LIST] [--timeout S] [--own-libc]" >&2
+       "[--perf-sizes LIST] [--e2e-sizes LIST] [--timeout S] [--own-libc]" >&2
   exit 2
 }
 
 # ---- building the bundle (on the build machine) ----------------------------
-make_bundle() {
-  local dir=$1 build=$2 exe lib
-  exe=$build/tests/gcd_run
-  [ -x "$exe" ] || { echo "gpu_check: $exe not built" >&2; exit 2; }
-  mkdir -p "$dir/lib" "$dir/libc" "$dir/kernels"
-  cp "$exe" "$dir/gcd_run"
-  # every library the driver loads: the C library's own (and its loader,
-  # and the parts a vendor driver may load: libpthread, libdl, librt) in
-  # libc/, the others in lib/
+# every library exe loads: the C library's own (and its loader) in DIR/libc/,
+# the others in DIR/lib/
+copy_libs() {
+  local exe=$1 dir=$2 lib
   ldd "$exe" | awk '/=> \// {print $3} /^\t\/.*ld-linux/ {print $1}' | while read -r lib; do
     case "$(basename "$lib")" in
       ld-linux*|libc.so*|libm.so*) cp -L "$lib" "$dir/libc/" ;;
       *) cp -L "$lib" "$dir/lib/" ;;
     esac
   done
+}
+
+make_bundle() {
+  local dir=$1 build=$2 exe lib
+  exe=$build/tests/gcd_run
+  [ -x "$exe" ] || { echo "gpu_check: $exe not built" >&2; exit 2; }
+  mkdir -p "$dir/lib" "$dir/libc" "$dir/kernels"
+  cp "$exe" "$dir/gcd_run"
+  copy_libs "$exe" "$dir"
+  # and the parts of the C library a vendor driver may load: libpthread,
+  # libdl, librt
   for lib in libpthread.so.0 libdl.so.2 librt.so.1; do
     for d in /lib/x86_64-linux-gnu /usr/lib/x86_64-linux-gnu /lib64; do
       if [ -e "$d/$lib" ]; then cp -L "$d/$lib" "$dir/libc/"; break; fi
@@ -70,6 +84,16 @@ make_bundle() {
   else
     echo "gpu_check: no static CGAL harness in $build (needs libcgal-dev and the static" \
          "GMP and MPFR): the table will have no CGAL times" >&2
+  fi
+  if [ -x "$build/tiler/gdt-tile" ] && [ -f "$build/tiler/libgdt-tile.so" ]; then
+    # the launcher loads its module from the directory of the running
+    # program: beside it, and beside the bundle's loader (libc/), which is
+    # the running program when the bundle's C library runs it
+    cp "$build/tiler/gdt-tile" "$build/tiler/libgdt-tile.so" "$dir/"
+    ln -sf ../libgdt-tile.so "$dir/libc/libgdt-tile.so"
+    copy_libs "$build/tiler/libgdt-tile.so" "$dir"
+  else
+    echo "gpu_check: no gdt-tile in $build/tiler: the table will have no end-to-end rows" >&2
   fi
   cp "$HERE/../kernels/"*.cl "$HERE/../kernels/"*.clh "$dir/kernels/"
   cp "${BASH_SOURCE[0]}" "$dir/gpu_check.sh"
@@ -97,6 +121,7 @@ CPU=0
 OWN_LIBC=0
 SIZES=""
 PERF=""
+E2E=""
 TIMEOUT=420
 BUNDLE_OUT=""
 BUILD_DIR="$HERE/../build"
@@ -107,6 +132,7 @@ while [ $# -gt 0 ]; do
     --cpu) CPU=1; shift ;;
     --sizes) SIZES=$2; shift 2 ;;
     --perf-sizes) PERF=$2; shift 2 ;;
+    --e2e-sizes) E2E=$2; shift 2 ;;
     --timeout) TIMEOUT=$2; shift 2 ;;
     --own-libc) OWN_LIBC=1; shift ;;
     *) usage ;;
@@ -123,10 +149,12 @@ if [ "$CPU" -eq 1 ]; then
   DEVICE=cpu
   SIZES=${SIZES:-"20K 50K"}
   PERF=${PERF:-"50K 200K"}
+  E2E=${E2E:-"100K"}
 else
   DEVICE=gpu
   SIZES=${SIZES:-"1M 4M"}
   PERF=${PERF:-"1M 4M 16M 64M"}
+  E2E=${E2E:-"16M"}
   NV=""
   for d in $(ldconfig -p 2>/dev/null | awk '/libnvidia-opencl\.so\.1/ {print $NF}') \
            /usr/lib/x86_64-linux-gnu/libnvidia-opencl.so.1 /usr/lib64/libnvidia-opencl.so.1 \
@@ -158,11 +186,19 @@ if [ "$OWN_LIBC" -eq 0 ] && [ -n "$SYSLIBC" ] && ver_ge "$SYSLIBC" "$(cat "$HERE
     LD_LIBRARY_PATH="$HERE/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}" timeout "$TIMEOUT" \
       "$HERE/gcd_run" --device "$DEVICE" "$@"
   }
+  run_tile() {
+    LD_LIBRARY_PATH="$HERE/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}" timeout "$TIMEOUT" \
+      "$HERE/gdt-tile" --device "$DEVICE" "$@"
+  }
 else
   LIBC_NOTE="the bundle's glibc $(cat "$HERE/libc/VERSION")"
   LOADER=$(ls "$HERE"/libc/ld-linux* | head -1)
   run_core() {
     timeout "$TIMEOUT" "$LOADER" --library-path "$HERE/lib:$HERE/libc" "$HERE/gcd_run" \
+      --device "$DEVICE" "$@"
+  }
+  run_tile() {
+    timeout "$TIMEOUT" "$LOADER" --library-path "$HERE/lib:$HERE/libc" "$HERE/gdt-tile" \
       --device "$DEVICE" "$@"
   }
 fi
@@ -219,6 +255,40 @@ for s in $PERF; do
   fi
 done
 
+# end to end: gdt-tile on a generated cloud, one and two queues
+erow=()
+E2E_ON=0
+[ -x "$HERE/gdt-tile" ] && E2E_ON=1
+# a member of the "times" object of a --json file (one member a line)
+jtime() { awk -v k="\"$1\":" '/"times": \{/ {t = 1; next} t && /}/ {t = 0}
+  t && $1 == k {gsub(",", "", $2); print $2}' "$2"; }
+for s in $([ "$E2E_ON" -eq 1 ] && echo "$E2E"); do
+  n=$(count_of "$s")
+  if ! out=$(run_core --gen lidar "$n" 7 --grid "$(grid_of "$n")" --dump-pcd "$PTS/e2e.pcd" \
+               --dump-only 2>&1); then
+    erow+=("$(printf '%10s FAILED %s' "$n" "$(tail -1 <<< "$out")")")
+    fail=1
+    continue
+  fi
+  for q in 1 2; do
+    t0=$(date +%s.%N)
+    if out=$(run_tile "$PTS/e2e.pcd" -o "$PTS/e2e.ply" --queues "$q" --json "$PTS/e2e.json" \
+               -q 2>&1); then
+      t1=$(date +%s.%N)
+      tile=$(awk '$1 == "\"tile\":" {gsub(",", "", $2); print $2}' "$PTS/e2e.json")
+      erow+=("$(printf '%10s %6s %6s %8.3f %8.3f %8.3f %6.1f' "$n" "$tile" "$q" \
+        "$(awk -v a="$t0" -v b="$t1" 'BEGIN { print b - a }')" "$(jtime tiles "$PTS/e2e.json")" \
+        "$(jtime core "$PTS/e2e.json")" \
+        "$(awk -v s="$(jtime device_busy_share "$PTS/e2e.json")" 'BEGIN { print 100 * s }')")")
+    else
+      erow+=("$(printf '%10s %6s %6s FAILED %s' "$n" "-" "$q" "$(tail -1 <<< "$out")")")
+      fail=1
+    fi
+    rm -rf "$PTS/e2e.ply" "$PTS/e2e.json" "$PTS/e2e.ply.gdt-job"
+  done
+  rm -f "$PTS/e2e.pcd"
+done
+
 if [ "$CPU" -eq 1 ]; then
   mem="$(awk '/MemTotal/ {printf "%.1f GiB host memory", $2 / 1048576}' /proc/meminfo)"
 elif command -v nvidia-smi >/dev/null 2>&1; then
@@ -241,5 +311,13 @@ else
     download total Mpt/s
 fi
 printf '%s\n' "${prow[@]}"
+if [ "$E2E_ON" -eq 1 ]; then
+  echo "end to end, gdt-tile on lidar points (binary PCD), tile side its own choice," \
+    "seconds; busy = % of the tile stage the device worked"
+  printf '%10s %6s %6s %8s %8s %8s %6s\n' points tile queues wall tiles core busy%
+  printf '%s\n' "${erow[@]}"
+else
+  echo "end to end: no gdt-tile in the bundle"
+fi
 echo "gpu_check: $(( $(date +%s) - T_START )) s"
 exit "$fail"

@@ -1,8 +1,9 @@
 """scripts/gpu_check.sh, the one command for a GPU machine, run here on the
-OpenCL CPU device (--cpu): the bundle it carries (the core driver with its
-libraries, the C library too, the kernels) works from its own folder, with
-this machine's C library or its own, prints the table, and a failing check
-fails it; without an NVIDIA driver it says so in one line (exit 3)."""
+OpenCL CPU device (--cpu): the bundle it carries (the core driver and
+gdt-tile with their libraries, the C library too, the kernels) works from
+its own folder, with this machine's C library or its own, prints the table,
+and a failing check fails it; without an NVIDIA driver it says so in one
+line (exit 3)."""
 import os
 import pathlib
 import shutil
@@ -38,7 +39,8 @@ def run(bundle, *args, timeout=600):
 
 @pytest.mark.parametrize("libc", [[], ["--own-libc"]])
 def test_cpu_run_prints_the_table(bundle, libc):
-    r = run(bundle, "--cpu", "--sizes", "8K", "--perf-sizes", "20K 30K", *libc)
+    r = run(bundle, "--cpu", "--sizes", "8K", "--perf-sizes", "20K 30K", "--e2e-sizes", "40K",
+            *libc)
     if r.returncode == 77 or "no OpenCL" in r.stdout + r.stderr:
         pytest.skip("no OpenCL CPU device")
     assert r.returncode == 0, r.stdout + r.stderr
@@ -53,6 +55,14 @@ def test_cpu_run_prints_the_table(bundle, libc):
     cgal = (bundle / "cgal_bench").exists()
     assert len(perf) == 2 and all(len(p) == (13 if cgal else 11) for p in perf), r.stdout
     assert lines[-1].startswith("gpu_check: ") and lines[-1].endswith(" s"), lines[-1]
+    # end to end: gdt-tile from the bundle with one and two queues, the
+    # tile side its choice for a CPU device, the busy share a percentage
+    e2e = [ln.split() for ln in lines if ln.split()[:1] == ["40000"]]
+    assert [(p[0], p[1], p[2]) for p in e2e] == [("40000", "4096", "1"), ("40000", "4096", "2")], \
+        r.stdout
+    for p in e2e:
+        wall, tiles, core, busy = (float(v) for v in p[3:7])
+        assert 0 < tiles < wall and 0 < core and 0 < busy <= 100, p
     for p in perf:
         if cgal:
             assert float(p[11]) > 0 and float(p[12]) > 0, p

@@ -5,11 +5,14 @@
  *           [--check] [--reference] [--no-fp64] [--check-phases] [--profile]
  *           [--gpu-layout] [--copy-out]
  *           (--gen uniform|lidar|grid COUNT SEED | --points FILE | --cloud LAS/PCD)
- *           [--dump-points FILE] [--json]
+ *           [--dump-points FILE] [--dump-pcd FILE [--dump-only]] [--json]
  *
  * Points files (also read by tests/tools/cgal_bench.cpp): the 8 bytes
  * "GDTPTS1\n", a little-endian uint64 count, then count pairs of int64 x, y
  * (tile-local lattice coordinates).  --dump-points writes the generated set.
+ * --dump-pcd writes it as a binary PCD cloud for gdt-tile: x and y in
+ * metres on a 1 cm lattice (x = 0.01 ix), z a smooth terrain of them, all
+ * doubles; with --dump-only nothing else is done (no device is opened).
  * --cloud reads a LAS or PCD file like gdt-tile --reference does (every
  * point, duplicates merged keeping the first, input order, coordinates
  * relative to the lower-left corner).
@@ -25,6 +28,7 @@
  * Output: one line of figures, or one JSON object with --json.
  * Exit: 0 ok, 1 failure, 2 usage, 77 no OpenCL device. */
 #include <inttypes.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -51,6 +55,25 @@ static int write_points(const char *path, const gdt_ipt *p, size_t n)
     for (size_t i = 0; ok && i < n; i++) {
         int64_t xy[2] = {p[i].x, p[i].y};
         ok = fwrite(xy, 8, 2, f) == 2;
+    }
+    if (f != NULL && fclose(f) != 0)
+        ok = 0;
+    return ok ? 0 : -1;
+}
+
+static int write_pcd(const char *path, const gdt_ipt *p, size_t n)
+{
+    FILE *f = fopen(path, "wb");
+    int ok = f != NULL &&
+             fprintf(f,
+                     "# .PCD v0.7 - gcd_run\nVERSION 0.7\nFIELDS x y z\nSIZE 8 8 8\n"
+                     "TYPE F F F\nCOUNT 1 1 1\nWIDTH %zu\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\n"
+                     "POINTS %zu\nDATA binary\n",
+                     n, n) > 0;
+    for (size_t i = 0; ok && i < n; i++) {
+        double x = 0.01 * (double)p[i].x, y = 0.01 * (double)p[i].y;
+        double xyz[3] = {x, y, 100.0 + 0.02 * x + 3.0 * sin(0.01 * x) * cos(0.013 * y)};
+        ok = fwrite(xyz, 8, 3, f) == 3;
     }
     if (f != NULL && fclose(f) != 0)
         ok = 0;
@@ -157,14 +180,15 @@ static void usage(void)
                     "[--repeat K] [--check] [--reference] [--no-fp64] [--check-phases] [--profile] "
                     "[--gpu-layout] [--copy-out] "
                     "(--gen uniform|lidar|grid COUNT SEED | --points FILE | --cloud LAS/PCD) "
-                    "[--dump-points FILE] [--json]\n");
+                    "[--dump-points FILE] [--dump-pcd FILE [--dump-only]] [--json]\n");
 }
 
 int main(int argc, char **argv)
 {
-    const char *device = NULL, *gen = NULL, *in = NULL, *dump = NULL, *cloud = NULL;
+    const char *device = NULL, *gen = NULL, *in = NULL, *dump = NULL, *cloud = NULL,
+               *dump_pcd = NULL;
     int grid = 4096, repeat = 1, check = 0, reference = 0, json = 0, nofp64 = 0, check_phases = 0,
-        profile = 0, gpu_layout = 0, copy_out = 0;
+        profile = 0, gpu_layout = 0, copy_out = 0, dump_only = 0;
     gdt_core_path_choice path = GDT_CORE_PATH_AUTO;
     size_t count = 0, n = 0;
     uint64_t seed = 1;
@@ -214,12 +238,17 @@ int main(int argc, char **argv)
             cloud = argv[++i];
         else if (strcmp(argv[i], "--dump-points") == 0 && i + 1 < argc)
             dump = argv[++i];
+        else if (strcmp(argv[i], "--dump-pcd") == 0 && i + 1 < argc)
+            dump_pcd = argv[++i];
+        else if (strcmp(argv[i], "--dump-only") == 0)
+            dump_only = 1;
         else {
             usage();
             return 2;
         }
     }
-    if ((gen != NULL) + (in != NULL) + (cloud != NULL) != 1 || repeat < 1) {
+    if ((gen != NULL) + (in != NULL) + (cloud != NULL) != 1 || repeat < 1 ||
+        (dump_only && dump_pcd == NULL && dump == NULL)) {
         usage();
         return 2;
     }
@@ -259,6 +288,14 @@ int main(int argc, char **argv)
     }
     if (dump != NULL && write_points(dump, pts, n) != 0) {
         fprintf(stderr, "gcd_run: cannot write %s\n", dump);
+        goto done;
+    }
+    if (dump_pcd != NULL && write_pcd(dump_pcd, pts, n) != 0) {
+        fprintf(stderr, "gcd_run: cannot write %s\n", dump_pcd);
+        goto done;
+    }
+    if (dump_only) {
+        rc = 0;
         goto done;
     }
     memset(&o, 0, sizeof o);
