@@ -7,6 +7,7 @@
 #include <CL/cl.h>
 
 #include "gdt_ocl.h"
+#include "private/busy_union.h"
 
 #include <ctype.h>
 #include <errno.h>
@@ -54,17 +55,9 @@ struct gdt_ocl_buf {
 };
 
 /* What the queues of one device share once it has more than one: the
- * built programs, and the device-busy union of their commands' intervals.
- *
- * Invariants (under mu): q[0..nq) are the live contexts of the device;
- * iv[0..n) are execution intervals (device clock) not yet folded; folded_s
- * is the length of the union of every interval folded so far, all of which
- * end at or before folded_end.  A queue's commands are collected in order
- * and never overlap; one whose commands are not all collected
- * (bu_pending) starts its next one at or after its bu_last_end, and one
- * with none pending starts its next one after now, after every collected
- * end.  So an interval that ends at or before the least bu_last_end of the
- * pending queues can overlap no interval still to come: fold folds those. */
+ * built programs, and the device-busy union of their commands' intervals
+ * (private/busy_union.h).  Under mu: q[0..nq) are the device's live
+ * contexts, busy and every context's bq. */
 typedef struct ocl_shared_prog {
     char *file, *opts;
     cl_program prog; /* retained */
@@ -81,10 +74,7 @@ typedef struct ocl_shared {
     size_t nq;
     ocl_shared_prog *progs;
     size_t nprogs;
-    cl_ulong (*iv)[2];
-    size_t n, cap;
-    double folded_s;
-    cl_ulong folded_end;
+    gdt_busy_union busy;
 } ocl_shared;
 
 struct gdt_ocl {
@@ -116,10 +106,9 @@ struct gdt_ocl {
     size_t npend, cappend;
     double busy_s;
     /* A device with several queues (gdt_ocl_create with opts->share). */
-    ocl_shared *sh;       /* NULL while the device has this queue alone */
-    int further;          /* a further queue: the context is another's */
-    int bu_pending;       /* under sh->mu: commands not yet collected */
-    cl_ulong bu_last_end; /* under sh->mu: end of the last collected command */
+    ocl_shared *sh;    /* NULL while the device has this queue alone */
+    int further;       /* a further queue: the context is another's */
+    gdt_busy_queue bq; /* under sh->mu: this queue in the device's busy union */
 };
 
 #define OCL_PEND_MAX 65536 /* pending events before a finish collects them */
@@ -148,57 +137,22 @@ static void ev_keep(gdt_ocl *ocl, cl_event *slot)
 {
     if (slot != NULL && *slot != NULL) {
         ocl->npend++;
-        if (ocl->sh != NULL && !ocl->bu_pending) {
+        if (ocl->sh != NULL && !ocl->bq.pending) {
             pthread_mutex_lock(&ocl->sh->mu);
-            ocl->bu_pending = 1;
+            ocl->bq.pending = 1;
             pthread_mutex_unlock(&ocl->sh->mu);
         }
     }
 }
 
-static int iv_cmp(const void *a, const void *b)
-{
-    const cl_ulong *x = a, *y = b;
-    return x[0] < y[0] ? -1 : x[0] > y[0] ? 1 : x[1] < y[1] ? -1 : x[1] > y[1];
-}
-
-/* Folds the stored intervals that no interval still to come can overlap
- * (all of them with all set: every queue is idle), see ocl_shared; the
- * rest stay, merged.  sh->mu held. */
+/* Folds the device's stored intervals that can no longer overlap one
+ * still to come (busy_union.h).  sh->mu held. */
 static void shared_fold(ocl_shared *sh, int all)
 {
-    cl_ulong t = ~(cl_ulong)0;
-    size_t keep = 0;
-    if (!all)
-        for (size_t i = 0; i < sh->nq; i++)
-            if (sh->q[i]->bu_pending && sh->q[i]->bu_last_end < t)
-                t = sh->q[i]->bu_last_end;
-    if (sh->n == 0)
-        return;
-    qsort(sh->iv, sh->n, sizeof sh->iv[0], iv_cmp);
-    for (size_t i = 0; i < sh->n;) {
-        cl_ulong a = sh->iv[i][0], b = sh->iv[i][1];
-        size_t j = i + 1;
-        while (j < sh->n && sh->iv[j][0] <= b) {
-            if (sh->iv[j][1] > b)
-                b = sh->iv[j][1];
-            j++;
-        }
-        if (b <= t) {
-            if (a < sh->folded_end)
-                a = sh->folded_end;
-            if (b > a)
-                sh->folded_s += 1e-9 * (double)(b - a);
-            if (b > sh->folded_end)
-                sh->folded_end = b;
-        } else {
-            sh->iv[keep][0] = a;
-            sh->iv[keep][1] = b;
-            keep++;
-        }
-        i = j;
-    }
-    sh->n = keep;
+    const gdt_busy_queue *qs[OCL_QUEUES_MAX];
+    for (size_t i = 0; i < sh->nq; i++)
+        qs[i] = &sh->q[i]->bq;
+    gdt_busy_fold(&sh->busy, qs, sh->nq, all);
 }
 
 /* The execution interval of a complete command's event, device clock;
@@ -220,32 +174,13 @@ static void shared_collect(gdt_ocl *ocl)
     pthread_mutex_lock(&sh->mu);
     for (size_t i = 0; i < ocl->npend; i++) {
         cl_ulong t0, t1;
-        if (ev_interval(ocl->pend[i], &t0, &t1)) {
-            if (sh->n == sh->cap) {
-                size_t cap = sh->cap ? 2 * sh->cap : 1024;
-                void *g = realloc(sh->iv, cap * sizeof sh->iv[0]);
-                if (g != NULL) {
-                    sh->iv = g;
-                    sh->cap = cap;
-                }
-            }
-            if (sh->n < sh->cap) {
-                sh->iv[sh->n][0] = t0;
-                sh->iv[sh->n][1] = t1;
-                sh->n++;
-            } else {
-                /* no memory to hold it: counted alone (an overlap with
-                 * another queue is then counted twice) */
-                sh->folded_s += 1e-9 * (double)(t1 - t0);
-            }
-            if (t1 > ocl->bu_last_end)
-                ocl->bu_last_end = t1;
-        }
+        if (ev_interval(ocl->pend[i], &t0, &t1))
+            gdt_busy_add(&sh->busy, &ocl->bq, t0, t1);
         clReleaseEvent(ocl->pend[i]);
     }
     ocl->npend = 0;
-    ocl->bu_pending = 0;
-    if (sh->n >= OCL_FOLD_AT)
+    ocl->bq.pending = 0;
+    if (sh->busy.n >= OCL_FOLD_AT)
         shared_fold(sh, 0);
     pthread_mutex_unlock(&sh->mu);
 }
@@ -310,8 +245,7 @@ double gdt_ocl_busy_seconds(gdt_ocl *ocl)
             busy_collect(q);
     }
     pthread_mutex_lock(&sh->mu);
-    shared_fold(sh, 1);
-    v = sh->folded_s;
+    v = gdt_busy_seconds(&sh->busy);
     pthread_mutex_unlock(&sh->mu);
     return v;
 }
@@ -335,7 +269,7 @@ static void shared_free(ocl_shared *sh)
             clReleaseProgram(sh->progs[i].prog);
     }
     free(sh->progs);
-    free(sh->iv);
+    gdt_busy_free(&sh->busy);
     pthread_mutex_destroy(&sh->mu);
     free(sh);
 }
@@ -375,7 +309,8 @@ static gdt_status shared_attach(gdt_ocl *ocl, gdt_ocl *base, gdt_error *err)
         }
         if (base->npend > 0 && clFinish(base->queue) == CL_SUCCESS)
             busy_collect(base);
-        sh->folded_s = base->busy_s;
+        gdt_busy_init(&sh->busy);
+        sh->busy.folded_s = base->busy_s;
         sh->q[sh->nq++] = base;
         base->sh = sh;
     }

@@ -71,6 +71,11 @@ gdt_add_test_exe(test_gcd_flip ${CMAKE_CURRENT_SOURCE_DIR}/c/test_gcd_flip.c ${G
 add_test(NAME gcd_flip COMMAND test_gcd_flip)
 set_tests_properties(gcd_flip PROPERTIES LABELS "gcd" SKIP_RETURN_CODE 77)
 
+# The device-busy union of several command queues (no device needed).
+gdt_add_test_exe(test_busy_union ${CMAKE_CURRENT_SOURCE_DIR}/c/test_busy_union.c)
+add_test(NAME busy_union COMMAND test_busy_union)
+set_tests_properties(busy_union PROPERTIES LABELS "gcd")
+
 gdt_add_test_exe(test_gcd_core ${CMAKE_CURRENT_SOURCE_DIR}/c/test_gcd_core.c ${GDT_GCD_GEN})
 
 add_test(NAME gcd_core COMMAND test_gcd_core)
