@@ -390,6 +390,15 @@ gdt_status gdt_core_create(gdt_core **out, const gdt_core_opts *opts, gdt_error 
                 goto fail;
         }
     }
+    {
+        unsigned cached = 0, built = 0;
+        const char *dir = NULL;
+        gdt_ocl_program_counts(c->ocl, &cached, &built, &dir);
+        if (cached + built > 0)
+            gdt_log_note(c->log, "OpenCL programs: %u from the program cache %s, %u built from "
+                                 "source",
+                         cached, dir != NULL ? dir : "(none)", built);
+    }
 #define NAME(b) c->b.what = #b
     NAME(d_pts);
     NAME(d_pos);

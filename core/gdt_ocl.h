@@ -30,6 +30,16 @@
  * when the device lacks cl_khr_fp64, or when the caller forces the integer
  * path; kernels then never use double.
  *
+ * Program binaries: a program built from its source is saved as the
+ * device's binary (clGetProgramInfo) in "programs" of the kernel cache
+ * directory below, named by a hash of everything it depends on (platform,
+ * device, driver and their versions, the build options, the source text
+ * with its headers' hash) and checked against a second hash; later builds
+ * of the same take it from there (clCreateProgramWithBinary), without the
+ * compiler front end.  An entry that does not load or build is ignored: the
+ * program is built from the source and the entry written again (whole,
+ * through a temporary renamed over it).
+ *
  * PoCL kernel cache: before the first OpenCL call of the process, the
  * environment variable POCL_CACHE_DIR is pointed at a directory the project
  * controls: opts.cache_dir when given; else an existing POCL_CACHE_DIR is
@@ -260,6 +270,11 @@ gdt_status gdt_ocl_finish(gdt_ocl *ocl, gdt_error *err);
  * counts each device once; call it on the first while no thread drives
  * another of the device's queues. */
 double gdt_ocl_busy_seconds(gdt_ocl *ocl);
+
+/* How many of ocl's programs came from the program-binary cache and how
+ * many were built from source; *dir: the cache's directory (NULL: none). */
+void gdt_ocl_program_counts(const gdt_ocl *ocl, unsigned *cached, unsigned *built,
+                            const char **dir);
 
 /* 1 when a and b drive the same device, else 0. */
 int gdt_ocl_same_device(const gdt_ocl *a, const gdt_ocl *b);

@@ -18,6 +18,7 @@
 #include <string.h>
 #include <sys/mman.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #ifndef GDT_KERNEL_DIR
 #define GDT_KERNEL_DIR "kernels"
@@ -65,6 +66,10 @@ typedef struct ocl_shared_prog {
 
 static char *dup_str(const char *s);
 
+/* The program-binary cache (see gdt_ocl.h): "programs" in the kernel cache
+ * directory; empty: none.  Set once, by gdt_ocl_prepare_env. */
+static char g_prog_dir[4096 + 16];
+
 #define OCL_QUEUES_MAX 64
 #define OCL_FOLD_AT 8192 /* stored intervals before a fold is tried */
 
@@ -109,6 +114,7 @@ struct gdt_ocl {
     ocl_shared *sh;    /* NULL while the device has this queue alone */
     int further;       /* a further queue: the context is another's */
     gdt_busy_queue bq; /* under sh->mu: this queue in the device's busy union */
+    unsigned progs_cached, progs_built; /* programs from the binary cache, from source */
 };
 
 #define OCL_PEND_MAX 65536 /* pending events before a finish collects them */
@@ -248,6 +254,14 @@ double gdt_ocl_busy_seconds(gdt_ocl *ocl)
     v = gdt_busy_seconds(&sh->busy);
     pthread_mutex_unlock(&sh->mu);
     return v;
+}
+
+void gdt_ocl_program_counts(const gdt_ocl *ocl, unsigned *cached, unsigned *built,
+                            const char **dir)
+{
+    *cached = ocl->progs_cached;
+    *built = ocl->progs_built;
+    *dir = g_prog_dir[0] != '\0' ? g_prog_dir : NULL;
 }
 
 int gdt_ocl_same_device(const gdt_ocl *a, const gdt_ocl *b)
@@ -460,15 +474,20 @@ static int make_dirs(const char *path)
 /* Points POCL_CACHE_DIR at a project-controlled directory (see gdt_ocl.h).
  * Failure to create the directory is only a warning: PoCL then falls back
  * to compiling without a cache. */
+static void dev_string(cl_device_id d, cl_device_info what, char *buf, size_t len);
+
+
 static void set_pocl_cache(const char *cache_dir, gdt_log *log)
 {
     char dir[4096];
-    const char *xdg, *home;
+    const char *xdg, *home, *env;
     int rc;
 
     if (cache_dir != NULL && cache_dir[0] != '\0') {
         snprintf(dir, sizeof dir, "%s", cache_dir);
-    } else if (getenv("POCL_CACHE_DIR") != NULL) {
+    } else if ((env = getenv("POCL_CACHE_DIR")) != NULL) {
+        if (env[0] != '\0' && strlen(env) < sizeof dir)
+            snprintf(g_prog_dir, sizeof g_prog_dir, "%s/programs", env);
         return;
     } else if ((xdg = getenv("XDG_CACHE_HOME")) != NULL && xdg[0] == '/') {
         snprintf(dir, sizeof dir, "%s/gdt-tile/pocl", xdg);
@@ -484,6 +503,124 @@ static void set_pocl_cache(const char *cache_dir, gdt_log *log)
         return;
     }
     setenv("POCL_CACHE_DIR", dir, 1);
+    snprintf(g_prog_dir, sizeof g_prog_dir, "%s/programs", dir);
+}
+
+/* FNV-1a of n bytes, continued from h. */
+static uint64_t fnv(uint64_t h, const void *data, size_t n)
+{
+    const unsigned char *b = data;
+    for (size_t i = 0; i < n; i++) {
+        h ^= b[i];
+        h *= UINT64_C(1099511628211);
+    }
+    return h;
+}
+
+/* The key of a program binary: two independent 64-bit hashes of everything
+ * the binary depends on (the platform, device and driver and their
+ * versions, the build options, the whole source text, which starts with
+ * the hash of its headers), each string with its terminating NUL. */
+static void prog_key(const gdt_ocl *ocl, const char *opts, const char *src, uint64_t key[2])
+{
+    static const cl_platform_info pinfo[] = {CL_PLATFORM_NAME, CL_PLATFORM_VERSION};
+    static const cl_device_info dinfo[] = {CL_DEVICE_NAME, CL_DEVICE_VERSION, CL_DRIVER_VERSION,
+                                           CL_DEVICE_VENDOR};
+    char buf[1024];
+    key[0] = UINT64_C(14695981039346656037);
+    key[1] = UINT64_C(0x6a09e667f3bcc909);
+    for (size_t i = 0; i < sizeof pinfo / sizeof pinfo[0]; i++) {
+        buf[0] = '\0';
+        clGetPlatformInfo(ocl->platform, pinfo[i], sizeof buf - 1, buf, NULL);
+        buf[sizeof buf - 1] = '\0';
+        for (int k = 0; k < 2; k++)
+            key[k] = fnv(key[k], buf, strlen(buf) + 1);
+    }
+    for (size_t i = 0; i < sizeof dinfo / sizeof dinfo[0]; i++) {
+        dev_string(ocl->device, dinfo[i], buf, sizeof buf);
+        for (int k = 0; k < 2; k++)
+            key[k] = fnv(key[k], buf, strlen(buf) + 1);
+    }
+    for (int k = 0; k < 2; k++) {
+        key[k] = fnv(key[k], opts, strlen(opts) + 1);
+        key[k] = fnv(key[k], src, strlen(src) + 1);
+    }
+}
+
+#define PROG_MAGIC "GDTPROG1"
+#define PROG_HEADER 32 /* magic, key[0], key[1], binary size */
+#define PROG_MAX ((uint64_t)1 << 30)
+
+/* The cached binary of key (malloc'ed, *n bytes), or NULL: none, or a
+ * file that is not one this function's writer made for key. */
+static unsigned char *prog_load(const uint64_t key[2], size_t *n)
+{
+    char path[sizeof g_prog_dir + 32];
+    unsigned char hdr[PROG_HEADER], *bin = NULL;
+    uint64_t k0, k1, size;
+    FILE *f;
+
+    if (g_prog_dir[0] == '\0')
+        return NULL;
+    snprintf(path, sizeof path, "%s/%016" PRIx64 ".bin", g_prog_dir, key[0]);
+    f = fopen(path, "rb");
+    if (f == NULL)
+        return NULL;
+    if (fread(hdr, 1, sizeof hdr, f) == sizeof hdr && memcmp(hdr, PROG_MAGIC, 8) == 0) {
+        memcpy(&k0, hdr + 8, 8);
+        memcpy(&k1, hdr + 16, 8);
+        memcpy(&size, hdr + 24, 8);
+        if (k0 == key[0] && k1 == key[1] && size > 0 && size <= PROG_MAX &&
+            (bin = malloc((size_t)size)) != NULL) {
+            int extra = 0;
+            if (fread(bin, 1, (size_t)size, f) != (size_t)size || fread(&extra, 1, 1, f) != 0) {
+                free(bin); /* cut short, or longer than it says */
+                bin = NULL;
+            } else
+                *n = (size_t)size;
+        }
+    }
+    fclose(f);
+    return bin;
+}
+
+/* Saves p's binary under key, whole or not at all (a temporary renamed
+ * over the name); any failure leaves the cache as it was. */
+static void prog_save(const gdt_ocl *ocl, cl_program p, const uint64_t key[2])
+{
+    char path[sizeof g_prog_dir + 32], tmp[sizeof g_prog_dir + 64];
+    unsigned char hdr[PROG_HEADER], *bin;
+    size_t size = 0;
+    uint64_t size64;
+    FILE *f;
+    int ok;
+
+    if (g_prog_dir[0] == '\0' ||
+        clGetProgramInfo(p, CL_PROGRAM_BINARY_SIZES, sizeof size, &size, NULL) != CL_SUCCESS ||
+        size == 0 || size > PROG_MAX || make_dirs(g_prog_dir) != 0)
+        return;
+    bin = malloc(size);
+    if (bin == NULL)
+        return;
+    if (clGetProgramInfo(p, CL_PROGRAM_BINARIES, sizeof bin, &bin, NULL) != CL_SUCCESS) {
+        free(bin);
+        return;
+    }
+    snprintf(path, sizeof path, "%s/%016" PRIx64 ".bin", g_prog_dir, key[0]);
+    snprintf(tmp, sizeof tmp, "%s.tmp-%ld-%p", path, (long)getpid(), (const void *)ocl);
+    size64 = size;
+    memcpy(hdr, PROG_MAGIC, 8);
+    memcpy(hdr + 8, &key[0], 8);
+    memcpy(hdr + 16, &key[1], 8);
+    memcpy(hdr + 24, &size64, 8);
+    f = fopen(tmp, "wb");
+    ok = f != NULL && fwrite(hdr, 1, sizeof hdr, f) == sizeof hdr &&
+         fwrite(bin, 1, size, f) == size;
+    if (f != NULL && fclose(f) != 0)
+        ok = 0;
+    if (!ok || rename(tmp, path) != 0)
+        unlink(tmp);
+    free(bin);
 }
 
 void gdt_ocl_prepare_env(const char *cache_dir, gdt_log *log)
@@ -1263,13 +1400,42 @@ gdt_status gdt_ocl_build(gdt_ocl *ocl, const char *file, const char *extra,
     if (p->prog != NULL) {
         rc = CL_SUCCESS;
     } else {
-        const char *srcs[1] = {src};
-        p->prog = clCreateProgramWithSource(ocl->ctx, 1, srcs, NULL, &rc);
-        if (rc != CL_SUCCESS) {
-            st = cl_fail(err, "clCreateProgramWithSource", file, rc);
-            goto fail;
+        uint64_t key[2];
+        size_t nbin = 0;
+        unsigned char *bin;
+        prog_key(ocl, opts, src, key);
+        /* a binary this process or an earlier one built from the same source
+         * for the same device and driver: no compiler front end (PoCL
+         * preprocesses every source to find its own cache entry) */
+        bin = prog_load(key, &nbin);
+        if (bin != NULL) {
+            const unsigned char *bins[1] = {bin};
+            cl_int bst = CL_SUCCESS;
+            p->prog = clCreateProgramWithBinary(ocl->ctx, 1, &ocl->device, &nbin, bins, &bst, &rc);
+            if (rc == CL_SUCCESS && bst == CL_SUCCESS)
+                rc = clBuildProgram(p->prog, 1, &ocl->device, opts, NULL, NULL);
+            else
+                rc = CL_INVALID_BINARY;
+            if (rc != CL_SUCCESS && p->prog != NULL) {
+                clReleaseProgram(p->prog); /* not usable: built from the source */
+                p->prog = NULL;
+            }
+            ocl->progs_cached += p->prog != NULL;
+            free(bin);
         }
-        rc = clBuildProgram(p->prog, 1, &ocl->device, opts, NULL, NULL);
+        if (p->prog == NULL) {
+            const char *srcs[1] = {src};
+            p->prog = clCreateProgramWithSource(ocl->ctx, 1, srcs, NULL, &rc);
+            if (rc != CL_SUCCESS) {
+                st = cl_fail(err, "clCreateProgramWithSource", file, rc);
+                goto fail;
+            }
+            rc = clBuildProgram(p->prog, 1, &ocl->device, opts, NULL, NULL);
+            if (rc == CL_SUCCESS) {
+                prog_save(ocl, p->prog, key);
+                ocl->progs_built++;
+            }
+        }
     }
     if (rc != CL_SUCCESS) {
         size_t loglen = 0;
