@@ -3,11 +3,11 @@
 
   bench_mpi.py [--build-dir DIR] [--points 10M] [--ranks 1,2] [--tile N]
                [--repeat K] [--kind lidar] [--seed S] [--format las|laz]
-               [--workdir DIR] [--keep] [--target 1.8] [--json FILE]
+               [--pml NAME] [--workdir DIR] [--keep] [--target 1.8] [--json FILE]
 
 One LiDAR-like LAS cloud of --points records (scripts/gen_cloud.py; not timed,
 reused from --workdir) is triangulated by
-    mpirun -np K --bind-to core gdt-tile CLOUD.las --tile T --threads 1 -o OUT.ply
+    mpirun -np K --bind-to core --mca pml ob1 gdt-tile CLOUD.las --tile T --threads 1 -o OUT.ply
 for every K of --ranks (--format laz: the same cloud compressed by laspy's
 lazrs writer, chunks of 50000 points, written once beside it), one core per rank: --threads 1 and the OpenCL runtime
 (PoCL) held to one thread (POCL_MAX_PTHREAD_COUNT=1), each rank bound to a
@@ -23,6 +23,12 @@ and the exit: the wall time less --json's total), the
 load balance of the tile stage (slowest rank over the mean), and whether the
 PLY is byte for byte the first K's.  The target is the speed-up of the
 largest K over the first, at least --target (1.8 for K = 2), PASS or MISS.
+
+--pml chooses Open MPI's point-to-point layer (default ob1, its own shared
+memory and TCP transports; '' leaves Open MPI's choice): on a machine without
+an HPC interconnect Debian's Open MPI first tries UCX, which made MPI_Init
+take 0.23 s instead of 0.03 s here, paid by every K > 1 and not by K = 1
+(one rank runs as a plain process).
 
 Needs Open MPI's mpirun and a gdt-tile built with MPI.  Run as root, Open
 MPI is told that is allowed.  On a machine with fewer cores than the largest
@@ -68,6 +74,9 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=1, help="gen_cloud.py --seed (1)")
     ap.add_argument("--format", choices=("las", "laz"), default="las",
                     help="the cloud as LAS or LAZ (las)")
+    ap.add_argument("--pml", default="ob1",
+                    help="Open MPI's point-to-point layer, --mca pml NAME (ob1; '' = Open MPI's "
+                         "choice)")
     ap.add_argument("--workdir", default=None, help="keep and reuse the generated cloud here")
     ap.add_argument("--tmpdir", default=None, help="parent of the temporary folder")
     ap.add_argument("--keep", action="store_true", help="keep outputs and temporary files")
@@ -122,6 +131,8 @@ def main(argv=None):
                 shutil.rmtree(d, ignore_errors=True)
                 d.mkdir()
                 cmd = [mpirun, "-np", k, "--bind-to", "core", "--map-by", "core"]
+                if a.pml:
+                    cmd += ["--mca", "pml", a.pml]
                 if k > cores:
                     cmd += ["--oversubscribe"]
                 cmd += [gdt, las, "--tile", a.tile, "--threads", "1", "-q", "-o", d / "o.ply",
@@ -159,6 +170,7 @@ def main(argv=None):
         print()
         print(f"gdt-tile under mpirun: {be.size_label(a.points)} points ({a.kind}, seed "
               f"{a.seed}, {a.format.upper()}), --tile {a.tile}, --threads 1, PoCL 1 thread, one core per rank, "
+              f"{'pml ' + a.pml if a.pml else 'Open MPI' + chr(39) + 's own pml'}, "
               f"best of {a.repeat}; the PLY is the same bytes for every K")
         head = f"{'K':>3} {'wall s':>8} {'speed-up':>9} " + " ".join(
             f"{s + ' s':>9}" for s in STAGES) + f" {'outside s':>10} {'balance':>8}"
