@@ -9,7 +9,11 @@
  *     the file then holds its latest contents whenever it is not cached
  *     (a cached block is written back whole when evicted);
  *   - a cell is 0 (never written) or the float32 bits of its value plus one
- *     (the one NaN pattern 0xffffffff becomes the quiet NaN 0x7fc00000). */
+ *     (the one NaN pattern 0xffffffff becomes the quiet NaN 0x7fc00000);
+ *   - when the whole raster fits the budget (every block would fit the
+ *     cache) it is one row-major array, raster, instead of the cache; the
+ *     build decodes it in place and GDAL's in-memory intermediate takes it
+ *     as its band, with no copy. */
 #define _DEFAULT_SOURCE 1 /* mkstemp */
 #include "gdt_dem.h"
 
@@ -40,6 +44,8 @@ struct gdt_dem {
     uint64_t mem_budget;
     int64_t bcols, brows, nblocks;
     size_t nslots, used;
+    uint32_t *raster;    /* the whole raster fits the budget: ncols x nrows cells,
+                          * row-major, and no block cache (cells NULL) */
     uint32_t *cells;     /* nslots * BLOCK_CELLS */
     int64_t *slot_block; /* block in each slot, -1 free */
     uint64_t *slot_tick; /* last use (LRU) */
@@ -258,26 +264,37 @@ gdt_status gdt_dem_create(gdt_dem **out, const gdt_dem_geo *geo, const char *pat
         w->preview = dup_str(opts->preview);
         w->preview_tmp = gdt_outfile_temp(opts->preview);
     }
-    w->cells = cells_alloc(w->nslots * BLOCK_BYTES, &w->cells_aligned);
-    w->slot_block = malloc(w->nslots * sizeof *w->slot_block);
-    w->slot_tick = calloc(w->nslots, sizeof *w->slot_tick);
-    w->hkey = malloc(hcap * sizeof *w->hkey);
-    w->hval = malloc(hcap * sizeof *w->hval);
-    w->spilled = calloc((size_t)(w->nblocks + 7) / 8, 1);
+    if ((int64_t)w->nslots >= w->nblocks) {
+        /* on huge pages where the system gives them, as the cache's blocks:
+         * a face's cells are a few rows of a large array, and 4 KiB pages
+         * cost a TLB miss nearly every row */
+        size_t bytes = (size_t)geo->ncols * (size_t)geo->nrows * sizeof *w->raster;
+        w->raster = cells_alloc(bytes, &w->cells_aligned);
+        if (w->raster != NULL)
+            memset(w->raster, 0, bytes);
+    } else {
+        w->cells = cells_alloc(w->nslots * BLOCK_BYTES, &w->cells_aligned);
+        w->slot_block = malloc(w->nslots * sizeof *w->slot_block);
+        w->slot_tick = calloc(w->nslots, sizeof *w->slot_tick);
+        w->hkey = malloc(hcap * sizeof *w->hkey);
+        w->hval = malloc(hcap * sizeof *w->hval);
+        w->spilled = calloc((size_t)(w->nblocks + 7) / 8, 1);
+    }
     if (w->path == NULL || w->tmp_path == NULL || w->scratch_dir == NULL ||
         (opts->crs_wkt != NULL && w->wkt == NULL) ||
         (opts->preview != NULL && (w->preview == NULL || w->preview_tmp == NULL)) ||
-        w->cells == NULL || w->slot_block == NULL || w->slot_tick == NULL || w->hkey == NULL ||
-        w->hval == NULL || w->spilled == NULL) {
+        (w->raster == NULL &&
+         (w->cells == NULL || w->slot_block == NULL || w->slot_tick == NULL ||
+          w->hkey == NULL || w->hval == NULL || w->spilled == NULL))) {
         gdt_dem_abort(w);
         return gdt_error_set(err, GDT_EINTERNAL, 7001,
                              "out of memory (DEM block cache of "
                              "%zu blocks)",
                              w->nslots);
     }
-    for (size_t s = 0; s < w->nslots; s++)
+    for (size_t s = 0; w->raster == NULL && s < w->nslots; s++)
         w->slot_block[s] = -1;
-    for (size_t i = 0; i < hcap; i++)
+    for (size_t i = 0; w->raster == NULL && i < hcap; i++)
         w->hkey[i] = -1;
     w->stats.blocks = (uint64_t)w->nblocks;
     w->stats.cache_blocks = w->nslots;
@@ -341,6 +358,26 @@ static gdt_status slot_of(gdt_dem *w, int64_t b, size_t *slot, gdt_error *err)
     return GDT_OK;
 }
 
+/* Cells (row, col .. col + n - 1), at cell[0 .. n), take z (encoded: the
+ * invariants above); a cell written before is an error. */
+static gdt_status put_cells(gdt_dem *w, uint32_t *cell, int64_t row, int64_t col, int64_t n,
+                            const float *z, gdt_error *err)
+{
+    for (int64_t k = 0; k < n; k++) {
+        uint32_t bits;
+        memcpy(&bits, &z[k], sizeof bits);
+        if (bits == UINT32_MAX)
+            bits = UINT32_C(0x7fc00000);
+        if (cell[k] != 0)
+            return gdt_error_set(err, GDT_EINTERNAL, 7662,
+                                 "%s: DEM cell (%lld, %lld) given a value twice", w->path,
+                                 (long long)row, (long long)(col + k));
+        cell[k] = bits + 1;
+    }
+    w->stats.cells_written += (uint64_t)n;
+    return GDT_OK;
+}
+
 gdt_status gdt_dem_put(gdt_dem *w, int64_t row, int64_t col, int64_t n, const float *z,
                        gdt_error *err)
 {
@@ -351,6 +388,9 @@ gdt_status gdt_dem_put(gdt_dem *w, int64_t row, int64_t col, int64_t n, const fl
                              "%s: cells (%lld, %lld..%lld) outside the DEM of %lld x %lld", w->path,
                              (long long)row, (long long)col, (long long)(col + n - 1),
                              (long long)w->geo.nrows, (long long)w->geo.ncols);
+    if (w->raster != NULL)
+        return put_cells(w, w->raster + (size_t)row * (size_t)w->geo.ncols + (size_t)col, row, col,
+                         n, z, err);
     while (n > 0) {
         int64_t b = (row / GDT_DEM_BLOCK) * w->bcols + col / GDT_DEM_BLOCK;
         int64_t in = col % GDT_DEM_BLOCK, m = GDT_DEM_BLOCK - in < n ? GDT_DEM_BLOCK - in : n;
@@ -361,18 +401,9 @@ gdt_status gdt_dem_put(gdt_dem *w, int64_t row, int64_t col, int64_t n, const fl
             return st;
         cell =
             w->cells + s * BLOCK_CELLS + (size_t)(row % GDT_DEM_BLOCK) * GDT_DEM_BLOCK + (size_t)in;
-        for (int64_t k = 0; k < m; k++) {
-            uint32_t bits;
-            memcpy(&bits, &z[k], sizeof bits);
-            if (bits == UINT32_MAX)
-                bits = UINT32_C(0x7fc00000);
-            if (cell[k] != 0)
-                return gdt_error_set(err, GDT_EINTERNAL, 7662,
-                                     "%s: DEM cell (%lld, %lld) given a value twice", w->path,
-                                     (long long)row, (long long)(col + k));
-            cell[k] = bits + 1;
-        }
-        w->stats.cells_written += (uint64_t)m;
+        st = put_cells(w, cell, row, col, m, z, err);
+        if (st != GDT_OK)
+            return st;
         z += m;
         col += m;
         n -= m;
@@ -435,8 +466,40 @@ static gdt_status next_block(void *ctx, int64_t bx, int64_t by, float *buf, int 
     return GDT_OK;
 }
 
+/* The raster decoded in place to float32 bits, nodata where never
+ * written; counts the blocks with a value as the cache's build does. */
+static void decode_raster(gdt_dem *w)
+{
+    const size_t ncols = (size_t)w->geo.ncols;
+    float nd = (float)w->nodata;
+    uint32_t nd_bits;
+    unsigned char *any = calloc((size_t)w->bcols, 1);
+
+    memcpy(&nd_bits, &nd, sizeof nd_bits);
+    for (int64_t r = 0; r < w->geo.nrows; r++) {
+        uint32_t *row = w->raster + (size_t)r * ncols;
+        for (size_t c = 0; c < ncols; c++) {
+            if (row[c] == 0) {
+                row[c] = nd_bits;
+            } else {
+                row[c] -= 1;
+                if (any != NULL)
+                    any[c / GDT_DEM_BLOCK] = 1;
+            }
+        }
+        if (any != NULL && (r % GDT_DEM_BLOCK == GDT_DEM_BLOCK - 1 || r == w->geo.nrows - 1)) {
+            for (int64_t b = 0; b < w->bcols; b++)
+                w->stats.blocks_written += any[b];
+            memset(any, 0, (size_t)w->bcols);
+        }
+    }
+    free(any);
+}
+
 static void free_cache(gdt_dem *w)
 {
+    free(w->raster);
+    w->raster = NULL;
     free(w->cells);
     free(w->slot_block);
     free(w->slot_tick);
@@ -498,10 +561,10 @@ gdt_status gdt_dem_build(gdt_dem *w, gdt_dem_stats *stats, gdt_error *err)
      * (it never spilled): it grows as the cache gives its blocks back, by
      * a third more for the overviews; else a GeoTIFF in the scratch
      * directory. */
-    const int in_memory = w->nblocks <= (int64_t)w->nslots;
+    const int in_memory = w->raster != NULL;
     void *mem_ds = NULL;
 
-    if (w->cells == NULL || w->built)
+    if ((w->cells == NULL && w->raster == NULL) || w->built)
         return gdt_error_set(err, GDT_EINTERNAL, 7664,
                              "%s: the DEM was built (or failed to build) already", w->path);
     w->xfer = malloc(BLOCK_BYTES);
@@ -525,13 +588,17 @@ gdt_status gdt_dem_build(gdt_dem *w, gdt_dem_stats *stats, gdt_error *err)
         }
         close(fd);
     }
-    st = w->gdal->tiles(&w->geo, w->nodata, w->epsg, w->wkt, w->tiles_path, gdal_cache, next_block,
-                        w, &mem_ds, err);
-    free_cache(w);
+    if (in_memory)
+        decode_raster(w);
+    st = w->gdal->tiles(&w->geo, w->nodata, w->epsg, w->wkt, w->tiles_path, (float *)w->raster,
+                        gdal_cache, next_block, w, &mem_ds, err);
+    if (!in_memory)
+        free_cache(w); /* its blocks are in the intermediate file */
     if (st == GDT_OK)
         st = w->gdal->cog(w->tiles_path, mem_ds, w->tmp_path, w->path, gdal_cache, err);
     else
         w->gdal->discard(mem_ds);
+    free_cache(w); /* the raster outlives the in-memory intermediate, its band */
     remove_tiles(w);
     /* the preview from the complete temporary; its failure alone is told by
      * the commit, after the DEM is in place */

@@ -125,9 +125,9 @@ typedef struct ovr_work {
 } ovr_work;
 
 /* Writes the part of every overview level that block (bx, by) gives: buf
- * holds its w x h cells (stride GDT_DEM_BLOCK), nodata where nd_bits. */
-static gdt_status block_overviews(GDALRasterBandH band, int levels, const float *buf, int w, int h,
-                                  int64_t bx, int64_t by, uint32_t nd_bits, float nd,
+ * holds its w x h cells (rows stride cells apart), nodata where nd_bits. */
+static gdt_status block_overviews(GDALRasterBandH band, int levels, const float *buf, size_t stride,
+                                  int w, int h, int64_t bx, int64_t by, uint32_t nd_bits, float nd,
                                   const gdt_dem_geo *geo, ovr_work *o, const char *path,
                                   gdt_error *err)
 {
@@ -150,7 +150,7 @@ static gdt_status block_overviews(GDALRasterBandH band, int levels, const float 
                         if (r >= ph || c >= pw)
                             continue;
                         if (k == 1) {
-                            float v = buf[(size_t)r * GDT_DEM_BLOCK + (size_t)c];
+                            float v = buf[(size_t)r * stride + (size_t)c];
                             uint32_t bits;
                             memcpy(&bits, &v, sizeof bits);
                             if (bits != nd_bits) {
@@ -180,8 +180,8 @@ static gdt_status block_overviews(GDALRasterBandH band, int levels, const float 
 }
 
 gdt_status gdt_dem_gdal_tiles(const gdt_dem_geo *geo, double nodata, int epsg, const char *wkt,
-                              const char *tiles_path, uint64_t gdal_cache, gdt_dem_block_fn fn,
-                              void *ctx, void **mem_ds, gdt_error *err)
+                              const char *tiles_path, float *raster, uint64_t gdal_cache,
+                              gdt_dem_block_fn fn, void *ctx, void **mem_ds, gdt_error *err)
 {
     const int in_memory = tiles_path == NULL;
     const char *name = in_memory ? "the in-memory DEM" : tiles_path;
@@ -236,11 +236,30 @@ gdt_status gdt_dem_gdal_tiles(const gdt_dem_geo *geo, double nodata, int epsg, c
         co = CSLSetNameValue(co, "BIGTIFF", "YES");
         co = CSLSetNameValue(co, "SPARSE_OK", "TRUE");
     }
-    ds = GDALCreate(drv, in_memory ? "" : tiles_path, (int)geo->ncols, (int)geo->nrows, 1,
-                    GDT_Float32, co);
+    if (in_memory && raster == NULL) {
+        st = gdt_error_set(err, GDT_EINTERNAL, 7665, "%s: no raster for the in-memory DEM", name);
+        goto done;
+    }
+    /* in memory: the caller's raster is the band, not a copy of it */
+    ds = GDALCreate(drv, in_memory ? "" : tiles_path, (int)geo->ncols, (int)geo->nrows,
+                    in_memory ? 0 : 1, GDT_Float32, co);
     if (ds == NULL) {
         st = gdal_fail(err, name, "create the intermediate raster");
         goto done;
+    }
+    if (in_memory) {
+        char **bo = NULL;
+        char v[64];
+        snprintf(v, sizeof v, "%p", (void *)raster);
+        bo = CSLSetNameValue(bo, "DATAPOINTER", v);
+        bo = CSLSetNameValue(bo, "PIXELOFFSET", "4");
+        snprintf(v, sizeof v, "%lld", (long long)geo->ncols * 4);
+        bo = CSLSetNameValue(bo, "LINEOFFSET", v);
+        if (GDALAddBand(ds, GDT_Float32, bo) != CE_None)
+            st = gdal_fail(err, name, "take the DEM raster as the intermediate's band");
+        CSLDestroy(bo);
+        if (st != GDT_OK)
+            goto done;
     }
     gt[0] = geo->west;
     gt[1] = geo->res_x;
@@ -284,9 +303,9 @@ gdt_status gdt_dem_gdal_tiles(const gdt_dem_geo *geo, double nodata, int epsg, c
             goto done;
         }
     }
-    /* a MEM raster starts as zeros: cells never written must read nodata,
-     * as the sparse GeoTIFF's missing blocks do (the full resolution gets
-     * its empty blocks below, block by block, as the cache lets them go) */
+    /* MEM overviews start as zeros: cells never written must read nodata,
+     * as the sparse GeoTIFF's missing blocks do (the full resolution is the
+     * caller's raster, nodata where it has no value) */
     if (in_memory) {
         for (int k = 1; k <= levels && st == GDT_OK; k++) {
             GDALRasterBandH b = GDALGetOverview(band, k - 1);
@@ -304,18 +323,25 @@ gdt_status gdt_dem_gdal_tiles(const gdt_dem_geo *geo, double nodata, int epsg, c
             int64_t x = bx * GDT_DEM_BLOCK, y = by * GDT_DEM_BLOCK;
             int w = (int)(geo->ncols - x < GDT_DEM_BLOCK ? geo->ncols - x : GDT_DEM_BLOCK);
             int h = (int)(geo->nrows - y < GDT_DEM_BLOCK ? geo->nrows - y : GDT_DEM_BLOCK);
-            st = fn(ctx, bx, by, buf, &empty, err);
-            if (st != GDT_OK || (empty && !in_memory))
+            if (in_memory) {
+                /* the band holds the block already; an empty one adds
+                 * nothing to the overviews */
+                if (levels > 0)
+                    st = block_overviews(band, levels, raster + (size_t)y * (size_t)geo->ncols +
+                                                           (size_t)x,
+                                         (size_t)geo->ncols, w, h, bx, by, nd_bits, ndf, geo, &ow,
+                                         name, err);
                 continue;
-            if (empty)
-                for (size_t i = 0; i < (size_t)GDT_DEM_BLOCK * GDT_DEM_BLOCK; i++)
-                    buf[i] = ndf;
+            }
+            st = fn(ctx, bx, by, buf, &empty, err);
+            if (st != GDT_OK || empty)
+                continue;
             if (GDALRasterIO(band, GF_Write, (int)x, (int)y, w, h, buf, w, h, GDT_Float32, 0,
                              (int)(GDT_DEM_BLOCK * sizeof *buf)) != CE_None)
                 st = gdal_fail(err, name, "write a block of the intermediate raster");
-            else if (levels > 0 && !empty)
-                st = block_overviews(band, levels, buf, w, h, bx, by, nd_bits, ndf, geo, &ow, name,
-                                     err);
+            else if (levels > 0)
+                st = block_overviews(band, levels, buf, GDT_DEM_BLOCK, w, h, bx, by, nd_bits, ndf,
+                                     geo, &ow, name, err);
         }
 done:
     if (ds != NULL && in_memory && st == GDT_OK && mem_ds != NULL) {

@@ -27,16 +27,17 @@ typedef gdt_status (*gdt_dem_block_fn)(void *ctx, int64_t bx, int64_t by, float 
  * georeferencing, CRS (epsg, else wkt, else none) and nodata, each block
  * asked from fn once, in row-major block order.  Either a tiled GeoTIFF
  * at tiles_path (uncompressed, BIGTIFF, sparse: empty blocks are not
- * written), or, with tiles_path NULL, a dataset of GDAL's MEM driver (the
- * whole raster and its overviews in memory; empty blocks are filled with
- * nodata), returned in *mem_ds for gdt_dem_gdal_cog.  Both give the COG
- * the same cells and the same georeferencing.  gdal_cache bounds GDAL's
- * block cache (bytes).
+ * written), or, with tiles_path NULL, a dataset of GDAL's MEM driver whose
+ * band is raster itself (ncols x nrows float32, row-major, nodata where no
+ * value; not copied: it must outlive the dataset) with its overviews in
+ * memory, returned in *mem_ds for gdt_dem_gdal_cog (fn is then not
+ * called).  Both give the COG the same cells and the same georeferencing.
+ * gdal_cache bounds GDAL's block cache (bytes).
  * returns: GDT_OK; fn's errors; GDT_EINPUT 3650 (the CRS is unknown to
- * GDAL); GDT_EIO 4652; GDT_EINTERNAL 7001. */
+ * GDAL); GDT_EIO 4652; GDT_EINTERNAL 7001, 7665 (no raster in memory). */
 gdt_status gdt_dem_gdal_tiles(const gdt_dem_geo *geo, double nodata, int epsg, const char *wkt,
-                              const char *tiles_path, uint64_t gdal_cache, gdt_dem_block_fn fn,
-                              void *ctx, void **mem_ds, gdt_error *err);
+                              const char *tiles_path, float *raster, uint64_t gdal_cache,
+                              gdt_dem_block_fn fn, void *ctx, void **mem_ds, gdt_error *err);
 
 /* Copies the intermediate (mem_ds when not NULL, which it closes, else the
  * file tiles_path) to the COG tmp_path (DEFLATE level 1, floating-point
@@ -64,8 +65,8 @@ gdt_status gdt_dem_gdal_preview(const char *dem_path, const char *tmp_path, cons
 /* The entry points above, as the module exports them. */
 typedef struct gdt_dem_gdal_fns {
     gdt_status (*tiles)(const gdt_dem_geo *geo, double nodata, int epsg, const char *wkt,
-                        const char *tiles_path, uint64_t gdal_cache, gdt_dem_block_fn fn, void *ctx,
-                        void **mem_ds, gdt_error *err);
+                        const char *tiles_path, float *raster, uint64_t gdal_cache,
+                        gdt_dem_block_fn fn, void *ctx, void **mem_ds, gdt_error *err);
     gdt_status (*cog)(const char *tiles_path, void *mem_ds, const char *tmp_path, const char *path,
                       uint64_t gdal_cache, gdt_error *err);
     void (*discard)(void *mem_ds);
