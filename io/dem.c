@@ -46,6 +46,8 @@ struct gdt_dem {
     size_t nslots, used;
     uint32_t *raster;    /* the whole raster fits the budget: ncols x nrows cells,
                           * row-major, and no block cache (cells NULL) */
+    void *raster_map;    /* the mapping raster lies in, raster_len bytes */
+    size_t raster_len;
     uint32_t *cells;     /* nslots * BLOCK_CELLS */
     int64_t *slot_block; /* block in each slot, -1 free */
     uint64_t *slot_tick; /* last use (LRU) */
@@ -192,6 +194,30 @@ static uint32_t *cells_alloc(size_t bytes, int *aligned)
     return p;
 }
 
+/* bytes of zeros (pages zeroed by the kernel as they are first touched,
+ * so cells never written cost nothing) in a private mapping, from a 2 MiB
+ * boundary and advised onto huge pages where the system gives them: a
+ * face's cells are a few rows of a large array, and with 4 KiB pages
+ * nearly every row is a TLB miss.  NULL when it cannot be had. */
+static uint32_t *raster_alloc(gdt_dem *w, size_t bytes)
+{
+    const size_t huge = (size_t)2 << 20;
+    uintptr_t a;
+    void *p;
+    if (bytes > SIZE_MAX - huge)
+        return NULL;
+    p = mmap(NULL, bytes + huge, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    if (p == MAP_FAILED)
+        return NULL;
+    w->raster_map = p;
+    w->raster_len = bytes + huge;
+    a = ((uintptr_t)p + huge - 1) & ~(uintptr_t)(huge - 1);
+#ifdef MADV_HUGEPAGE
+    (void)madvise((void *)a, bytes, MADV_HUGEPAGE); /* advice only */
+#endif
+    return (uint32_t *)a;
+}
+
 void gdt_dem_preload(void)
 {
     void *sym;
@@ -265,13 +291,7 @@ gdt_status gdt_dem_create(gdt_dem **out, const gdt_dem_geo *geo, const char *pat
         w->preview_tmp = gdt_outfile_temp(opts->preview);
     }
     if ((int64_t)w->nslots >= w->nblocks) {
-        /* on huge pages where the system gives them, as the cache's blocks:
-         * a face's cells are a few rows of a large array, and 4 KiB pages
-         * cost a TLB miss nearly every row */
-        size_t bytes = (size_t)geo->ncols * (size_t)geo->nrows * sizeof *w->raster;
-        w->raster = cells_alloc(bytes, &w->cells_aligned);
-        if (w->raster != NULL)
-            memset(w->raster, 0, bytes);
+        w->raster = raster_alloc(w, (size_t)geo->ncols * (size_t)geo->nrows * sizeof *w->raster);
     } else {
         w->cells = cells_alloc(w->nslots * BLOCK_BYTES, &w->cells_aligned);
         w->slot_block = malloc(w->nslots * sizeof *w->slot_block);
@@ -498,7 +518,9 @@ static void decode_raster(gdt_dem *w)
 
 static void free_cache(gdt_dem *w)
 {
-    free(w->raster);
+    if (w->raster_map != NULL)
+        munmap(w->raster_map, w->raster_len);
+    w->raster_map = NULL;
     w->raster = NULL;
     free(w->cells);
     free(w->slot_block);
