@@ -34,7 +34,8 @@
  * device's binary (clGetProgramInfo) in "programs" of the kernel cache
  * directory below, named by a hash of everything it depends on (platform,
  * device, driver and their versions, the build options, the source text
- * with its headers' hash) and checked against a second hash; later builds
+ * with its headers' hash), checked against a second hash and, for its
+ * body, a hash of the binary itself; later builds
  * of the same take it from there (clCreateProgramWithBinary), without the
  * compiler front end.  An entry that does not load or build is ignored: the
  * program is built from the source and the entry written again (whole,

@@ -471,12 +471,11 @@ static int make_dirs(const char *path)
     return 0;
 }
 
+static void dev_string(cl_device_id d, cl_device_info what, char *buf, size_t len);
+
 /* Points POCL_CACHE_DIR at a project-controlled directory (see gdt_ocl.h).
  * Failure to create the directory is only a warning: PoCL then falls back
  * to compiling without a cache. */
-static void dev_string(cl_device_id d, cl_device_info what, char *buf, size_t len);
-
-
 static void set_pocl_cache(const char *cache_dir, gdt_log *log)
 {
     char dir[4096];
@@ -547,17 +546,19 @@ static void prog_key(const gdt_ocl *ocl, const char *opts, const char *src, uint
     }
 }
 
-#define PROG_MAGIC "GDTPROG1"
-#define PROG_HEADER 32 /* magic, key[0], key[1], binary size */
+#define PROG_MAGIC "GDTPROG2"
+#define PROG_HEADER 40 /* magic, key[0], key[1], binary size, FNV-1a of the binary */
 #define PROG_MAX ((uint64_t)1 << 30)
 
 /* The cached binary of key (malloc'ed, *n bytes), or NULL: none, or a
- * file that is not one this function's writer made for key. */
+ * file that is not one prog_save wrote for key, whole (its header, length
+ * and the hash of its body all agree: a damaged binary that the runtime
+ * might still accept is never handed to it). */
 static unsigned char *prog_load(const uint64_t key[2], size_t *n)
 {
     char path[sizeof g_prog_dir + 32];
     unsigned char hdr[PROG_HEADER], *bin = NULL;
-    uint64_t k0, k1, size;
+    uint64_t k0, k1, size, sum;
     FILE *f;
 
     if (g_prog_dir[0] == '\0')
@@ -570,11 +571,13 @@ static unsigned char *prog_load(const uint64_t key[2], size_t *n)
         memcpy(&k0, hdr + 8, 8);
         memcpy(&k1, hdr + 16, 8);
         memcpy(&size, hdr + 24, 8);
+        memcpy(&sum, hdr + 32, 8);
         if (k0 == key[0] && k1 == key[1] && size > 0 && size <= PROG_MAX &&
             (bin = malloc((size_t)size)) != NULL) {
             int extra = 0;
-            if (fread(bin, 1, (size_t)size, f) != (size_t)size || fread(&extra, 1, 1, f) != 0) {
-                free(bin); /* cut short, or longer than it says */
+            if (fread(bin, 1, (size_t)size, f) != (size_t)size || fread(&extra, 1, 1, f) != 0 ||
+                fnv(UINT64_C(14695981039346656037), bin, (size_t)size) != sum) {
+                free(bin); /* cut short, longer than it says, or damaged */
                 bin = NULL;
             } else
                 *n = (size_t)size;
@@ -591,7 +594,7 @@ static void prog_save(const gdt_ocl *ocl, cl_program p, const uint64_t key[2])
     char path[sizeof g_prog_dir + 32], tmp[sizeof g_prog_dir + 64];
     unsigned char hdr[PROG_HEADER], *bin;
     size_t size = 0;
-    uint64_t size64;
+    uint64_t size64, sum;
     FILE *f;
     int ok;
 
@@ -613,6 +616,8 @@ static void prog_save(const gdt_ocl *ocl, cl_program p, const uint64_t key[2])
     memcpy(hdr + 8, &key[0], 8);
     memcpy(hdr + 16, &key[1], 8);
     memcpy(hdr + 24, &size64, 8);
+    sum = fnv(UINT64_C(14695981039346656037), bin, size);
+    memcpy(hdr + 32, &sum, 8);
     f = fopen(tmp, "wb");
     ok = f != NULL && fwrite(hdr, 1, sizeof hdr, f) == sizeof hdr &&
          fwrite(bin, 1, size, f) == size;

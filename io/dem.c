@@ -487,14 +487,17 @@ static gdt_status next_block(void *ctx, int64_t bx, int64_t by, float *buf, int 
 }
 
 /* The raster decoded in place to float32 bits, nodata where never
- * written; counts the blocks with a value as the cache's build does. */
-static void decode_raster(gdt_dem *w)
+ * written; counts the blocks with a value as the cache's build does.
+ * returns: GDT_OK; GDT_EINTERNAL 7001. */
+static gdt_status decode_raster(gdt_dem *w, gdt_error *err)
 {
     const size_t ncols = (size_t)w->geo.ncols;
     float nd = (float)w->nodata;
     uint32_t nd_bits;
     unsigned char *any = calloc((size_t)w->bcols, 1);
 
+    if (any == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     memcpy(&nd_bits, &nd, sizeof nd_bits);
     for (int64_t r = 0; r < w->geo.nrows; r++) {
         uint32_t *row = w->raster + (size_t)r * ncols;
@@ -503,17 +506,17 @@ static void decode_raster(gdt_dem *w)
                 row[c] = nd_bits;
             } else {
                 row[c] -= 1;
-                if (any != NULL)
-                    any[c / GDT_DEM_BLOCK] = 1;
+                any[c / GDT_DEM_BLOCK] = 1;
             }
         }
-        if (any != NULL && (r % GDT_DEM_BLOCK == GDT_DEM_BLOCK - 1 || r == w->geo.nrows - 1)) {
+        if (r % GDT_DEM_BLOCK == GDT_DEM_BLOCK - 1 || r == w->geo.nrows - 1) {
             for (int64_t b = 0; b < w->bcols; b++)
                 w->stats.blocks_written += any[b];
             memset(any, 0, (size_t)w->bcols);
         }
     }
     free(any);
+    return GDT_OK;
 }
 
 static void free_cache(gdt_dem *w)
@@ -610,8 +613,8 @@ gdt_status gdt_dem_build(gdt_dem *w, gdt_dem_stats *stats, gdt_error *err)
         }
         close(fd);
     }
-    if (in_memory)
-        decode_raster(w);
+    if (in_memory && (st = decode_raster(w, err)) != GDT_OK)
+        goto done;
     st = w->gdal->tiles(&w->geo, w->nodata, w->epsg, w->wkt, w->tiles_path, (float *)w->raster,
                         gdal_cache, next_block, w, &mem_ds, err);
     if (!in_memory)

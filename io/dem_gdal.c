@@ -276,8 +276,10 @@ gdt_status gdt_dem_gdal_tiles(const gdt_dem_geo *geo, double nodata, int epsg, c
         st = gdal_fail(err, name, "set the georeferencing");
         goto done;
     }
-    buf = malloc((size_t)GDT_DEM_BLOCK * GDT_DEM_BLOCK * sizeof *buf);
-    if (buf == NULL) {
+    /* blocks from fn go through buf; in memory the raster is the band */
+    if (!in_memory)
+        buf = malloc((size_t)GDT_DEM_BLOCK * GDT_DEM_BLOCK * sizeof *buf);
+    if (!in_memory && buf == NULL) {
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         goto done;
     }
