@@ -302,12 +302,18 @@ gdt_status gdt_tiler_pass2_open(gdt_tiler *t, gdt_error *err);
  * gdt_tiler_pass2_open on the recording one) and with its cloud set to its
  * share, spills it into .raw files of its own, suffix ".p<part>"
  * (gdt_tiler_spill_part); once every share is spilled, the owner of tile k
- * joins the shares' files 0 .. parts - 1 in that order into the tile's .raw
- * file (gdt_tiler_join_parts; a missing file holds none of the tile's
- * points) and merges it (gdt_tiler_merge_shipped with recs NULL).
- * returns: the spill's errors; join: GDT_EINPUT 3501 (not pass 1's count),
- * GDT_EIO 4502/4503. */
+ * takes the shares' files 0 .. parts - 1 in that order (a missing file
+ * holds none of the tile's points) with gdt_tiler_take_parts: into a fresh
+ * array *recs of *n records, the tile's pass-1 count, when the records and the merge's
+ * table fit in half the memory budget (the files are then removed), else
+ * joined into the tile's .raw file (*recs NULL, as gdt_tiler_join_parts
+ * does; *n 0); then merges it (gdt_tiler_merge_shipped with *recs and *n,
+ * or NULL) and frees *recs.
+ * returns: the spill's errors; take and join: GDT_EINPUT 3501 (not pass
+ * 1's count), GDT_EIO 4502/4503/4504, GDT_EINTERNAL 7001. */
 gdt_status gdt_tiler_spill_part(gdt_tiler *t, int part, gdt_error *err);
+gdt_status gdt_tiler_take_parts(gdt_tiler *t, uint64_t k, int parts, gdt_point **recs,
+                                uint64_t *n, gdt_error *err);
 gdt_status gdt_tiler_join_parts(gdt_tiler *t, uint64_t k, int parts, gdt_error *err);
 
 /* What the --dup merge of one tile wrote. */

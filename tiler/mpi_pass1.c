@@ -116,8 +116,8 @@ void mr_pass1_hooks(mr_ctx *m)
     m->p1.ctx = m;
 }
 
-void mr_pass1_answer(mr_ctx *m, const unsigned char *msg, size_t len, gdt_status st,
-                     const gdt_error *err)
+void mr_pass1_answer(mr_ctx *m, const unsigned char *msg, size_t len, gdt_status *pst,
+                     gdt_error *perr, int *core_started)
 {
     gdt_unpack u;
     gdt_error e;
@@ -125,6 +125,7 @@ void mr_pass1_answer(mr_ctx *m, const unsigned char *msg, size_t len, gdt_status
     unsigned char *part = NULL;
     size_t pl = 0;
     uint64_t first, end, kept = 0;
+    gdt_status st = *pst;
 
     memset(&u, 0, sizeof u);
     u.p = msg;
@@ -133,11 +134,18 @@ void mr_pass1_answer(mr_ctx *m, const unsigned char *msg, size_t len, gdt_status
     end = gdt_unpack_u64(&u);
     gdt_error_clear(&e);
     if (st != GDT_OK)
-        e = *err; /* this rank could not start: its failure is the answer */
+        e = *perr; /* this rank could not start: its failure is the answer */
     else if (u.bad || first > end)
         st = mr_bad_message(0, TAG_P1, &e);
     else
         st = tr_run_pass1_share(m->c, first, end, &part, &pl, &kept, &e);
+    /* the build runs beside the answer's wait (and beside the others'
+     * reading, had they more to read) */
+    if (!*core_started) {
+        *core_started = 1;
+        if (*pst == GDT_OK)
+            *pst = tr_run_start_core(m->c, perr);
+    }
     memset(&p, 0, sizeof p);
     mr_pack_status(&p, st, &e);
     gdt_pack_u64(&p, kept);

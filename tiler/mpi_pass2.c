@@ -230,9 +230,11 @@ void mr_wait_go(mr_ctx *m, gdt_status *st, gdt_error *err, unsigned char **go, s
             int ready = 0, from = 0, tag = 0;
             unsigned char *msg = NULL;
             s2 = gdt_comm_wait(m->comm, 0, -1, NULL, &ready, &from, &tag, len, &e2);
-            /* the OpenCL core is built once this rank's shares of pass 1
-             * and pass 2 are read (after PLAN), or at GO: the build would
-             * take the core a share is read on */
+            /* the OpenCL core is built once this rank's share of pass 1
+             * is read, while rank 0 takes the answers and plans (this rank
+             * would only wait; rank 0 builds its own beside its share),
+             * else after PLAN or at GO: the build would take the core a
+             * share is read on */
             if (s2 == GDT_OK && tag == TAG_GO && !core_started) {
                 core_started = 1;
                 if (pst == GDT_OK)
@@ -245,7 +247,7 @@ void mr_wait_go(mr_ctx *m, gdt_status *st, gdt_error *err, unsigned char **go, s
             if (s2 == GDT_OK)
                 s2 = mr_recv(m, 0, tag, *len, &msg, &e2);
             if (s2 == GDT_OK && tag == TAG_P1) {
-                mr_pass1_answer(m, msg, *len, pst, &pe);
+                mr_pass1_answer(m, msg, *len, &pst, &pe, &core_started);
             } else if (s2 == GDT_OK && tag == TAG_GROUND) {
                 mr_ground_answer(m, msg, *len, &pst, &pe);
             } else if (s2 == GDT_OK && tag == TAG_PLAN) {

@@ -443,11 +443,16 @@ static gdt_status p2_spill(void *ctx, int *whole, gdt_error *err)
         gdt_tiler_tile_files f;
         uint64_t j = k - own.ka;
         /* the merge itself marks the tile's files in this tiler */
+        gdt_point *pr = NULL;
+        uint64_t npr = 0;
         if (files)
-            st = gdt_tiler_join_parts(c->tiler, k, m->size, err);
-        if (st == GDT_OK)
-            st = gdt_tiler_merge_shipped(c->tiler, k, files ? NULL : own.recs + own.off[j],
-                                         files ? 0 : own.off[j + 1] - own.off[j], &f, err);
+            st = gdt_tiler_take_parts(c->tiler, k, m->size, &pr, &npr, err);
+        if (st == GDT_OK && files)
+            st = gdt_tiler_merge_shipped(c->tiler, k, pr, npr, &f, err);
+        else if (st == GDT_OK)
+            st = gdt_tiler_merge_shipped(c->tiler, k, own.recs + own.off[j],
+                                         own.off[j + 1] - own.off[j], &f, err);
+        free(pr);
     }
     sp_own_free(&own);
     m->shipped = 0;
@@ -511,9 +516,12 @@ void mr_spill_answer(mr_ctx *m, uint64_t first, uint64_t end, uint64_t base, int
             gdt_error e;
             gdt_status js = st;
             gdt_error_clear(&e);
+            gdt_point *pr = NULL;
+            uint64_t npr = 0;
             if (js == GDT_OK)
-                js = gdt_tiler_join_parts(m->c->tiler, k, m->size, &e);
-            mr_merge_report(m, k, NULL, 0, js, js != GDT_OK && st == GDT_OK ? &e : pe);
+                js = gdt_tiler_take_parts(m->c->tiler, k, m->size, &pr, &npr, &e);
+            mr_merge_report(m, k, pr, npr, js, js != GDT_OK && st == GDT_OK ? &e : pe);
+            free(pr);
         } else {
             mr_merge_report(m, k, own.recs + own.off[j], own.off[j + 1] - own.off[j], st, pe);
         }

@@ -1,9 +1,10 @@
 /* pass2_part.c — pass 2 out of core in shares between processes: each
  * spills its share of the cloud into .raw files of its own (suffix
- * ".p<R>"), and the owner of a tile joins the shares' files, in share
- * order, into the tile's .raw file before the --dup merge.  Shares are
- * consecutive runs of input order, so the joined file is the one a single
- * process spills: the same records in the same order.
+ * ".p<R>"), and the owner of a tile takes the shares' files, in share
+ * order, for the --dup merge: read straight into memory when the tile's
+ * records fit, else joined into the tile's .raw file.  Shares are
+ * consecutive runs of input order, so either way the merge sees the
+ * records a single process spills, in the same order.
  */
 #define _GNU_SOURCE 1 /* copy_file_range */
 #include "private/tiler_impl.h"
@@ -67,6 +68,112 @@ static gdt_status append_file(int out, const char *dst, int in, const char *src,
     }
 }
 
+/* The error of a tile whose shares do not hold pass 1's count. */
+static gdt_status count_changed(const gdt_tiler *t, uint64_t k, uint64_t got, gdt_error *err)
+{
+    return gdt_error_set(err, GDT_EINPUT, 3501,
+                         "the input changed between the two passes: tile (%" PRId64 ", %" PRId64
+                         ") received %" PRIu64 " points, pass 1 counted %" PRIu64,
+                         t->tiles[k].i, t->tiles[k].j, got, t->tiles[k].count);
+}
+
+/* Reads the shares' files of tile k (base path raw) into recs, which holds
+ * the tile's pass-1 count; the files are removed once all are read.
+ * Invariant: got counts the records read so far, never more than count
+ * (a longer share is the changed-input error at once). */
+static gdt_status read_parts(gdt_tiler *t, uint64_t k, const char *raw, int parts, gdt_point *recs,
+                             gdt_error *err)
+{
+    const uint64_t count = t->tiles[k].count;
+    uint64_t got = 0;
+    gdt_status st = GDT_OK;
+    for (int r = 0; r < parts && st == GDT_OK; r++) {
+        char *src = tl_path("%s.p%d", raw, r);
+        tl_rfile rf;
+        struct stat sb;
+        uint64_t nrec;
+        size_t n;
+        int fd;
+        if (src == NULL)
+            return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        fd = open(src, O_RDONLY | O_CLOEXEC);
+        if (fd < 0) {
+            if (errno != ENOENT) /* else that share had no point in this tile */
+                st = gdt_error_set(err, GDT_EIO, 4502, "cannot open %s: %s", src,
+                                   strerror(errno));
+            free(src);
+            continue;
+        }
+        if (fstat(fd, &sb) != 0)
+            st = gdt_error_set(err, GDT_EIO, 4504, "cannot read %s: %s", src, strerror(errno));
+        close(fd);
+        nrec = st == GDT_OK ? (uint64_t)sb.st_size / TL_REC : 0;
+        if (st == GDT_OK && ((uint64_t)sb.st_size % TL_REC != 0 || nrec > count - got))
+            st = count_changed(t, k, got + nrec, err);
+        if (st == GDT_OK && nrec > 0) {
+            st = tl_rfile_open(&rf, src, nrec, t->sz.merge_read_recs, err);
+            if (st == GDT_OK) {
+                st = tl_rfile_read(&rf, recs + got, (size_t)nrec, &n, err);
+                if (st == GDT_OK && n != nrec)
+                    st = gdt_error_set(err, GDT_EJOB, 6503, "%s: shorter than written", src);
+                tl_rfile_close(&rf);
+            }
+            got += nrec;
+        }
+        free(src);
+    }
+    if (st == GDT_OK && got != count)
+        st = count_changed(t, k, got, err);
+    for (int r = 0; r < parts && st == GDT_OK; r++) {
+        char *src = tl_path("%s.p%d", raw, r);
+        if (src == NULL)
+            return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        unlink(src);
+        free(src);
+    }
+    return st;
+}
+
+gdt_status gdt_tiler_take_parts(gdt_tiler *t, uint64_t k, int parts, gdt_point **recs,
+                                uint64_t *n, gdt_error *err)
+{
+    uint64_t count;
+    char *raw;
+    gdt_status st;
+
+    *recs = NULL;
+    *n = 0;
+    if ((t->state != 1 && t->state != 5) || t->job_dir == NULL || k >= t->ntiles)
+        return gdt_error_set(err, GDT_EUSAGE, 2505, "no share of pass 2 to take (tile %" PRIu64
+                             ")", k);
+    count = t->tiles[k].count;
+    /* in memory as the merge of a shipped tile takes it: then the join's
+     * copy of every record and the merge's reading of the copy are saved;
+     * a .raw file that must stay (keep_spill) or a tile whose records and
+     * merge table pass half the budget is joined as before */
+    if (t->opts.keep_spill || count >= TL_MERGE_CAP_MAX || count == 0 ||
+        count > t->budget / 2 / sizeof(gdt_point) ||
+        count * sizeof(gdt_point) + tl_collapse_table_bytes(count) > t->budget / 2)
+        return gdt_tiler_join_parts(t, k, parts, err);
+    raw = tl_tile_file(t, k, "raw", 1);
+    *recs = malloc((size_t)count * sizeof **recs);
+    if (raw == NULL || *recs == NULL) {
+        free(raw);
+        free(*recs);
+        *recs = NULL;
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    }
+    st = read_parts(t, k, raw, parts, *recs, err);
+    free(raw);
+    if (st != GDT_OK) {
+        free(*recs);
+        *recs = NULL;
+    } else {
+        *n = count;
+    }
+    return st;
+}
+
 gdt_status gdt_tiler_join_parts(gdt_tiler *t, uint64_t k, int parts, gdt_error *err)
 {
     char *dst = NULL, *src = NULL;
@@ -109,10 +216,7 @@ gdt_status gdt_tiler_join_parts(gdt_tiler *t, uint64_t k, int parts, gdt_error *
         st = gdt_error_set(err, GDT_EIO, 4503, "cannot write %s: %s", dst, strerror(errno));
     out = -1;
     if (st == GDT_OK && bytes != t->tiles[k].count * TL_REC)
-        st = gdt_error_set(err, GDT_EINPUT, 3501,
-                           "the input changed between the two passes: tile (%" PRId64
-                           ", %" PRId64 ") received %" PRIu64 " points, pass 1 counted %" PRIu64,
-                           t->tiles[k].i, t->tiles[k].j, bytes / TL_REC, t->tiles[k].count);
+        st = count_changed(t, k, bytes / TL_REC, err);
     if (st == GDT_OK)
         t->tiles[k].written = t->tiles[k].count;
 done:

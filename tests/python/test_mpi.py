@@ -259,9 +259,23 @@ def test_shared_pass2_out_of_core(mpi_bin, root, tmp_path):
     out = tmp_path / "o.ply"
     r = mpirun(3, mpi_bin, [c, "-o", out, *args, "-v"])
     assert r.returncode == 0, r.stdout + r.stderr
-    # every rank spilled its share into .raw files of its own, joined by the owners
+    # every rank spilled its share into .raw files of its own; each owner read
+    # its tiles' shares into memory (a tile is far below half the budget)
     assert "in shares of 3 ranks (each rank's .raw files)" in r.stderr, r.stderr
     assert out.read_bytes() == ref.read_bytes()
+    # one tile of 220000 points, its records and merge table beyond half the
+    # budget (but the tile within it): its owner joins the shares' files
+    # into the tile's .raw file and merges from there
+    c1 = gen(root, tmp_path / "c1.las", 220000, 9)
+    one = ["--tile", "4096", "--mem-budget", "16M"]
+    ref1 = tmp_path / "ref1.ply"
+    r = run([mpi_bin, c1, "-o", ref1, *one, "-q"])
+    assert r.returncode == 0, r.stderr
+    out1 = tmp_path / "o1.ply"
+    r = mpirun(3, mpi_bin, [c1, "-o", out1, *one, "-v"])
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "in shares of 3 ranks (each rank's .raw files)" in r.stderr, r.stderr
+    assert out1.read_bytes() == ref1.read_bytes()
     # a LAZ input of 6 chunks: each rank decodes whole chunks of its share,
     # in both passes, and spills them into its own files
     laz = write_laz(c, tmp_path / "c.laz", chunk=50000)

@@ -125,10 +125,13 @@ void mr_fail(mr_ctx *m, int from, gdt_status st, int code, const char *msg);
 void mr_pass1_hooks(mr_ctx *m);
 
 /* Another rank, given P1 (msg, len): reads its share and answers P1DONE;
- * st, err: this rank's state so far (a failure is the answer).  Ends the
- * job (gdt_comm_abort) when the answer cannot be sent. */
-void mr_pass1_answer(mr_ctx *m, const unsigned char *msg, size_t len, gdt_status st,
-                     const gdt_error *err);
+ * *st, *err: this rank's state so far (a failure is the answer).  Unless
+ * *core_started, the OpenCL core's start-up begins between the reading and
+ * the answer (tr_run_start_core; *core_started set, a failure to start into
+ * *st, *err): the answer waits for rank 0 to take it, time the build can
+ * use.  Ends the job (gdt_comm_abort) when the answer cannot be sent. */
+void mr_pass1_answer(mr_ctx *m, const unsigned char *msg, size_t len, gdt_status *st,
+                     gdt_error *err, int *core_started);
 
 /* m->raw_pre / raw_n from tiler t's pass-1 counts.  returns: 7001. */
 gdt_status mr_raw_prefix(mr_ctx *m, const gdt_tiler *t, gdt_error *err);
