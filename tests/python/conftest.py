@@ -18,12 +18,17 @@ DATA = pathlib.Path(os.environ.get("GDT_TEST_DATA_DIR", ROOT.parent / "shared" /
 # work-group variants into its cache as they are first run, and processes
 # that do so at the same time in one cache have been seen to crash
 # (pocl/pocl#430, #1480).  The programs run by one worker share its cache;
-# tests of the cache location itself remove this variable.
-if "POCL_CACHE_DIR" not in os.environ:
+# tests of the cache location itself remove this variable.  The workers
+# inherit the environment of the process that started them, which loaded
+# this file first: a directory chosen here (GDT_TEST_POCL_CACHE names it) is
+# chosen again by each worker, one given by the user is kept.
+if "POCL_CACHE_DIR" not in os.environ or \
+        os.environ.get("GDT_TEST_POCL_CACHE") == os.environ["POCL_CACHE_DIR"]:
     _worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
     _cache = pathlib.Path(tempfile.gettempdir()) / f"gdt-test-pocl-{os.getuid()}-{_worker}"
     _cache.mkdir(parents=True, exist_ok=True)
     os.environ["POCL_CACHE_DIR"] = str(_cache)
+    os.environ["GDT_TEST_POCL_CACHE"] = str(_cache)
 
 
 def build_dir() -> pathlib.Path:
