@@ -61,6 +61,7 @@ static void part_src(const tr_run *c, const gdt_lattice *lat, tr_out_src *s)
     s->stop = c->opts->stop;
     s->trim = gdt_trim_on(&c->trim);
     s->concavity = c->trim.concavity > 0;
+    s->tri_cached = c->tri_cached;
 }
 
 /* Keeps the first failure of this rank's writes. */

@@ -616,8 +616,13 @@ static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
             st = mr_parts_read_layout(m, &u, err);
         if (st == GDT_OK)
             st = tr_run_attach(c, id, state, slen, err);
-        if (st == GDT_OK && m->parts)
+        /* this rank's faces are written after the tile stage, from its
+         * .tri files: kept in the page cache for that, not read from the
+         * disk then */
+        if (st == GDT_OK && m->parts) {
+            c->tri_cached = 1;
             st = mr_parts_open(m, err);
+        }
     }
     free(go);
     if (st == GDT_OK) {

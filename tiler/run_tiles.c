@@ -339,7 +339,7 @@ static gdt_status post_tile_run(tr_run *c, tr_slot *sl, gdt_error *err)
     st = tr_tile_path(c->tiles_dir, d, "tri", &path, err);
     /* durability comes in batches: see sync_tiles */
     if (st == GDT_OK)
-        st = tr_write_atomic(path, c->fbuf, len, 1, err);
+        st = tr_write_atomic(path, c->fbuf, len, 1, c->tri_cached, err);
     free(path);
     if (st != GDT_OK)
         return st;

@@ -3,6 +3,7 @@
 #include "private/tiled_files.h"
 
 #include <errno.h>
+#include <fcntl.h>
 #include <stdint.h>
 #include <inttypes.h>
 #include <stdio.h>
@@ -238,7 +239,7 @@ gdt_status tr_write_direct(int fd, int *direct, const unsigned char *buf, size_t
     return GDT_OK;
 }
 
-gdt_status tr_dread_open(tr_dread *r, const char *path, size_t cap, gdt_error *err)
+gdt_status tr_dread_open(tr_dread *r, const char *path, size_t cap, int cached, gdt_error *err)
 {
     void *buf = NULL;
     memset(r, 0, sizeof *r);
@@ -252,7 +253,13 @@ gdt_status tr_dread_open(tr_dread *r, const char *path, size_t cap, gdt_error *e
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     }
     r->cap = cap;
-    r->fd = gdt_dio_open_read(path, &r->direct);
+    if (cached) {
+        r->fd = open(path, O_RDONLY | O_CLOEXEC);
+        if (r->fd >= 0) /* advice only: nothing to do when it is not taken */
+            (void)posix_fadvise(r->fd, 0, 0, POSIX_FADV_SEQUENTIAL);
+    } else {
+        r->fd = gdt_dio_open_read(path, &r->direct);
+    }
     if (r->fd < 0) {
         int e = errno;
         gdt_status st =
@@ -336,7 +343,7 @@ gdt_status tr_commit_tmp(int *fd, const char *tmp, const char *path, int nosync,
 }
 
 gdt_status tr_write_atomic(const char *path, const unsigned char *buf, size_t len, int nosync,
-                           gdt_error *err)
+                           int cached, gdt_error *err)
 {
     int direct;
     size_t lp = strlen(path);
@@ -348,7 +355,12 @@ gdt_status tr_write_atomic(const char *path, const unsigned char *buf, size_t le
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     memcpy(tmp, path, lp);
     memcpy(tmp + lp, ".tmp", 5);
-    fd = gdt_dio_create(tmp, 0644, &direct);
+    if (cached) {
+        direct = 0;
+        fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    } else {
+        fd = gdt_dio_create(tmp, 0644, &direct);
+    }
     if (fd < 0) {
         st = gdt_error_set(err, GDT_EIO, 4802, "%s: cannot create: %s", tmp, strerror(errno));
         goto fail;

@@ -314,7 +314,7 @@ static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
     if (st == GDT_OK)
         st = tr_tile_path(o->src.tiles_dir, &d, "tri", &path, err);
     if (st == GDT_OK)
-        st = tr_dread_open(&r, path, TR_DREAD_BYTES, err);
+        st = tr_dread_open(&r, path, TR_DREAD_BYTES, o->src.tri_cached, err);
     if (st == GDT_OK)
         st = tr_dread_bytes(&r, hdr, TR_HEADER, &got, err);
     if (st == GDT_OK && (got != TR_HEADER || memcmp(hdr, TR_MAGIC, 8) != 0 ||

@@ -27,26 +27,38 @@ static gdt_checks T = {0, 0};
 
 #define CHECK(cond, ...) GDT_CHECK(&T, cond, __VA_ARGS__)
 
+/* len random bytes in *buf (aligned for direct I/O) and len + 1 bytes of
+ * room in *back; 0 (both NULL) when memory runs out, a failed check. */
+static int random_buffers(size_t len, uint64_t *seed, unsigned char **buf, unsigned char **back)
+{
+    void *aligned = NULL;
+    *buf = NULL;
+    *back = malloc(len + 1);
+    if (*back != NULL && posix_memalign(&aligned, GDT_DIO_BLOCK, len + 1) == 0)
+        *buf = aligned;
+    if (*buf == NULL) {
+        CHECK(0, "%s", "out of memory");
+        free(*back);
+        *back = NULL;
+        return 0;
+    }
+    for (size_t i = 0; i < len; i++)
+        (*buf)[i] = (unsigned char)gdt_splitmix64(seed);
+    return 1;
+}
+
 static void one_file(const char *dir, size_t len, int start_direct, uint64_t *seed)
 {
     char path[4200];
-    unsigned char *buf = NULL, *back = malloc(len + 1);
+    unsigned char *buf, *back;
     static const size_t pieces[] = {1, 12, 13, 4095, 4096, 4097, 65536 * 12, 3 << 20};
     int direct = 0, fd;
     gdt_error err;
 
     gdt_error_clear(&err);
     snprintf(path, sizeof path, "%s/f_%zu_%d", dir, len, start_direct);
-    void *aligned = NULL;
-    if (back != NULL && posix_memalign(&aligned, GDT_DIO_BLOCK, len + 1) == 0)
-        buf = aligned;
-    if (buf == NULL) {
-        CHECK(0, "%s", "out of memory");
-        free(back);
+    if (!random_buffers(len, seed, &buf, &back))
         return;
-    }
-    for (size_t i = 0; i < len; i++)
-        buf[i] = (unsigned char)gdt_splitmix64(seed);
     fd = start_direct ? gdt_dio_create(path, 0644, &direct) : -1;
     if (!start_direct)
         fd = creat(path, 0644);
@@ -58,12 +70,13 @@ static void one_file(const char *dir, size_t len, int start_direct, uint64_t *se
     }
     /* mode 0: the reader as opened (direct where the file system allows
      * it); 1: buffered from the start, as on a file system that refuses
-     * O_DIRECT; 2: leaving direct mode after the first piece */
-    for (int mode = 0; mode < 3; mode++) {
+     * O_DIRECT; 2: leaving direct mode after the first piece; 3: opened
+     * for a file read through the page cache */
+    for (int mode = 0; mode < 4; mode++) {
         for (size_t p = 0; p < sizeof pieces / sizeof pieces[0]; p++) {
             tr_dread r;
             size_t at = 0, got = 0;
-            gdt_status st = tr_dread_open(&r, path, TR_DREAD_BYTES, &err);
+            gdt_status st = tr_dread_open(&r, path, TR_DREAD_BYTES, mode == 3, &err);
             CHECK(st == GDT_OK, "%s", err.msg);
             if (st != GDT_OK)
                 continue;
@@ -75,6 +88,8 @@ static void one_file(const char *dir, size_t len, int start_direct, uint64_t *se
                 printf("note: this file system refuses O_DIRECT; the reader is buffered\n");
             if (mode == 1 && r.direct)
                 CHECK(gdt_dio_end(r.fd, &r.direct) == 0, "%s", "cannot leave direct mode");
+            if (mode == 3)
+                CHECK(!r.direct, "len %zu: a reader opened for the page cache is direct", len);
             do {
                 size_t want = pieces[p] < len + 1 - at ? pieces[p] : len + 1 - at;
                 st = tr_dread_bytes(&r, back + at, want, &got, &err);
@@ -105,6 +120,40 @@ static void one_file(const char *dir, size_t len, int start_direct, uint64_t *se
     free(back);
 }
 
+/* tr_write_atomic, direct or through the page cache, read back both ways:
+ * the same bytes at the final name, no temporary left. */
+static void atomic_file(const char *dir, size_t len, uint64_t *seed)
+{
+    char path[4200], tmp[4300];
+    unsigned char *buf, *back;
+    gdt_error err;
+    snprintf(path, sizeof path, "%s/atomic.tri", dir);
+    snprintf(tmp, sizeof tmp, "%s.tmp", path);
+    if (!random_buffers(len, seed, &buf, &back))
+        return;
+    for (int cached = 0; cached < 2; cached++) {
+        gdt_error_clear(&err);
+        CHECK(tr_write_atomic(path, buf, len, 1, cached, &err) == GDT_OK, "%s", err.msg);
+        CHECK(access(tmp, F_OK) != 0, "len %zu, cached %d: the temporary is left", len, cached);
+        for (int rc = 0; rc < 2; rc++) {
+            tr_dread r;
+            size_t got = 0;
+            gdt_status st = tr_dread_open(&r, path, TR_DREAD_BYTES, rc, &err);
+            CHECK(st == GDT_OK, "%s", err.msg);
+            if (st != GDT_OK)
+                continue;
+            st = tr_dread_bytes(&r, back, len + 1, &got, &err);
+            CHECK(st == GDT_OK && got == len && memcmp(back, buf, len) == 0,
+                  "len %zu, written cached %d, read cached %d: %zu bytes back", len, cached, rc,
+                  got);
+            tr_dread_close(&r);
+        }
+        unlink(path);
+    }
+    free(buf);
+    free(back);
+}
+
 int main(int argc, char **argv)
 {
     static const size_t lens[] = {0,    1,     64,   4095,  4096,          4097,
@@ -127,11 +176,17 @@ int main(int argc, char **argv)
     for (size_t i = 0; i < sizeof lens / sizeof lens[0]; i++)
         for (int d = 0; d < 2; d++)
             one_file(dir, lens[i], d, &seed);
+    for (size_t i = 0; i < sizeof lens / sizeof lens[0]; i++)
+        atomic_file(dir, lens[i], &seed);
     gdt_error_clear(&err);
-    CHECK(tr_dread_open(&r, "/nonexistent/tile.tri", TR_DREAD_BYTES, &err) == GDT_EIO &&
-              err.code == 4805,
-          "missing file: status %d code %d", (int)err.status, err.code);
-    tr_dread_close(&r);
+    for (int cached = 0; cached < 2; cached++) {
+        gdt_error_clear(&err);
+        CHECK(tr_dread_open(&r, "/nonexistent/tile.tri", TR_DREAD_BYTES, cached, &err) ==
+                      GDT_EIO &&
+                  err.code == 4805,
+              "missing file (cached %d): status %d code %d", cached, (int)err.status, err.code);
+        tr_dread_close(&r);
+    }
     rmdir(dir);
     return gdt_check_finish(&T, "test_tile_files");
 }

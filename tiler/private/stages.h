@@ -268,6 +268,9 @@ struct tr_run {
     tr_post post;
     tr_reclaim reclaim;
     tr_out *out;        /* the mesh writer, from the tile stage on */
+    int tri_cached;     /* the .tri files go through the page cache: this rank's mesh
+                         * writer reads them back once the tile stage is over (an
+                         * MPI rank other than 0 writing its part) */
     int out_parts;      /* asked by the MPI run before tr_run_output_start: the tiles'
                          * owners write the mesh in parts when it is a plain PLY;
                          * tr_run_output_start leaves it set only then */

@@ -170,9 +170,11 @@ typedef struct tr_dread {
     char *path;         /* owned, for messages */
 } tr_dread;
 
-/* Opens path; cap (a multiple of GDT_DIO_BLOCK) bytes of buffer.
+/* Opens path; cap (a multiple of GDT_DIO_BLOCK) bytes of buffer.  cached:
+ * through the page cache, read ahead (a file written with cached set and
+ * read back soon, see tr_write_atomic), else direct where allowed.
  * returns: GDT_OK; GDT_EIO 4805 (cannot open); GDT_EINTERNAL 7001. */
-gdt_status tr_dread_open(tr_dread *r, const char *path, size_t cap, gdt_error *err);
+gdt_status tr_dread_open(tr_dread *r, const char *path, size_t cap, int cached, gdt_error *err);
 /* The next n bytes into dst; *got < n only at the end of the file.
  * returns: GDT_OK; GDT_EIO 4806 (read failed). */
 gdt_status tr_dread_bytes(tr_dread *r, void *dst, size_t n, size_t *got, gdt_error *err);
@@ -187,12 +189,13 @@ gdt_status tr_commit_tmp(int *fd, const char *tmp, const char *path, int nosync,
                          gdt_error *err);
 
 /* Writes buf (aligned to GDT_DIO_BLOCK) to path through path.tmp, with
- * direct I/O where allowed (tr_write_direct), then fsync (unless nosync)
+ * direct I/O where allowed (tr_write_direct) unless cached (the file is
+ * read back soon: it stays in the page cache), then fsync (unless nosync)
  * and rename.  On failure nothing is left at either name.
  * returns: GDT_OK; GDT_EIO 4802 (cannot create), 4803, 4804; GDT_EINTERNAL
  * 7001. */
 gdt_status tr_write_atomic(const char *path, const unsigned char *buf, size_t len, int nosync,
-                           gdt_error *err);
+                           int cached, gdt_error *err);
 
 /* The error of a run stopped by a signal during `where` (GDT_EINTERRUPTED
  * 1302), telling how to continue the job. */

@@ -51,6 +51,8 @@ typedef struct tr_out_src {
                                     the writer */
     int parts;                   /* a mesh (no DEM or check copy; trimmed or not) written
                                   * in parts by the tiles' owners (mpirun): see below */
+    int tri_cached;              /* the .tri files were written through the page cache
+                                  * (tr_run.tri_cached): read them through it */
 } tr_out_src;
 
 /* Starts the writer (src is copied; the arrays and strings it points to
