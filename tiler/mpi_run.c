@@ -346,6 +346,8 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
     uint64_t *mine = NULL, nmine = 0, vmine = 0;
     double t_tiles0 = 0, t_own = 0;
 
+    /* the ranks share the removal of the tile files at the end */
+    c->removal_parts = m->size;
     mr_pass1_hooks(m);
     c->p1share = &m->p1;
     mr_pass2_hooks(m);
@@ -673,10 +675,40 @@ static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
     u.p = fin;
     u.n = len;
     run_st = (gdt_status)gdt_unpack_u64(&u);
+    m->remove_share = gdt_unpack_u64(&u) != 0;
     free(fin);
-    if (u.bad)
+    if (u.bad) {
+        m->remove_share = 0;
         return mr_bad_message(0, TAG_FINAL, err);
+    }
     return run_st;
+}
+
+/* Rank 0, after FINAL asked every rank that reported to remove its share
+ * of the tile files: its own share, then, once every such rank has said
+ * REMOVED, what is left of the job (tr_remove_job_files). */
+static void remove_shared(mr_ctx *m, tr_run *c)
+{
+    tr_remove_tile_share(c->tiles_dir, 0, m->size);
+    for (int r = 1; r < m->size; r++) {
+        int ready = 0, from = 0, tag = 0;
+        size_t len = 0;
+        unsigned char *buf = NULL;
+        gdt_error e2;
+        gdt_status s2;
+        if (!m->finished[r])
+            continue;
+        gdt_error_clear(&e2);
+        s2 = gdt_comm_wait(m->comm, r, TAG_REMOVED, NULL, &ready, &from, &tag, &len, &e2);
+        if (s2 == GDT_OK)
+            s2 = mr_recv(m, r, TAG_REMOVED, len, &buf, &e2);
+        free(buf);
+        if (s2 != GDT_OK) {
+            gdt_error_print(&e2, stderr); /* the job is done: what is left stays */
+            return;
+        }
+    }
+    tr_remove_job_files(c->job, 1, c->own_dir);
 }
 
 /* The tile stage over this rank's tiles ks[0, n): rank 0 with the journal
@@ -718,14 +750,16 @@ gdt_status gdt_cli_tiled_mpi(const gdt_options *opts, gdt_comm *comm, gdt_error 
         c.opts = opts;
         st = run_rank0(&m, &c, err);
         for (int r = 1; r < m.size; r++) {
-            uint64_t v = (uint64_t)st;
+            uint64_t v[2] = {(uint64_t)st, (uint64_t)c.removal_due};
             gdt_error e2;
             gdt_error_clear(&e2);
             /* only ranks that got GO and reported wait for FINAL; those
              * that got a failed GO have returned */
-            if (m.finished[r] && gdt_comm_send(comm, r, TAG_FINAL, &v, sizeof v, &e2) != GDT_OK)
+            if (m.finished[r] && gdt_comm_send(comm, r, TAG_FINAL, v, sizeof v, &e2) != GDT_OK)
                 gdt_error_print(&e2, stderr);
         }
+        if (c.removal_due)
+            remove_shared(&m, &c);
     } else {
         /* the other ranks print nothing: progress, warnings and the job's
          * error come from rank 0 */
@@ -734,6 +768,13 @@ gdt_status gdt_cli_tiled_mpi(const gdt_options *opts, gdt_comm *comm, gdt_error 
         quiet.json = NULL;
         c.opts = &quiet;
         st = run_other(&m, &c, err);
+        if (m.remove_share) {
+            gdt_error e2;
+            gdt_error_clear(&e2);
+            tr_remove_tile_share(c.tiles_dir, m.rank, m.size);
+            if (gdt_comm_send(comm, 0, TAG_REMOVED, NULL, 0, &e2) != GDT_OK)
+                gdt_error_print(&e2, stderr);
+        }
     }
     st = tr_run_close(&c, st);
     free(m.raw_pre);

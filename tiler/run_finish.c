@@ -408,7 +408,15 @@ gdt_status tr_run_finish(tr_run *c, gdt_error *err)
         c->tiler = NULL;
         gdt_job_close(c->jobdb);
         c->jobdb = NULL;
-        tr_remove_job_files(c->job, 1, c->own_dir);
+        /* several processes: the journal now, the tile files by each of
+         * them (their unlinking waits for the file system's metadata more
+         * than it works), the rest when they are done */
+        if (c->removal_parts > 1) {
+            tr_remove_job_journal(c->job);
+            c->removal_due = 1;
+        } else {
+            tr_remove_job_files(c->job, 1, c->own_dir);
+        }
     }
     return GDT_OK;
 }

@@ -202,32 +202,53 @@ static void first_difference(const char *a, const char *b, char *msg, size_t len
 }
 
 /* See stages.h. */
-void tr_remove_job_files(const char *job, int final, int own_dir)
+void tr_remove_job_journal(const char *job)
 {
     static const char *const names[] = {"job.db", "job.db-wal", "job.db-shm", "job.db-journal",
                                         "index.vdb", "index.vdb.tmp", MF_NAME,
                                         MF_NAME ".tmp", MD_NAME, MD_NAME ".tmp",
                                         CHECK_PLY_NAME, "ground.bits"};
-    char *tiles = tr_path_join(job, "tiles");
-    /* the journal first: a removal cut short by a crash must not leave a
-     * journal that vouches for files already gone */
     for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
         char *p = tr_path_join(job, names[i]);
         if (p != NULL)
             unlink(p);
         free(p);
     }
+}
+
+/* FNV-1a of a name: which share of a removal it falls in. */
+static uint32_t name_hash(const char *s)
+{
+    uint32_t h = 2166136261u;
+    for (; *s != '\0'; s++)
+        h = (h ^ (unsigned char)*s) * 16777619u;
+    return h;
+}
+
+/* See stages.h. */
+void tr_remove_tile_share(const char *tiles_dir, int part, int parts)
+{
+    DIR *d = opendir(tiles_dir);
+    struct dirent *e;
+    if (d == NULL)
+        return;
+    while ((e = readdir(d)) != NULL)
+        if ((strncmp(e->d_name, "tile_", 5) == 0 || strncmp(e->d_name, "bucket_", 7) == 0 ||
+             strncmp(e->d_name, "merge_", 6) == 0) &&
+            (parts <= 1 || name_hash(e->d_name) % (uint32_t)parts == (uint32_t)part))
+            unlinkat(dirfd(d), e->d_name, 0);
+    closedir(d);
+}
+
+/* See stages.h. */
+void tr_remove_job_files(const char *job, int final, int own_dir)
+{
+    char *tiles = tr_path_join(job, "tiles");
+    /* the journal first: a removal cut short by a crash must not leave a
+     * journal that vouches for files already gone */
+    tr_remove_job_journal(job);
     if (tiles != NULL) {
-        DIR *d = opendir(tiles);
-        struct dirent *e;
-        if (d != NULL) {
-            while ((e = readdir(d)) != NULL)
-                if (strncmp(e->d_name, "tile_", 5) == 0 ||
-                    strncmp(e->d_name, "bucket_", 7) == 0 ||
-                    strncmp(e->d_name, "merge_", 6) == 0)
-                    unlinkat(dirfd(d), e->d_name, 0);
-            closedir(d);
-        }
+        tr_remove_tile_share(tiles, 0, 1);
         rmdir(tiles);
         free(tiles);
     }

@@ -11,6 +11,10 @@
  * and one that leaves direct mode mid-file; every byte must come back, the
  * reader must report the end exactly, and the writer must leave direct
  * mode after the tail.  A reader of a missing file fails with 4805.
+ * tr_write_atomic writes the same bytes directly and through the page
+ * cache.  The removal of a job's tile files in shares (tr_remove_tile_share,
+ * one per MPI rank) removes each tile file in exactly one share, every
+ * share some, and nothing else.
  */
 #include <errno.h>
 #include <fcntl.h>
@@ -21,6 +25,7 @@
 #include <unistd.h>
 
 #include "gdt_check.h"
+#include "private/stages.h"
 #include "private/tiled_files.h"
 
 static gdt_checks T = {0, 0};
@@ -154,6 +159,69 @@ static void atomic_file(const char *dir, size_t len, uint64_t *seed)
     free(back);
 }
 
+/* The name of the i-th file of a job's tiles/ in removal_shares. */
+static void job_file(char *buf, size_t n, int i)
+{
+    switch (i % 4) {
+    case 0: snprintf(buf, n, "tile_%d_%d.pts", i / 4, i % 7); break;
+    case 1: snprintf(buf, n, "tile_%d_%d.tri", i / 4, i % 7); break;
+    case 2: snprintf(buf, n, "bucket_%d_%d", i / 4, i % 7); break;
+    default: snprintf(buf, n, "merge_%d_%d.x", i / 4, i % 7); break;
+    }
+}
+
+/* tr_remove_tile_share in parts shares over a directory of tile files and
+ * a file of the user's. */
+static void removal_shares(const char *dir, int parts)
+{
+    enum { NFILES = 120 };
+    char tiles[4200], name[4400], mine[4400];
+    int present[NFILES], removed_by[NFILES];
+    snprintf(tiles, sizeof tiles, "%s/tiles_%d", dir, parts);
+    CHECK(mkdir(tiles, 0755) == 0, "%s: %s", tiles, strerror(errno));
+    for (int i = 0; i < NFILES; i++) {
+        int fd;
+        char base[64];
+        job_file(base, sizeof base, i);
+        snprintf(name, sizeof name, "%s/%s", tiles, base);
+        fd = creat(name, 0644);
+        CHECK(fd >= 0, "%s: %s", name, strerror(errno));
+        if (fd >= 0)
+            close(fd);
+        present[i] = 1;
+        removed_by[i] = -1;
+    }
+    snprintf(mine, sizeof mine, "%s/notes.txt", tiles);
+    {
+        int fd = creat(mine, 0644);
+        if (fd >= 0)
+            close(fd);
+    }
+    for (int p = 0; p < parts; p++) {
+        int n = 0;
+        tr_remove_tile_share(tiles, p, parts);
+        for (int i = 0; i < NFILES; i++) {
+            char base[64];
+            job_file(base, sizeof base, i);
+            snprintf(name, sizeof name, "%s/%s", tiles, base);
+            if (present[i] && access(name, F_OK) != 0) {
+                present[i] = 0;
+                removed_by[i] = p;
+                n++;
+            }
+        }
+        CHECK(parts == 1 || n > 0, "share %d of %d removed nothing", p, parts);
+        CHECK(parts > 1 || n == NFILES, "one share removed %d of %d files", n, NFILES);
+        /* a share run again finds nothing of its own */
+        tr_remove_tile_share(tiles, p, parts);
+    }
+    for (int i = 0; i < NFILES; i++)
+        CHECK(removed_by[i] >= 0, "%d shares: file %d was never removed", parts, i);
+    CHECK(access(mine, F_OK) == 0, "%d shares: a file not of the job was removed", parts);
+    unlink(mine);
+    rmdir(tiles);
+}
+
 int main(int argc, char **argv)
 {
     static const size_t lens[] = {0,    1,     64,   4095,  4096,          4097,
@@ -178,6 +246,8 @@ int main(int argc, char **argv)
             one_file(dir, lens[i], d, &seed);
     for (size_t i = 0; i < sizeof lens / sizeof lens[0]; i++)
         atomic_file(dir, lens[i], &seed);
+    for (int parts = 1; parts <= 4; parts++)
+        removal_shares(dir, parts);
     gdt_error_clear(&err);
     for (int cached = 0; cached < 2; cached++) {
         gdt_error_clear(&err);

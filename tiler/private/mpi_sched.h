@@ -33,7 +33,8 @@ enum {
     TAG_GOUT = 20,     /* 0 -> r: write your share of --ground-out (mpi_ground.c) */
     TAG_GOUTDONE = 21, /* r -> 0: the share is written and synced, or why not */
     TAG_TSIZES = 22,   /* r -> 0: a text mesh's part: its fragments' lengths (mpi_parts.c) */
-    TAG_TPLACE = 23    /* 0 -> r: where to place them */
+    TAG_TPLACE = 23,   /* 0 -> r: where to place them */
+    TAG_REMOVED = 24   /* r -> 0: the rank's share of the tile files is removed */
 };
 
 /* Records per TAG_RECDATA message (32 MiB of gdt_point). */
@@ -66,6 +67,7 @@ typedef struct mr_ctx {
     gdt_filter_counts *p1_counts; /* the filter's counts of the whole pass, per input */
     /* another rank */
     int stopped; /* STOP received */
+    int remove_share; /* another rank: FINAL asked it to remove its share of the tile files */
     /* the mesh in parts (mpi_parts.c), on every rank */
     int parts;     /* this run writes the mesh in parts */
     int part_text; /* and it is a text mesh (OBJ, LandXML): fragments first */

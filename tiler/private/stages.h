@@ -254,6 +254,10 @@ struct tr_run {
     char *ground_bits;  /* J/ground.bits (--ground-out); owned */
     int created;        /* this run made the job directory */
     int own_dir;        /* a run of this job made it (gdt_job_lock) */
+    int removal_parts;  /* > 1: the job's tile files are removed by this many processes
+                         * (MPI ranks) after the run, not by tr_run_finish alone */
+    int removal_due;    /* tr_run_finish removed the journal and left the tile files
+                         * to those processes (removal_parts > 1) */
     tr_core_start cstart; /* the core's creation, until tr_run_pass1 joins it */
     gdt_cloud *cloud;
     gdt_tiler *tiler;
@@ -357,6 +361,17 @@ gdt_status tr_run_prepare_job(tr_run *c, gdt_error *err);
  * stay.  Never removes anything else: --job may name a directory the user
  * owns. */
 void tr_remove_job_files(const char *job, int final, int own_dir);
+
+/* The first step of tr_remove_job_files alone: the journal and the job's
+ * other files beside tiles/ (a removal cut short must not leave a journal
+ * that vouches for files already gone). */
+void tr_remove_job_journal(const char *job);
+
+/* Part part of parts of the removal of tiles/: the tile files whose name
+ * hashes to part (so that K processes share it without a word, each file
+ * once); a file already gone is no error.  tr_remove_job_files after the
+ * last part removes whatever is left and the directories. */
+void tr_remove_tile_share(const char *tiles_dir, int part, int parts);
 
 /* ---- run_passes.c: the device, pass 1 and pass 2 ---- */
 
