@@ -7,6 +7,7 @@
 
 #include <dirent.h>
 #include <errno.h>
+#include <pthread.h>
 #include <inttypes.h>
 #include <math.h>
 #include <stdarg.h>
@@ -16,6 +17,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "gdt_grow.h"
 #include "private/outpaths.h"
 #include "private/tiled_files.h"
 #include "private/tiled_run.h"
@@ -225,18 +227,72 @@ static uint32_t name_hash(const char *s)
     return h;
 }
 
-/* See stages.h. */
+/* Unlinkers of one removal: names[i] for i = first, first + step, ...
+ * relative to the directory dirfd. */
+#define UNLINK_THREADS 4
+#define UNLINK_PER_THREAD 32 /* names a further thread must have to be worth starting */
+
+typedef struct unlinker {
+    int dirfd;
+    char **names;
+    size_t n, first, step;
+} unlinker;
+
+static void *unlink_main(void *arg)
+{
+    const unlinker *u = arg;
+    for (size_t i = u->first; i < u->n; i += u->step)
+        unlinkat(u->dirfd, u->names[i], 0);
+    return NULL;
+}
+
+/* See stages.h.  An unlink waits for the file system's metadata (and, on
+ * a file system mounted with discard, for the device) far longer than it
+ * works, so the names are unlinked by up to UNLINK_THREADS threads at once;
+ * without memory or threads, one by one here. */
 void tr_remove_tile_share(const char *tiles_dir, int part, int parts)
 {
     DIR *d = opendir(tiles_dir);
     struct dirent *e;
+    char **names = NULL;
+    size_t n = 0, cap = 0;
+    unlinker u[UNLINK_THREADS];
+    pthread_t tid[UNLINK_THREADS];
+    int started[UNLINK_THREADS] = {0};
+    size_t nt;
     if (d == NULL)
         return;
-    while ((e = readdir(d)) != NULL)
-        if ((strncmp(e->d_name, "tile_", 5) == 0 || strncmp(e->d_name, "bucket_", 7) == 0 ||
-             strncmp(e->d_name, "merge_", 6) == 0) &&
-            (parts <= 1 || name_hash(e->d_name) % (uint32_t)parts == (uint32_t)part))
-            unlinkat(dirfd(d), e->d_name, 0);
+    while ((e = readdir(d)) != NULL) {
+        char *nm;
+        if (!((strncmp(e->d_name, "tile_", 5) == 0 || strncmp(e->d_name, "bucket_", 7) == 0 ||
+               strncmp(e->d_name, "merge_", 6) == 0) &&
+              (parts <= 1 || name_hash(e->d_name) % (uint32_t)parts == (uint32_t)part)))
+            continue;
+        nm = gdt_grow(&names, &cap, n + 1, sizeof *names, 256) == 0 ? strdup(e->d_name) : NULL;
+        if (nm == NULL)
+            unlinkat(dirfd(d), e->d_name, 0); /* out of memory: at once */
+        else
+            names[n++] = nm;
+    }
+    nt = n / UNLINK_PER_THREAD;
+    nt = nt < 1 ? 1 : nt > UNLINK_THREADS ? UNLINK_THREADS : nt;
+    for (size_t i = 0; i < nt; i++) {
+        u[i].dirfd = dirfd(d);
+        u[i].names = names;
+        u[i].n = n;
+        u[i].first = i;
+        u[i].step = nt;
+        started[i] = i > 0 && pthread_create(&tid[i], NULL, unlink_main, &u[i]) == 0;
+    }
+    for (size_t i = 0; i < nt; i++)
+        if (!started[i])
+            unlink_main(&u[i]); /* the first share, and any whose thread did not start */
+    for (size_t i = 0; i < nt; i++)
+        if (started[i])
+            pthread_join(tid[i], NULL);
+    for (size_t i = 0; i < n; i++)
+        free(names[i]);
+    free(names);
     closedir(d);
 }
 

@@ -13,8 +13,8 @@
  * mode after the tail.  A reader of a missing file fails with 4805.
  * tr_write_atomic writes the same bytes directly and through the page
  * cache.  The removal of a job's tile files in shares (tr_remove_tile_share,
- * one per MPI rank) removes each tile file in exactly one share, every
- * share some, and nothing else.
+ * one per MPI rank, each unlinking on several threads) removes each tile
+ * file in exactly one share, every share some, and nothing else.
  */
 #include <errno.h>
 #include <fcntl.h>
