@@ -755,8 +755,10 @@ gdt_status gdt_cli_tiled_mpi(const gdt_options *opts, gdt_comm *comm, gdt_error 
             gdt_error_clear(&e2);
             /* only ranks that got GO and reported wait for FINAL; those
              * that got a failed GO have returned */
-            if (m.finished[r] && gdt_comm_send(comm, r, TAG_FINAL, v, sizeof v, &e2) != GDT_OK)
+            if (m.finished[r] && gdt_comm_send(comm, r, TAG_FINAL, v, sizeof v, &e2) != GDT_OK) {
                 gdt_error_print(&e2, stderr);
+                m.finished[r] = 0; /* no REMOVED to wait for */
+            }
         }
         if (c.removal_due)
             remove_shared(&m, &c);

@@ -93,22 +93,17 @@ static gdt_status read_parts(gdt_tiler *t, uint64_t k, const char *raw, int part
         struct stat sb;
         uint64_t nrec;
         size_t n;
-        int fd;
         if (src == NULL)
             return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-        fd = open(src, O_RDONLY | O_CLOEXEC);
-        if (fd < 0) {
+        if (stat(src, &sb) != 0) {
             if (errno != ENOENT) /* else that share had no point in this tile */
                 st = gdt_error_set(err, GDT_EIO, 4502, "cannot open %s: %s", src,
                                    strerror(errno));
             free(src);
             continue;
         }
-        if (fstat(fd, &sb) != 0)
-            st = gdt_error_set(err, GDT_EIO, 4504, "cannot read %s: %s", src, strerror(errno));
-        close(fd);
-        nrec = st == GDT_OK ? (uint64_t)sb.st_size / TL_REC : 0;
-        if (st == GDT_OK && ((uint64_t)sb.st_size % TL_REC != 0 || nrec > count - got))
+        nrec = (uint64_t)sb.st_size / TL_REC;
+        if ((uint64_t)sb.st_size % TL_REC != 0 || nrec > count - got)
             st = count_changed(t, k, got + nrec, err);
         if (st == GDT_OK && nrec > 0) {
             st = tl_rfile_open(&rf, src, nrec, t->sz.merge_read_recs, err);
@@ -152,7 +147,6 @@ gdt_status gdt_tiler_take_parts(gdt_tiler *t, uint64_t k, int parts, gdt_point *
      * a .raw file that must stay (keep_spill) or a tile whose records and
      * merge table pass half the budget is joined as before */
     if (t->opts.keep_spill || count >= TL_MERGE_CAP_MAX || count == 0 ||
-        count > t->budget / 2 / sizeof(gdt_point) ||
         count * sizeof(gdt_point) + tl_collapse_table_bytes(count) > t->budget / 2)
         return gdt_tiler_join_parts(t, k, parts, err);
     raw = tl_tile_file(t, k, "raw", 1);

@@ -8,7 +8,10 @@
  *  - the tiny test budget takes every spill and merge path and writes
  *    byte-identical files;
  *  - auto cell and halo, density-grid coarsening, refused ranges, and an
- *    input that changes between the passes.
+ *    input that changes between the passes;
+ *  - pass 1 and pass 2 in shares equal one pass: a tile's shares taken into
+ *    memory hold its .raw file's records in order, or, when .raw files
+ *    must stay, are joined into that file.
  * argv[1]: a work directory (created). */
 #include <errno.h>
 #include <inttypes.h>
@@ -221,6 +224,7 @@ typedef struct run_opts {
     prog *progress;
     int threads;         /* --dup merge workers (0: one) */
     uint64_t id;         /* the job id's first word (the checksums' seed) */
+    int drop_spill;      /* pass 2 keeps no .raw file (else every one stays, to compare) */
 } run_opts;
 
 typedef struct vdb_check {
@@ -439,7 +443,7 @@ static gdt_status open_inputs(const char *const *paths, size_t np, const char *j
     o.dup = ro->dup;
     o.job_dir = job;
     o.test_tiny = ro->tiny;
-    o.keep_spill = 1;
+    o.keep_spill = !ro->drop_spill;
     o.density_voxels = ro->voxels;
     o.test_nosync = ro->nosync;
     o.threads = ro->threads;
@@ -574,7 +578,7 @@ static void test_pass1_shares(const gdt_point *in, size_t n)
         at += m;
     }
     for (int q = 0; q < 3; q++) {
-        run_opts ro = {64, cases[q].cell, -1, GDT_DUP_FIRST, 0, cases[q].voxels, 1, NULL, 0, 0};
+        run_opts ro = {64, cases[q].cell, -1, GDT_DUP_FIRST, 0, cases[q].voxels, 1, NULL, 0, 0, 0};
         char jw[2300], js[2300], iw[2400], is[2400];
         gdt_cloud *cw = NULL, *cs[NSH] = {NULL};
         gdt_tiler *tw = NULL, *ts[NSH] = {NULL};
@@ -590,8 +594,12 @@ static void test_pass1_shares(const gdt_point *in, size_t n)
         if (st == GDT_OK)
             st = gdt_tiler_pass1(tw, &err);
         CHECK(st == GDT_OK, "pass 1 over the whole cloud: %s", err.msg);
+        /* case 1: the shares' tiler keeps no .raw file, so the owner of a
+         * tile takes its shares into memory; the other cases join them */
+        run_opts rs = ro;
+        rs.drop_spill = q == 1;
         for (int r = 0; st == GDT_OK && r < NSH; r++) {
-            st = open_inputs(pp, NIN, r == 0 ? js : NULL, &ro, &cs[r], &ts[r], &err);
+            st = open_inputs(pp, NIN, r == 0 ? js : NULL, &rs, &cs[r], &ts[r], &err);
             if (st == GDT_OK && r == 0) {
                 CHECK(gdt_cloud_split(cs[0], NSH, bounds) == 1, "a PCD cloud can be shared");
                 for (int j = 0; j <= NSH; j++) {
@@ -655,8 +663,10 @@ static void test_pass1_shares(const gdt_point *in, size_t n)
                       "case %d: tile %" PRIu64 " differs", q, k);
             }
             /* pass 2 in shares through files: each share spilled with its
-             * first ordinal, then every tile's shares joined, is the .raw
-             * file of one pass 2 (the shares spilled from one tiler here) */
+             * first ordinal, then every tile's shares taken into memory
+             * (gdt_tiler_take_parts: these tiles are far below half the
+             * budget) or joined, is the .raw file of one pass 2 (the shares
+             * spilled from one tiler here) */
             st = gdt_tiler_pass2(tw, &err);
             if (st == GDT_OK)
                 st = gdt_tiler_pass2_open(ts[0], &err);
@@ -666,6 +676,46 @@ static void test_pass1_shares(const gdt_point *in, size_t n)
                     st = gdt_tiler_spill_part(ts[0], r, &err);
             }
             for (uint64_t k = 0; st == GDT_OK && k < a->tiles; k++) {
+                char ra[4096], rb[4096];
+                gdt_point *recs = NULL, *want = NULL;
+                uint64_t nr = 0;
+                size_t got = 0;
+                tl_rfile rf;
+                gdt_tile_desc da;
+                st = gdt_tiler_take_parts(ts[0], k, NSH, &recs, &nr, &err);
+                gdt_tiler_tile_info(tw, k, &da, NULL);
+                gdt_tiler_tile_path(tw, k, "raw", ra, sizeof ra);
+                gdt_tiler_tile_path(ts[0], k, "raw", rb, sizeof rb);
+                if (!rs.drop_spill) {
+                    /* a .raw file that must stay: joined, not taken */
+                    CHECK(st != GDT_OK || (recs == NULL && nr == 0 && files_equal(ra, rb)),
+                          "case %d: tile %" PRIu64 " was not joined into %s", q, k, rb);
+                    free(recs);
+                    continue;
+                }
+                CHECK(st != GDT_OK || (recs != NULL && nr == da.raw_points),
+                      "case %d: tile %" PRIu64 " not taken into memory (%" PRIu64 " of %" PRIu64
+                      ")", q, k, nr, da.raw_points);
+                CHECK(st != GDT_OK || access(rb, F_OK) != 0, "case %d: %s was joined", q, rb);
+                want = malloc((size_t)(nr + 1) * sizeof *want);
+                if (st == GDT_OK && recs != NULL && want != NULL &&
+                    tl_rfile_open(&rf, ra, nr, 4096, &err) == GDT_OK) {
+                    if (tl_rfile_read(&rf, want, (size_t)nr, &got, &err) != GDT_OK)
+                        got = 0;
+                    tl_rfile_close(&rf);
+                    CHECK(got == nr && memcmp(want, recs, (size_t)nr * sizeof *recs) == 0,
+                          "case %d: tile %" PRIu64 ": the shares in memory are not %s", q, k,
+                          ra);
+                }
+                free(want);
+                free(recs);
+            }
+            for (int r = NSH - 1; st == GDT_OK && !rs.drop_spill && r >= 0; r--) {
+                st = gdt_cloud_set_range(cs[0], bounds[r], bounds[r + 1], bounds[r], &err);
+                if (st == GDT_OK)
+                    st = gdt_tiler_spill_part(ts[0], r, &err);
+            }
+            for (uint64_t k = 0; st == GDT_OK && !rs.drop_spill && k < a->tiles; k++) {
                 char ra[4096], rb[4096];
                 st = gdt_tiler_join_parts(ts[0], k, NSH, &err);
                 gdt_tiler_tile_path(tw, k, "raw", ra, sizeof ra);
@@ -733,7 +783,7 @@ int main(int argc, char **argv)
 
     /* Given cell and halo, every --dup rule, normal and tiny budgets. */
     for (int r = 0; r < 3; r++) {
-        run_opts ro = {64, 13.0, 5, rules[r], 0, 0, r > 0, NULL, 0, 0};
+        run_opts ro = {64, 13.0, 5, rules[r], 0, 0, r > 0, NULL, 0, 0, 0};
         gdt_cloud *c1 = NULL, *c2 = NULL;
         gdt_tiler *a, *b;
         char what[64];
@@ -781,7 +831,7 @@ int main(int argc, char **argv)
     {
         long halos[2] = {100, 0};
         for (int q = 0; q < 2; q++) {
-            run_opts ro = {64, 9.0, halos[q], GDT_DUP_FIRST, q == 0, 0, 1, NULL, 0, 0};
+            run_opts ro = {64, 9.0, halos[q], GDT_DUP_FIRST, q == 0, 0, 1, NULL, 0, 0, 0};
             gdt_cloud *c = NULL;
             gdt_tiler *t;
             char what[64];
@@ -803,7 +853,7 @@ int main(int argc, char **argv)
 
     /* Auto cell and halo: about N^2/4 points per tile, exact counts. */
     {
-        run_opts ro = {64, 0.0, -1, GDT_DUP_FIRST, 0, 0, 1, NULL, 0, 7};
+        run_opts ro = {64, 0.0, -1, GDT_DUP_FIRST, 0, 0, 1, NULL, 0, 7, 0};
         gdt_cloud *c = NULL;
         gdt_tiler *t;
         gdt_tiler_file_sum *sums = NULL;
@@ -891,7 +941,7 @@ int main(int argc, char **argv)
     /* A density grid forced to coarsen: the counts stay exact (given cell:
      * same tiles as before; auto cell: the voxel still divides the tile). */
     {
-        run_opts ro = {64, 13.0, 5, GDT_DUP_FIRST, 0, 64, 1, NULL, 0, 0};
+        run_opts ro = {64, 13.0, 5, GDT_DUP_FIRST, 0, 64, 1, NULL, 0, 0, 0};
         gdt_cloud *c = NULL;
         gdt_tiler *t;
         snprintf(job, sizeof job, "%s/job-coarse", workdir);
@@ -917,7 +967,7 @@ int main(int argc, char **argv)
     /* Progress reports, and a stop request in the middle of pass 2. */
     {
         prog pr;
-        run_opts ro = {64, 13.0, 5, GDT_DUP_FIRST, 0, 0, 1, &pr, 0, 0};
+        run_opts ro = {64, 13.0, 5, GDT_DUP_FIRST, 0, 0, 1, &pr, 0, 0, 0};
         gdt_cloud *c = NULL;
         gdt_tiler *t = NULL;
         gdt_status st;
@@ -955,8 +1005,8 @@ int main(int argc, char **argv)
      * in the merge stops it with the job left to run again. */
     {
         prog pr;
-        run_opts r1 = {64, 13.0, 5, GDT_DUP_FIRST, 0, 0, 1, NULL, 1, 0};
-        run_opts r4 = {64, 13.0, 5, GDT_DUP_FIRST, 0, 0, 1, &pr, 4, 0};
+        run_opts r1 = {64, 13.0, 5, GDT_DUP_FIRST, 0, 0, 1, NULL, 1, 0, 0};
+        run_opts r4 = {64, 13.0, 5, GDT_DUP_FIRST, 0, 0, 1, &pr, 4, 0, 0};
         gdt_cloud *c1 = NULL, *c4 = NULL;
         gdt_tiler *t1, *t4;
         gdt_status st;
@@ -1005,7 +1055,7 @@ int main(int argc, char **argv)
     {
         gdt_cloud *c = NULL;
         gdt_tiler *t = NULL;
-        run_opts ro = {1024, 4194304.0, 0, GDT_DUP_FIRST, 0, 0, 1, NULL, 0, 0};
+        run_opts ro = {1024, 4194304.0, 0, GDT_DUP_FIRST, 0, 0, 1, NULL, 0, 0, 0};
         gdt_status st;
         snprintf(job, sizeof job, "%s/job-refused", workdir);
         make_dir(job);
@@ -1112,7 +1162,7 @@ int main(int argc, char **argv)
     {
         gdt_cloud *c = NULL;
         gdt_tiler *t = NULL;
-        run_opts ro = {64, 13.0, 5, GDT_DUP_FIRST, 0, 0, 1, NULL, 0, 0};
+        run_opts ro = {64, 13.0, 5, GDT_DUP_FIRST, 0, 0, 1, NULL, 0, 0, 0};
         gdt_status st;
         char moved[2100];
         snprintf(moved, sizeof moved, "%s/moved.pcd", workdir);

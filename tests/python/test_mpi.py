@@ -260,12 +260,14 @@ def test_shared_pass2_out_of_core(mpi_bin, root, tmp_path):
     r = mpirun(3, mpi_bin, [c, "-o", out, *args, "-v"])
     assert r.returncode == 0, r.stdout + r.stderr
     # every rank spilled its share into .raw files of its own; each owner read
-    # its tiles' shares into memory (a tile is far below half the budget)
+    # its tiles' shares into memory (a tile is far below half the budget;
+    # which path a tile takes is checked in test_tiler)
     assert "in shares of 3 ranks (each rank's .raw files)" in r.stderr, r.stderr
     assert out.read_bytes() == ref.read_bytes()
     # one tile of 220000 points, its records and merge table beyond half the
-    # budget (but the tile within it): its owner joins the shares' files
-    # into the tile's .raw file and merges from there
+    # budget (but the tile within it): its owner (rank 1) joins the shares'
+    # files into the tile's .raw file and merges from there (which path a
+    # tile takes is checked in test_tiler)
     c1 = gen(root, tmp_path / "c1.las", 220000, 9)
     one = ["--tile", "4096", "--mem-budget", "16M"]
     ref1 = tmp_path / "ref1.ply"
