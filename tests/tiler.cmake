@@ -12,6 +12,10 @@ add_test(NAME tiler COMMAND test_tiler ${CMAKE_CURRENT_BINARY_DIR}/tiler-work)
 # size, read back in pieces of many sizes.
 gdt_add_test_exe(test_tile_files ${CMAKE_CURRENT_SOURCE_DIR}/c/test_tile_files.c)
 add_test(NAME tile_files COMMAND test_tile_files ${CMAKE_CURRENT_BINARY_DIR})
+# How an MPI job shares its tiles: the tile stage's owners spread over tile
+# order and balanced on every prefix; pass 2's contiguous shares.
+gdt_add_test_exe(test_mpi_sched ${CMAKE_CURRENT_SOURCE_DIR}/c/test_mpi_sched.c)
+add_test(NAME mpi_sched COMMAND test_mpi_sched)
 # The parser of a .tri file's header and seam section: verdicts and
 # message numbers of valid, foreign, overflowing and out-of-range files.
 gdt_add_test_exe(test_tri_seam ${CMAKE_CURRENT_SOURCE_DIR}/c/test_tri_seam.c)

@@ -61,6 +61,24 @@ int mr_owner_of(const uint64_t *pre, uint64_t n, uint64_t k, int size)
 }
 
 
+gdt_status mr_tile_owners(const uint64_t *pre, uint64_t n, int size, int *owner,
+                          gdt_error *err)
+{
+    uint64_t *load = calloc((size_t)size, sizeof *load);
+    if (load == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    for (uint64_t k = 0; k < n; k++) {
+        int best = 0;
+        for (int r = 1; r < size; r++)
+            if (load[r] < load[best])
+                best = r;
+        owner[k] = best;
+        load[best] += pre[k + 1] - pre[k];
+    }
+    free(load);
+    return GDT_OK;
+}
+
 void mr_pack_status(gdt_pack *p, gdt_status st, const gdt_error *err)
 {
     gdt_pack_u64(p, (uint64_t)st);

@@ -129,6 +129,7 @@ static void r0_mark(mr_ctx *m, uint64_t k)
     if (m->c->out != NULL)
         tr_out_ready(m->c->out, m->prefix);
     tr_merge_ready(m->c, m->prefix);
+    mr_parts_advance(m);
 }
 
 static void r0_done(void *ctx, uint64_t k)
@@ -288,13 +289,12 @@ static gdt_status r0_poll(void *ctx, gdt_error *err)
     return st;
 }
 
-/* The tiles of rank r: contiguous runs of tile order, balanced by point
- * count (tile k goes to the rank whose share holds the middle of its
- * points); the same for every run of the same job and rank count. */
-/* The tile stage's owner: weights are the tiles' vertices. */
-static int owner(const tr_run *c, uint64_t k, int size)
+/* The rank of tile k in the tile stage (m->towner: mr_tile_owners over
+ * the tiles' vertex counts); the same for every run of the same job and
+ * rank count. */
+static int owner(const mr_ctx *m, uint64_t k)
 {
-    return mr_owner_of(c->base, c->s.tiles, k, size);
+    return m->towner[k];
 }
 
 /* GO for rank r: the run's status, then (when it is GDT_OK) the job, the
@@ -313,12 +313,12 @@ static gdt_status r0_go(mr_ctx *m, int r, gdt_status run_st, const unsigned char
         gdt_pack_u64(&p, c->job_id[1]);
         gdt_pack_bytes(&p, state, slen);
         for (uint64_t k = 0; k < m->ntiles; k++)
-            n += owner(c, k, m->size) == r;
+            n += owner(m, k) == r;
         gdt_pack_u64(&p, n);
         for (uint64_t k = 0; st == GDT_OK && k < m->ntiles; k++) {
             int found = 0;
             uint64_t size = 0, sum = 0;
-            if (owner(c, k, m->size) != r)
+            if (owner(m, k) != r)
                 continue;
             st = gdt_job_get_tile(c->jobdb, k, &found, &size, &sum, err);
             gdt_pack_u64(&p, k);
@@ -390,8 +390,11 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
         m->ntiles = gdt_tiler_tile_count(c->tiler);
         m->done = calloc(m->ntiles + 1, 1);
         mine = malloc((m->ntiles + 1) * sizeof *mine);
-        if (m->done == NULL || mine == NULL)
+        m->towner = malloc((m->ntiles + 1) * sizeof *m->towner);
+        if (m->done == NULL || mine == NULL || m->towner == NULL)
             st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        if (st == GDT_OK)
+            st = mr_tile_owners(c->base, m->ntiles, m->size, m->towner, err);
     }
     /* every other rank waits for its GO, also when there is nothing to do */
     for (int r = 1; r < m->size; r++) {
@@ -411,7 +414,7 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
         return st;
     }
     for (uint64_t k = 0; k < m->ntiles; k++)
-        if (owner(c, k, m->size) == 0) {
+        if (owner(m, k) == 0) {
             mine[nmine++] = k;
             vmine += c->base[k + 1] - c->base[k];
         }
@@ -554,7 +557,23 @@ static gdt_status rn_poll(void *ctx, gdt_error *err)
     mr_ctx *m = ctx;
     int ready = 0, from = 0, tag = 0;
     size_t len = 0;
-    gdt_status st = gdt_comm_probe(m->comm, 0, TAG_STOP, &ready, &from, &tag, &len, err);
+    gdt_status st;
+    /* the faces of done tiles whose place is known, between tiles */
+    for (;;) {
+        unsigned char *buf = NULL;
+        st = gdt_comm_probe(m->comm, 0, TAG_FPLACE, &ready, &from, &tag, &len, err);
+        if (st != GDT_OK || !ready)
+            break;
+        st = mr_recv(m, 0, TAG_FPLACE, len, &buf, err);
+        if (st == GDT_OK)
+            mr_parts_place(m, buf, len);
+        free(buf);
+        if (st != GDT_OK)
+            return st;
+    }
+    if (st != GDT_OK)
+        return st;
+    st = gdt_comm_probe(m->comm, 0, TAG_STOP, &ready, &from, &tag, &len, err);
     if (st != GDT_OK || !ready)
         return st;
     {
@@ -625,6 +644,13 @@ static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
             c->tri_cached = 1;
             st = mr_parts_open(m, err);
         }
+        if (st == GDT_OK && m->parts) {
+            m->own_ks = ks;
+            m->own_n = n;
+            m->fwritten = calloc(n + 1, 1);
+            if (m->fwritten == NULL)
+                st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        }
     }
     free(go);
     if (st == GDT_OK) {
@@ -653,12 +679,14 @@ static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
                 s2 = mr_recv(m, 0, TAG_FINAL, len, &fin, &e2);
                 break;
             }
-            if (s2 == GDT_OK && tag != TAG_PARTS && tag != TAG_GOUT)
+            if (s2 == GDT_OK && tag != TAG_PARTS && tag != TAG_GOUT && tag != TAG_FPLACE)
                 s2 = mr_bad_message(0, tag, &e2);
             if (s2 == GDT_OK)
                 s2 = mr_recv(m, 0, tag, len, &req, &e2);
             if (s2 == GDT_OK && tag == TAG_PARTS)
                 mr_parts_answer(m, ks, n, req, len);
+            else if (s2 == GDT_OK && tag == TAG_FPLACE)
+                mr_parts_place(m, req, len);
             else if (s2 == GDT_OK)
                 mr_gout_answer(m, req, len);
             free(req);
@@ -668,6 +696,8 @@ static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
             gdt_comm_abort(m->comm, (int)s2);
         }
     }
+    m->own_ks = NULL;
+    m->own_n = 0;
     free(ks);
     mr_parts_drop(m); /* a part PARTS never came for */
     /* the job's status is every rank's; rank 0 reports the error */
@@ -784,7 +814,9 @@ gdt_status gdt_cli_tiled_mpi(const gdt_options *opts, gdt_comm *comm, gdt_error 
     free(m.p1_bounds);
     free(m.p1_kept);
     free(m.p1_counts);
-    free(m.r0_kept);
+    free(m.towner);
+    free(m.first);
+    free(m.fwritten);
     if (m.rank != 0)
         gdt_error_clear(err); /* rank 0 reports the job's error */
     free(m.done);

@@ -228,8 +228,10 @@ static gdt_status write_summary(const tr_run *c, gdt_error *err)
             gdt_json_double(&j, "device_busy_share",
                             q->t_device_span > 0.0 ? q->t_device / q->t_device_span : 0.0);
             gdt_json_uint(&j, "replayed_inputs", q->replayed);
-            if (c->out_parts)
+            if (c->out_parts) {
                 gdt_json_double(&j, "write_s", q->t_write);
+                gdt_json_uint(&j, "tiles_placed_early", q->placed_early);
+            }
             if (c->opts->ground) {
                 /* 0 when a resumed job took the classes of an earlier run */
                 gdt_json_uint(&j, "ground_tiles", q->ground_tiles);

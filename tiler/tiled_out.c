@@ -898,20 +898,19 @@ int tr_out_text(const tr_out *o)
 gdt_status tr_out_text_sizes(const tr_out *o, const uint64_t *ks, uint64_t n, uint64_t *vbytes,
                              uint64_t *fbytes, gdt_error *err)
 {
-    *vbytes = *fbytes = 0;
     for (uint64_t i = 0; i < n; i++) {
         uint64_t k = ks[i];
         if (k >= o->src.ntiles || o->tmade[k] != 3)
             return gdt_error_set(err, GDT_EINTERNAL, 7830,
                                  "tile %" PRIu64 " of a text mesh has no fragments", k);
-        *vbytes += o->tv[k];
-        *fbytes += o->tf[k];
+        vbytes[i] = o->tv[k];
+        fbytes[i] = o->tf[k];
     }
     return GDT_OK;
 }
 
-gdt_status tr_out_place_text(tr_out *o, const uint64_t *ks, uint64_t n, uint64_t vat, uint64_t fat,
-                             gdt_error *err)
+gdt_status tr_out_place_text(tr_out *o, const uint64_t *ks, uint64_t n, const uint64_t *vat,
+                             const uint64_t *fat, gdt_error *err)
 {
     gdt_status st = GDT_OK;
     for (uint64_t i = 0; st == GDT_OK && i < n; i++) {
@@ -921,14 +920,10 @@ gdt_status tr_out_place_text(tr_out *o, const uint64_t *ks, uint64_t n, uint64_t
             uint64_t len = faces ? o->tf[k] : o->tv[k];
             st = fragment_path(o, k, faces, &path, err);
             if (st == GDT_OK)
-                st = gdt_mesh_part_copy(o->tpart, path, len, faces ? fat : vat, err);
+                st = gdt_mesh_part_copy(o->tpart, path, len, faces ? fat[i] : vat[i], err);
             if (st == GDT_OK)
                 unlink(path); /* placed: its bytes are in the mesh */
             free(path);
-            if (faces)
-                fat += len;
-            else
-                vat += len;
         }
     }
     return st;

@@ -3,7 +3,7 @@
  * Rank 0 runs the job as a single process does (private/stages.h) and is
  * the only rank that touches the job's lock and journal and writes the
  * outputs; every rank, rank 0 included, triangulates its share of the tiles
- * (contiguous runs of tile order balanced by point count) into the shared
+ * (dealt out in tile order, balanced by point count) into the shared
  * job directory, which must be on a file system every rank sees.  The
  * output is byte for byte that of a single process, and a job interrupted
  * under one number of ranks resumes under any other, or without mpirun.

@@ -34,7 +34,8 @@ enum {
     TAG_GOUTDONE = 21, /* r -> 0: the share is written and synced, or why not */
     TAG_TSIZES = 22,   /* r -> 0: a text mesh's part: its fragments' lengths (mpi_parts.c) */
     TAG_TPLACE = 23,   /* 0 -> r: where to place them */
-    TAG_REMOVED = 24   /* r -> 0: the rank's share of the tile files is removed */
+    TAG_REMOVED = 24,  /* r -> 0: the rank's share of the tile files is removed */
+    TAG_FPLACE = 25    /* 0 -> r: where the faces of some of its done tiles go (mpi_parts.c) */
 };
 
 /* Records per TAG_RECDATA message (32 MiB of gdt_point). */
@@ -83,9 +84,15 @@ typedef struct mr_ctx {
     gdt_error part_err;
     double part_t;           /* seconds this rank spent writing its part */
     gdt_trim_counts part_tc; /* its tiles' faces and drops (a trimmed mesh) */
-    uint64_t r0_fdone;       /* rank 0: its tiles [0, r0_fdone) have their faces written */
-    uint64_t r0_fnext;       /* and the first face of tile r0_fdone */
-    uint64_t *r0_kept;       /* ntiles: the faces kept of each of those tiles */
+    int *towner;       /* rank 0: the rank of each tile in the tile stage (mr_tile_owners) */
+    int placing;       /* rank 0: faces are placed as the prefix of done tiles grows */
+    uint64_t *first;   /* rank 0: ntiles + 1: first[k + 1] is known for k < fplaced */
+    uint64_t fplaced;  /* rank 0: tiles [0, fplaced) have their place in the mesh */
+    uint8_t *fwritten; /* per tile (rank 0) or per tile of own_ks (another rank):
+                        * its faces are in the mesh */
+    const uint64_t *own_ks; /* another rank: its tiles, increasing (from GO) */
+    uint64_t own_n;
+    uint64_t placed_early; /* another rank: its tiles FPLACE placed (for WROTE) */
     /* the shared ground filter (mpi_ground.c), rank 0 */
     tr_ground_share gs;
     int g_left;        /* ranks told GROUND that have not sent GDONE */
@@ -116,9 +123,22 @@ gdt_status mr_unpack_status(mr_ctx *m, gdt_unpack *u, int from);
 /* GDT_EINTERNAL 7952: a message that does not parse. */
 gdt_status mr_bad_message(int from, int tag, gdt_error *err);
 
-/* The rank of tile k (contiguous shares of tile order balanced by the
- * weights whose prefix sums are pre[0, n]). */
+/* The rank of tile k in the shared pass 2 and ground filter (contiguous
+ * shares of tile order balanced by the weights whose prefix sums are
+ * pre[0, n]). */
 int mr_owner_of(const uint64_t *pre, uint64_t n, uint64_t k, int size);
+
+/* The ranks of the tile stage, owner[0, n): tiles taken in tile order,
+ * each by the rank with the least weight so far (pre[0, n]: prefix sums
+ * of the weights; ties to the lower rank).  Every rank's tiles are spread
+ * over the whole order and each prefix of it is balanced within one
+ * tile's weight, so that the ranks pass through tile order together: the
+ * prefix of done tiles, which the seam merge and the placing of faces
+ * follow, grows all through the tile stage instead of waiting for the
+ * first rank's last tile.  A pure function of the weights.
+ * returns: GDT_OK; GDT_EINTERNAL 7001. */
+gdt_status mr_tile_owners(const uint64_t *pre, uint64_t n, int size, int *owner,
+                          gdt_error *err);
 
 /* Rank 0: a rank's failure becomes the job's (the first one stands). */
 void mr_fail(mr_ctx *m, int from, gdt_status st, int code, const char *msg);
@@ -165,6 +185,19 @@ void mr_parts_pack_layout(mr_ctx *m, gdt_pack *p);
 gdt_status mr_parts_read_layout(mr_ctx *m, gdt_unpack *u, gdt_error *err);
 gdt_status mr_parts_open(mr_ctx *m, gdt_error *err);
 void mr_parts_tile_done(mr_ctx *m, uint64_t k);
+
+/* Rank 0, when the prefix of done tiles has grown (m->prefix): the tiles
+ * that joined it get their place in the mesh (their kept faces counted
+ * from their .tri files): rank 0 writes the faces of its own, FPLACE tells
+ * the other ranks where theirs go.  Only while m->placing (a binary PLY in
+ * parts without --concavity, and no failure so far); a failure here is
+ * kept for PARTS and stops the placing. */
+void mr_parts_advance(mr_ctx *m);
+
+/* Another rank, given FPLACE (msg, len): writes the faces of the tiles it
+ * names (pairs of tile and first face) that it has not written (a failure
+ * is kept for WROTE).  A malformed message ends the job. */
+void mr_parts_place(mr_ctx *m, const unsigned char *msg, size_t len);
 
 /* Rank 0, after every FINISHED: reads every tile's face count, sends
  * PARTS (the tiles' first faces) to every other rank and writes its own

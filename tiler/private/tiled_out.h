@@ -93,13 +93,13 @@ void tr_out_on_complete(tr_out *o, void (*fn)(void *), void *ctx);
  * tiles straight into the output's temporary (gdt_ply.h, "in parts"), so
  * that rank 0 does not copy the whole mesh.  Vertices of tile k go to
  * base[k]; its faces to the sum of the face counts of tiles 0..k-1
- * (tr_out_count_faces), known once every tile is finished; the merge's
+ * (tr_out_count_faces), known once those tiles are finished; the merge's
  * faces follow the last tile's.  The bytes are those of the sequential
  * writer.  Rank 0: tr_out_start with src.parts creates the file, writes its
  * header and starts no thread (tr_out_ready does nothing);
  * tr_out_parts_layout gives what the other ranks need; rank 0 writes its
  * own tiles (tr_out_write_vertices as each is done, tr_out_write_faces
- * once every tile is counted); tr_out_set_tile_faces, then tr_out_finish
+ * once the tiles before it are counted); tr_out_set_tile_faces, then tr_out_finish
  * writes the merge's faces and completes the file once every other rank
  * has closed its part.  Another rank: tr_out_open_part, the same two
  * writes for each of its tiles, tr_out_close_part (which syncs them). */
@@ -149,26 +149,26 @@ gdt_status tr_out_write_faces(tr_out *o, uint64_t k, uint64_t first_face, gdt_er
  * "in parts"): tr_out_write_vertices and tr_out_write_faces make tile k's
  * fragments (tiles/<tile>.vtx, .ftx; faces once only, so they may be made
  * during the tile stage and asked for again), and nothing is placed until
- * every fragment's length is known.  Each rank's tiles are contiguous in
- * tile order, so each rank places one run of vertex bytes and one of face
- * bytes: tr_out_text_sizes gives their lengths, tr_out_place_text copies
- * the fragments (in tile order) to the offsets rank 0 computed, removing
- * each once placed.  Rank 0 also writes the separator and where its own
+ * every fragment's length is known: tr_out_text_sizes gives each tile's
+ * lengths, tr_out_place_text copies each tile's fragments to the offsets
+ * rank 0 computed from every tile's lengths in tile order, removing each
+ * once placed.  Rank 0 also writes the separator and where its own
  * faces begin (tr_out_text_tail) before tr_out_finish. */
 
 /* Whether o writes a text mesh in parts. */
 int tr_out_text(const tr_out *o);
 
-/* The vertex and face fragment bytes of tiles ks[0 .. n), each made.
+/* The vertex and face fragment bytes of tiles ks[0 .. n), each made:
+ * vbytes[i] and fbytes[i] for tile ks[i].
  * returns: GDT_OK; GDT_EINTERNAL 7830 (a fragment not made). */
 gdt_status tr_out_text_sizes(const tr_out *o, const uint64_t *ks, uint64_t n, uint64_t *vbytes,
                              uint64_t *fbytes, gdt_error *err);
 
-/* Copies the fragments of tiles ks[0 .. n) (increasing) into the mesh:
- * vertex bytes from byte vat on, face bytes from fat on.  returns: GDT_OK;
+/* Copies the fragments of tiles ks[0 .. n) into the mesh: tile ks[i]'s
+ * vertex bytes at byte vat[i], its face bytes at fat[i].  returns: GDT_OK;
  * gdt_mesh_part_copy's errors. */
-gdt_status tr_out_place_text(tr_out *o, const uint64_t *ks, uint64_t n, uint64_t vat, uint64_t fat,
-                             gdt_error *err);
+gdt_status tr_out_place_text(tr_out *o, const uint64_t *ks, uint64_t n, const uint64_t *vat,
+                             const uint64_t *fat, gdt_error *err);
 
 /* Rank 0: writes the separator at sep_at (where the vertex bytes end); its
  * own faces (tr_out_finish) will begin at tail_at.  returns: GDT_OK; 4721. */
