@@ -3,7 +3,8 @@
 
   bench_mpi.py [--build-dir DIR] [--points 10M] [--ranks 1,2] [--tile N]
                [--repeat K] [--kind lidar] [--seed S] [--format las|laz]
-               [--pml NAME] [--workdir DIR] [--keep] [--target 1.8] [--json FILE]
+               [--pml NAME] [--workdir DIR] [--keep] [--target 1.8] [--no-ceiling]
+               [--json FILE]
 
 One LiDAR-like LAS cloud of --points records (scripts/gen_cloud.py; not timed,
 reused from --workdir) is triangulated by
@@ -20,9 +21,20 @@ PLY's tiles written by their owners beside the merge, K > 1 only;
 write, the rest of the output after the merge), the time outside the
 run's own clock (mpirun, the processes' and MPI's start, the job's removal
 and the exit: the wall time less --json's total), the
-load balance of the tile stage (slowest rank over the mean), and whether the
-PLY is byte for byte the first K's.  The target is the speed-up of the
+load balance of the tile stage (slowest rank over the mean), the CPU
+seconds of the whole job (mpirun and every rank, user + system), and whether
+the PLY is byte for byte the first K's.  The target is the speed-up of the
 largest K over the first, at least --target (1.8 for K = 2), PASS or MISS.
+
+Beside it, what the machine itself allows: in each round the largest K's
+number of plain single-core runs of the same job side by side, each pinned
+to a core of its own (taskset), no MPI between them, and one such run
+alone.  Perfect scaling would run one job in 1/K of their time, so
+K x (alone) / (side by side) is the speed-up no K-rank run can pass here:
+cores that share caches, memory bandwidth or a host with other machines are
+each slower when all are busy.
+Printed as the ceiling, with the speed-up's share of it (--no-ceiling: not
+measured).
 
 --pml chooses Open MPI's point-to-point layer (default ob1, its own shared
 memory and TCP transports; '' leaves Open MPI's choice): on a machine without
@@ -45,6 +57,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import concurrent.futures
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import bench_e2e as be  # noqa: E402  (cloud generation, process measuring, size parsing)
@@ -61,6 +74,26 @@ def rank_list(s):
     if not v or any(k < 1 for k in v):
         raise argparse.ArgumentTypeError(f"{s!r}: rank counts are positive")
     return v
+
+
+def side_by_side(gdt, las, a, tmp, k, taskset, r):
+    """k plain single-core runs of the job at once, run i pinned to core i:
+    the wall time until the last one ended."""
+    def one(i):
+        d = tmp / f"side{i}"
+        shutil.rmtree(d, ignore_errors=True)
+        d.mkdir()
+        cmd = [taskset, "-c", str(i), gdt, las, "--tile", a.tile, "--threads", "1", "-q",
+               "-o", d / "o.ply", "--job", d / "job"]
+        log = str(tmp / f"side{i}-{r}")
+        rc, wall, _, _ = be.run_measured(cmd, log)
+        be.check_run(rc, cmd, log, "gdt-tile")
+        if not a.keep:
+            shutil.rmtree(d, ignore_errors=True)
+        return wall
+
+    with concurrent.futures.ThreadPoolExecutor(max_workers=k) as ex:
+        return max(ex.map(one, range(k)))
 
 
 def main(argv=None):
@@ -82,6 +115,8 @@ def main(argv=None):
     ap.add_argument("--keep", action="store_true", help="keep outputs and temporary files")
     ap.add_argument("--target", type=float, default=1.8,
                     help="speed-up of the largest K over the first (1.8)")
+    ap.add_argument("--no-ceiling", action="store_true",
+                    help="do not measure the machine's ceiling (plain runs side by side)")
     ap.add_argument("--json", default=None, help="write every figure to this JSON file")
     a = ap.parse_args(argv)
 
@@ -121,7 +156,14 @@ def main(argv=None):
         os.environ.clear()
         os.environ.update(env_keep)  # run_measured's children inherit it
 
-        res = {k: {"walls": [], "json": []} for k in a.ranks}
+        res = {k: {"walls": [], "json": [], "cpus": []} for k in a.ranks}
+        kmax = max(a.ranks)
+        taskset = shutil.which("taskset")
+        side, solo = [], []
+        measure_side = not a.no_ceiling and 2 <= kmax <= cores and taskset is not None
+        if not a.no_ceiling and kmax >= 2 and not measure_side:
+            why = "taskset is missing" if taskset is None else f"only {cores} cores"
+            print(f"bench_mpi: no ceiling measured ({why})", file=sys.stderr, flush=True)
         first_ply = None
         print(f"bench_mpi: {be.size_label(a.points)} points, --tile {a.tile}, ranks {a.ranks}, "
               f"{cores} cores, best of {a.repeat}", file=sys.stderr, flush=True)
@@ -138,8 +180,9 @@ def main(argv=None):
                 cmd += [gdt, las, "--tile", a.tile, "--threads", "1", "-q", "-o", d / "o.ply",
                         "--job", d / "job", "--json", d / "run.json"]
                 log = str(tmp / f"k{k}-{r}")
-                rc, wall, _, _ = be.run_measured(cmd, log)
+                rc, wall, _, cpu = be.run_measured(cmd, log)
                 be.check_run(rc, cmd, log, "mpirun gdt-tile")
+                res[k]["cpus"].append(cpu)
                 ply = (d / "o.ply").read_bytes()
                 if first_ply is None:
                     first_ply = ply
@@ -152,6 +195,11 @@ def main(argv=None):
                       flush=True)
                 if not a.keep:
                     shutil.rmtree(d, ignore_errors=True)
+            if measure_side:
+                solo.append(side_by_side(gdt, las, a, tmp, 1, taskset, r))
+                side.append(side_by_side(gdt, las, a, tmp, kmax, taskset, r))
+                print(f"  a plain run alone {r + 1}/{a.repeat}: {solo[-1]:8.2f} s; {kmax} side by "
+                      f"side: {side[-1]:8.2f} s", file=sys.stderr, flush=True)
 
         rows = []
         base = None
@@ -166,6 +214,7 @@ def main(argv=None):
                          # follows the run's own clock (job removal, exit)
                          "outside_s": wall - j["times"].get("total", 0.0),
                          "load_balance": j.get("mpi", {}).get("load_balance", 1.0),
+                         "cpu_s": res[k]["cpus"][best],
                          "walls_s": res[k]["walls"]})
         print()
         print(f"gdt-tile under mpirun: {be.size_label(a.points)} points ({a.kind}, seed "
@@ -173,20 +222,28 @@ def main(argv=None):
               f"{'pml ' + a.pml if a.pml else 'Open MPI' + chr(39) + 's own pml'}, "
               f"best of {a.repeat}; the PLY is the same bytes for every K")
         head = f"{'K':>3} {'wall s':>8} {'speed-up':>9} " + " ".join(
-            f"{s + ' s':>9}" for s in STAGES) + f" {'outside s':>10} {'balance':>8}"
+            f"{s + ' s':>9}" for s in STAGES) + f" {'outside s':>10} {'balance':>8} {'CPU s':>7}"
         print(head)
         print("-" * len(head))
         for row in rows:
             print(f"{row['ranks']:>3} {row['wall_s']:8.2f} {row['speedup']:9.3f} " +
                   " ".join(f"{row['times'][s]:9.2f}" for s in STAGES) +
-                  f" {row['outside_s']:10.2f} {row['load_balance']:8.3f}")
+                  f" {row['outside_s']:10.2f} {row['load_balance']:8.3f} {row['cpu_s']:7.2f}")
         last = rows[-1]
+        ceiling = None
+        if side:
+            ceiling = kmax * min(solo) / min(side)
+            print(f"ceiling: a plain run took {min(solo):.2f} s alone, {kmax} side by side (one core "
+                  f"each) {min(side):.2f} s (best of {len(side)}), so no {kmax}-rank run beats "
+                  f"{ceiling:.3f} x here; K = {last['ranks']} reached "
+                  f"{last['speedup'] / ceiling:.1%} of it")
         ok = last["speedup"] >= a.target
         print(f"target: K = {last['ranks']} at least {a.target:g} x K = {rows[0]['ranks']}: "
               f"{last['speedup']:.3f} {'PASS' if ok else 'MISS'}")
         if a.json:
             pathlib.Path(a.json).write_text(json.dumps(
                 {"points": a.points, "tile": a.tile, "cores": cores, "rows": rows,
+                 "alone_s": solo, "side_by_side_s": side, "ceiling": ceiling,
                  "target": a.target, "met": ok}, indent=2) + "\n")
         return 0 if ok else 1
     except be.BenchError as e:
