@@ -7,7 +7,7 @@
 # test tools go into a project-local virtual environment (.venv), because
 # Debian 12's system Python refuses pip installs.  The main tree build/ is a
 # Release build.  --asan also builds the AddressSanitizer +
-# UndefinedBehaviorSanitizer tree in build-asan/ (gcc, without MPI), --fuzz the clang tree
+# UndefinedBehaviorSanitizer tree in build-asan/ (gcc; with MPI, as the release tree), --fuzz the clang tree
 # build-fuzz/ with the libFuzzer targets (ASan + UBSan on every library).
 # Every tree is built with -Werror (GDT_WERROR=ON): warnings are errors in
 # development and CI, not in a user's or packager's plain cmake build.
@@ -72,8 +72,7 @@ cmake --build build -j"$JOBS"
 if [ "$ASAN" -eq 1 ]; then
   # without MPI: the sanitizers' tree is also the build without it (which
   # must build, and refuse a parallel launch with a message)
-  cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=Debug -DGDT_SANITIZE=ON -DGDT_WERROR=ON \
-    -DGDT_MPI=OFF >/dev/null
+  cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=Debug -DGDT_SANITIZE=ON -DGDT_WERROR=ON >/dev/null
   cmake --build build-asan -j"$JOBS"
 fi
 if [ "$FUZZ" -eq 1 ]; then
