@@ -7,8 +7,8 @@
 # test tools go into a project-local virtual environment (.venv), because
 # Debian 12's system Python refuses pip installs.  The main tree build/ is a
 # Release build.  --asan also builds the AddressSanitizer +
-# UndefinedBehaviorSanitizer tree in build-asan/ (gcc; with MPI, as the release tree), --fuzz the clang tree
-# build-fuzz/ with the libFuzzer targets (ASan + UBSan on every library).
+# UndefinedBehaviorSanitizer tree in build-asan/ (gcc, with MPI), --fuzz the clang tree
+# build-fuzz/ with the libFuzzer targets (ASan + UBSan on every library; without MPI).
 # Every tree is built with -Werror (GDT_WERROR=ON): warnings are errors in
 # development and CI, not in a user's or packager's plain cmake build.
 set -euo pipefail
@@ -76,8 +76,11 @@ if [ "$ASAN" -eq 1 ]; then
   cmake --build build-asan -j"$JOBS"
 fi
 if [ "$FUZZ" -eq 1 ]; then
+  # without MPI: besides the fuzz targets, its gdt-tile is the sanitized
+  # build without MPI that the launch tests need (a build without MPI under
+  # mpirun); build-asan has MPI
   cmake -S . -B build-fuzz -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_C_COMPILER=clang \
-    -DCMAKE_CXX_COMPILER=clang++ -DGDT_FUZZ=ON -DGDT_WERROR=ON >/dev/null
+    -DCMAKE_CXX_COMPILER=clang++ -DGDT_FUZZ=ON -DGDT_WERROR=ON -DGDT_MPI=OFF >/dev/null
   # the fuzz targets and what scripts/fuzz.sh makes their seeds with; the
   # tests and tools are the other trees'
   cmake --build build-fuzz -j"$JOBS" --target gdt_fuzz_all gdt-tile gdt-tile-module \

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The whole test suite: set-up (packages, .venv, the three builds), then
 # CTest and pytest on the release build, the sanitizer-marked tests again on
-# the ASan+UBSan build, and on the clang fuzz build the saved fuzz inputs and
-# a smoke run of every fuzz target (10 s each).  pytest runs its tests on one
+# the ASan+UBSan build (with MPI), and on the clang fuzz build (ASan+UBSan,
+# without MPI) the launch tests of a build without MPI, the saved fuzz
+# inputs and a smoke run of every fuzz target (10 s each).  pytest runs its tests on one
 # worker process per CPU (pytest-xdist): every test has its own temporary
 # directory, and the few that time a run compare CPU seconds of their own
 # children, so they do not depend on what runs beside them.
@@ -27,6 +28,8 @@ echo "== pytest (release build)"
 GDT_BUILD_DIR="$ROOT/build" .venv/bin/python -m pytest -q -n "$JOBS" tests/python
 echo "== pytest, sanitize-marked tests (ASan+UBSan build)"
 GDT_BUILD_DIR="$ROOT/build-asan" .venv/bin/python -m pytest -q -n "$JOBS" -m sanitize tests/python
+echo "== pytest, launch tests of a build without MPI (clang ASan+UBSan fuzz build)"
+GDT_BUILD_DIR="$ROOT/build-fuzz" .venv/bin/python -m pytest -q -n "$JOBS" tests/python/test_launch.py
 echo "== ctest, saved fuzz inputs (clang fuzz build)"
 ctest --test-dir build-fuzz --output-on-failure -L fuzz
 echo "== fuzz smoke run (clang fuzz build)"
