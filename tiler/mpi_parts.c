@@ -206,6 +206,13 @@ void mr_parts_tile_done(mr_ctx *m, uint64_t k)
     m->part_t += gdt_now() - t0;
 }
 
+/* Most bytes of one FPLACE message (128 pairs).  Rank 0 sends them while
+ * another rank may be sending it RECORD: small messages leave a blocking
+ * send as soon as the transport has buffered them (Open MPI's eager
+ * protocol, from 4 KiB up on every transport), so neither waits for the
+ * other's receive. */
+#define FPLACE_BYTES 2048
+
 /* Rank 0: m->first and m->fwritten for every tile (first[0] = 0).
  * returns: GDT_OK; GDT_EINTERNAL 7001. */
 static gdt_status need_places(mr_ctx *m, gdt_error *err)
@@ -250,6 +257,8 @@ void mr_parts_advance(mr_ctx *m)
         } else {
             gdt_pack_u64(&to[r], k);
             gdt_pack_u64(&to[r], m->first[k]);
+            if (to[r].n >= FPLACE_BYTES)
+                st = mr_send_pack(m, r, TAG_FPLACE, &to[r], &e);
         }
     }
     for (int r = 1; to != NULL && r < m->size; r++) {
