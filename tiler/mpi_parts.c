@@ -363,11 +363,16 @@ static gdt_status r0_place_text(mr_ctx *m, const uint64_t *ks, uint64_t n, gdt_s
         u.p = buf;
         u.n = len;
         if (mr_unpack_status(m, &u, r) == GDT_OK) {
-            uint64_t cnt = gdt_unpack_u64(&u);
-            int bad = u.bad || cnt > (u.n - u.at) / 24;
-            for (uint64_t i = 0; !bad && i < cnt; i++) {
+            uint64_t cnt = gdt_unpack_u64(&u), owned = 0;
+            int bad;
+            for (uint64_t k = 0; k < nt; k++)
+                owned += m->towner[k] == r;
+            /* every tile of the rank, once each, or a place would be missing */
+            bad = u.bad || cnt != owned || cnt > (u.n - u.at) / 24;
+            for (uint64_t i = 0, prev = 0; !bad && i < cnt; i++) {
                 uint64_t k = gdt_unpack_u64(&u), v = gdt_unpack_u64(&u), f = gdt_unpack_u64(&u);
-                bad = u.bad || k >= nt || m->towner[k] != r;
+                bad = u.bad || k >= nt || m->towner[k] != r || (i > 0 && k <= prev);
+                prev = k;
                 if (!bad && tv != NULL && tf != NULL)
                     tv[k] = v, tf[k] = f;
             }

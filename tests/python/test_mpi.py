@@ -198,14 +198,14 @@ def test_any_rank_count_writes_the_same_bytes(mpi_bin, clouds, tmp_path, case):
         # the parts' writing is timed: the stage beside the merge, and each rank's share
         assert "parts" in j["times"], (k, case)
         assert j["times"]["parts"] > 0 and all(q["write_s"] > 0 for q in mpi["per_rank"])
-        # a PLY's faces are placed as the prefix of done tiles grows: at
-        # least rank 0's first tile (tile 0) during the tile stage; a text
-        # mesh or --concavity places them all afterwards
-        early = sum(q["tiles_placed_early"] for q in mpi["per_rank"])
+        # a PLY's faces are placed as the prefix of done tiles grows, every
+        # tile by its owner before PARTS (rank 0's own directly, the others'
+        # through FPLACE); a text mesh or --concavity places them all after
+        early = [q["tiles_placed_early"] for q in mpi["per_rank"]]
         if ext == "ply" and "--concavity" not in opts:
-            assert early >= 1 and mpi["per_rank"][0]["tiles_placed_early"] >= 1, (k, case)
+            assert early == [q["tiles"] for q in mpi["per_rank"]], (k, case, early)
         else:
-            assert early == 0, (k, case)
+            assert early == [0] * k, (k, case, early)
 
 
 def test_dem_windows_written_as_runs(mpi_bin, clouds, tmp_path):

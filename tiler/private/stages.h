@@ -66,7 +66,8 @@ typedef struct tr_rank_stats {
     double t_tiles, t_core, t_certify, t_post;
     double t_device, t_device_span; /* as tr_summary's, for its own devices */
     double t_write; /* its parts of a mesh written in parts: vertices, faces, sync */
-    uint64_t placed_early; /* tiles whose faces it wrote during the tile stage */
+    uint64_t placed_early; /* tiles whose faces it wrote as their place became known,
+                            * before PARTS */
     uint64_t ground_tiles; /* --ground: tiles it classified (or adopted) */
     double t_ground;       /* and its time in the filter */
     uint64_t replayed;     /* compressed inputs (its shares of them) read back from
