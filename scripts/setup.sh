@@ -70,8 +70,8 @@ JOBS=$(nproc 2>/dev/null || echo 2)
 cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DGDT_WERROR=ON >/dev/null
 cmake --build build -j"$JOBS"
 if [ "$ASAN" -eq 1 ]; then
-  # without MPI: the sanitizers' tree is also the build without it (which
-  # must build, and refuse a parallel launch with a message)
+  # with MPI (when Open MPI is installed), so the MPI stages run sanitized
+  # too; the build without MPI is the fuzz tree's
   cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=Debug -DGDT_SANITIZE=ON -DGDT_WERROR=ON >/dev/null
   cmake --build build-asan -j"$JOBS"
 fi
