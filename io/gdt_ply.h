@@ -143,8 +143,12 @@ void gdt_ply_abort(gdt_ply_writer *w);
  *   - any process opens the temporary (gdt_ply_temp_path) with
  *     gdt_ply_part_open and writes vertex records [first, first + n) at
  *     header + 24 first and face records [first, first + n) at
- *     header + 24 V + 13 first (the same bytes as the sequential writer),
- *     through the page cache; gdt_ply_part_close syncs what it wrote;
+ *     header + 24 V + 13 first (the same bytes as the sequential writer);
+ *     a thread of the part writes them out while the caller goes on, the
+ *     whole 4 KiB blocks of each chunk with direct I/O where the file
+ *     system accepts it, the partial blocks at its ends (which another
+ *     part may share) through the page cache; a failed write is reported
+ *     by a later call on the part; gdt_ply_part_close syncs what it wrote;
  *   - when every part is written and closed, the creator calls
  *     gdt_ply_finish_parts with the face count F: the file must hold exactly
  *     header + 24 V + 13 F bytes; the counts are patched and the file is
@@ -177,9 +181,10 @@ typedef struct gdt_ply_part gdt_ply_part;
 gdt_status gdt_ply_part_open(gdt_ply_part **out, const char *tmp_path, uint64_t header_bytes,
                              uint64_t nvert, gdt_error *err);
 
-/* Writes vertices first .. first + n - 1 (xyz: 3n finite doubles).
+/* Writes vertices first .. first + n - 1 (xyz: 3n finite doubles); xyz
+ * may be reused at once.
  * returns: GDT_OK; GDT_EINTERNAL 7722 (beyond V), 7707 (not finite);
- *   GDT_EIO 4721. */
+ *   GDT_EIO 4721 (this or an earlier write failed). */
 gdt_status gdt_ply_part_vertices(gdt_ply_part *p, uint64_t first, const double *xyz, size_t n,
                                  gdt_error *err);
 
@@ -189,11 +194,21 @@ gdt_status gdt_ply_part_vertices(gdt_ply_part *p, uint64_t first, const double *
 gdt_status gdt_ply_part_faces(gdt_ply_part *p, uint64_t first, const int32_t *tri, size_t n,
                               gdt_error *err);
 
-/* Syncs and closes; frees p (also on failure; NULL accepted).
+/* Waits until every record given so far is written.  returns: GDT_OK;
+ * GDT_EIO 4721 (a write failed). */
+gdt_status gdt_ply_part_flush(gdt_ply_part *p, gdt_error *err);
+
+/* The bytes p wrote with direct I/O so far (complete after
+ * gdt_ply_part_flush): 0 where the file system refuses it. */
+uint64_t gdt_ply_part_direct_bytes(gdt_ply_part *p);
+
+/* Waits for the part's writes, syncs and closes; frees p (also on failure;
+ * NULL accepted).
  * returns: GDT_OK; GDT_EIO 4722. */
 gdt_status gdt_ply_part_close(gdt_ply_part *p, gdt_error *err);
 
-/* Closes without syncing and frees p; NULL accepted. */
+/* Stops the part's writes (what is queued is written) and closes without
+ * syncing; frees p; NULL accepted. */
 void gdt_ply_part_abort(gdt_ply_part *p);
 
 #ifdef __cplusplus

@@ -10,6 +10,7 @@
 #include <fcntl.h>
 #include <inttypes.h>
 #include <math.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -613,26 +614,222 @@ gdt_status gdt_ply_finish_parts(gdt_ply_writer *w, uint64_t nface, gdt_error *er
     return ply_commit(w, err);
 }
 
-/* ---- one process's parts ---- */
+/* ---- one process's parts ----
+ *
+ * A part's records go to the disk from a writer thread of its own, with
+ * direct I/O for the whole 4 KiB blocks of each chunk and through the page
+ * cache for the partial blocks at its two ends, which it may share with
+ * another part (another process's, or this part's previous chunk): the
+ * caller formats chunk k + 1 while the disk takes chunk k, and no record is
+ * copied into the page cache (two processes copying the whole mesh there
+ * cost a second of system time on 10M points).  A block written directly
+ * lies inside one chunk, so no other write ever touches it and the two
+ * paths never meet in one block.
+ *
+ * Invariants: slots [head, head + queued) (mod PART_SLOTS) wait for the
+ * writer, in submission order, the first of them being written while busy;
+ * the caller fills slot (head + queued) % PART_SLOTS, so it waits only when
+ * every slot is queued.  A chunk at file offset off starts at
+ * mem + off % GDT_DIO_BLOCK of its slot, so file blocks and memory blocks
+ * are aligned alike.  wr_errno is the first failed write (errno), sticky:
+ * later chunks are dropped and every later call fails.  Without a thread
+ * (threaded == 0: it could not be started) the caller writes each chunk at
+ * once, the same way. */
+#define PART_SLOTS 3
+#define PART_CHUNK GDT_PLY_BUFFER_BYTES
+
+typedef struct part_slot {
+    unsigned char *mem; /* PART_CHUNK + GDT_DIO_BLOCK bytes, aligned to GDT_DIO_BLOCK */
+    size_t n;           /* bytes of the chunk */
+    uint64_t off;       /* its file offset */
+} part_slot;
 
 struct gdt_ply_part {
     char *path; /* the temporary */
-    int fd;
+    int fd;     /* through the page cache */
+    int dfd;    /* O_DIRECT, or -1 (not accepted, or refused later) */
     uint64_t header, nvert;
-    unsigned char *buf; /* GDT_PLY_BUFFER_BYTES */
+    part_slot slot[PART_SLOTS];
+    pthread_t tid;
+    int threaded;
+    pthread_mutex_t mu;
+    pthread_cond_t cv;
+    int head, queued, stop;
+    int wr_errno;
+    uint64_t direct_bytes; /* written directly by the chunks done */
 };
+
+/* Writes buf[0, n) at off through the page cache and starts its writeback
+ * at once (where the system can), so that the sync at the end has little
+ * left to wait for.  returns: 0 or errno. */
+static int part_buffered(gdt_ply_part *p, const unsigned char *buf, size_t n, uint64_t off)
+{
+    int e = n > 0 ? gdt_fd_write_all(p->fd, buf, n, (int64_t)off) : 0;
+#ifdef SYNC_FILE_RANGE_WRITE
+    if (e == 0 && n > 0)
+        (void)sync_file_range(p->fd, (off_t)off, (off_t)n, SYNC_FILE_RANGE_WRITE);
+#endif
+    return e;
+}
+
+/* Writes slot s's chunk: its whole blocks directly while the file system
+ * takes them (a refusal, EINVAL, sends this and every later chunk through
+ * the page cache), the rest through the page cache.  returns: 0 or errno. */
+static int part_write_slot(gdt_ply_part *p, const part_slot *s, uint64_t *direct)
+{
+    const uint64_t B = GDT_DIO_BLOCK;
+    const unsigned char *b = s->mem + s->off % B;
+    uint64_t lo = (s->off + B - 1) / B * B, hi = (s->off + s->n) / B * B, at;
+    int e;
+
+    if (p->dfd < 0 || lo >= hi)
+        return part_buffered(p, b, s->n, s->off);
+    /* lo < hi: a whole block at least */
+    e = part_buffered(p, b, (size_t)(lo - s->off), s->off);
+    for (at = lo; e == 0 && at < hi;) {
+        ssize_t k = pwrite(p->dfd, b + (at - s->off), (size_t)(hi - at), (off_t)at);
+        if (k < 0 && errno == EINTR)
+            continue;
+        if ((k < 0 && errno == EINVAL) || (k > 0 && (uint64_t)k % B != 0)) {
+            if (k > 0)
+                at += (uint64_t)k;
+            close(p->dfd);
+            p->dfd = -1;
+            break;
+        }
+        if (k <= 0)
+            e = k < 0 ? errno : EIO;
+        else
+            at += (uint64_t)k;
+    }
+    *direct += at - lo;
+    if (e == 0)
+        e = part_buffered(p, b + (at - s->off), (size_t)(s->off + s->n - at), at);
+    return e;
+}
+
+static void *part_writer_main(void *arg)
+{
+    gdt_ply_part *p = arg;
+    pthread_mutex_lock(&p->mu);
+    for (;;) {
+        while (p->queued == 0 && !p->stop)
+            pthread_cond_wait(&p->cv, &p->mu);
+        if (p->queued == 0)
+            break;
+        {
+            const part_slot *s = &p->slot[p->head];
+            int drop = p->wr_errno != 0, e = 0;
+            uint64_t direct = 0;
+            pthread_mutex_unlock(&p->mu);
+            if (!drop)
+                e = part_write_slot(p, s, &direct);
+            pthread_mutex_lock(&p->mu);
+            p->direct_bytes += direct;
+            if (e != 0 && p->wr_errno == 0)
+                p->wr_errno = e;
+        }
+        p->head = (p->head + 1) % PART_SLOTS;
+        p->queued--;
+        pthread_cond_broadcast(&p->cv);
+    }
+    pthread_mutex_unlock(&p->mu);
+    return NULL;
+}
+
+static gdt_status part_failed(const gdt_ply_part *p, int e, gdt_error *err)
+{
+    return gdt_error_set(err, GDT_EIO, 4721, "%s: write failed: %s", p->path, strerror(e));
+}
+
+/* The slot to format the chunk at file offset off into: *q is where the
+ * chunk's first byte goes.  Waits while every slot is queued.
+ * returns: GDT_OK; GDT_EIO 4721 (an earlier chunk failed). */
+static gdt_status part_take(gdt_ply_part *p, uint64_t off, unsigned char **q, gdt_error *err)
+{
+    int e, i;
+    if (!p->threaded) {
+        *q = p->slot[0].mem + off % GDT_DIO_BLOCK;
+        return GDT_OK;
+    }
+    pthread_mutex_lock(&p->mu);
+    while (p->queued == PART_SLOTS && p->wr_errno == 0)
+        pthread_cond_wait(&p->cv, &p->mu);
+    e = p->wr_errno;
+    i = (p->head + p->queued) % PART_SLOTS;
+    pthread_mutex_unlock(&p->mu);
+    if (e != 0)
+        return part_failed(p, e, err);
+    *q = p->slot[i].mem + off % GDT_DIO_BLOCK;
+    return GDT_OK;
+}
+
+/* Hands the chunk formatted by part_take (n bytes at off) to the writer,
+ * or writes it now without one.  returns: GDT_OK; GDT_EIO 4721. */
+static gdt_status part_submit(gdt_ply_part *p, size_t n, uint64_t off, gdt_error *err)
+{
+    part_slot *s;
+    int e;
+    if (!p->threaded) {
+        p->slot[0].n = n;
+        p->slot[0].off = off;
+        e = part_write_slot(p, &p->slot[0], &p->direct_bytes);
+        return e != 0 ? part_failed(p, e, err) : GDT_OK;
+    }
+    pthread_mutex_lock(&p->mu);
+    s = &p->slot[(p->head + p->queued) % PART_SLOTS];
+    s->n = n;
+    s->off = off;
+    p->queued++;
+    pthread_cond_broadcast(&p->cv);
+    e = p->wr_errno;
+    pthread_mutex_unlock(&p->mu);
+    return e != 0 ? part_failed(p, e, err) : GDT_OK;
+}
+
+/* Lets the writer finish the queued chunks and stops it.  returns: its
+ * first failure (errno), 0 when none. */
+static int part_drain(gdt_ply_part *p)
+{
+    int e;
+    if (!p->threaded)
+        return 0;
+    pthread_mutex_lock(&p->mu);
+    p->stop = 1;
+    pthread_cond_broadcast(&p->cv);
+    pthread_mutex_unlock(&p->mu);
+    pthread_join(p->tid, NULL);
+    p->threaded = 0;
+    pthread_cond_destroy(&p->cv);
+    pthread_mutex_destroy(&p->mu);
+    e = p->wr_errno;
+    return e;
+}
+
+static void part_free(gdt_ply_part *p)
+{
+    for (int i = 0; i < PART_SLOTS; i++)
+        free(p->slot[i].mem);
+    free(p->path);
+    free(p);
+}
 
 gdt_status gdt_ply_part_open(gdt_ply_part **out, const char *tmp_path, uint64_t header_bytes,
                              uint64_t nvert, gdt_error *err)
 {
     gdt_ply_part *p = calloc(1, sizeof *p);
     *out = NULL;
-    if (p == NULL || (p->path = strdup(tmp_path)) == NULL ||
-        (p->buf = malloc(GDT_PLY_BUFFER_BYTES)) == NULL) {
-        if (p != NULL) {
-            free(p->path);
-            free(p);
-        }
+    if (p == NULL)
+        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+    p->fd = p->dfd = -1;
+    p->path = strdup(tmp_path);
+    for (int i = 0; i < PART_SLOTS; i++)
+        if (posix_memalign((void **)&p->slot[i].mem, GDT_DIO_BLOCK, PART_CHUNK + GDT_DIO_BLOCK) !=
+            0)
+            p->slot[i].mem = NULL;
+    if (p->path == NULL || p->slot[0].mem == NULL || p->slot[1].mem == NULL ||
+        p->slot[2].mem == NULL) {
+        part_free(p);
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     }
     p->header = header_bytes;
@@ -641,26 +838,20 @@ gdt_status gdt_ply_part_open(gdt_ply_part **out, const char *tmp_path, uint64_t 
     if (p->fd < 0) {
         gdt_status st = gdt_error_set(err, GDT_EIO, 4720, "%s: cannot open to write a part: %s",
                                       tmp_path, strerror(errno));
-        free(p->buf);
-        free(p->path);
-        free(p);
+        part_free(p);
         return st;
     }
+    p->dfd = open(tmp_path, O_WRONLY | O_CLOEXEC | O_DIRECT); /* -1: the page cache only */
+    if (pthread_mutex_init(&p->mu, NULL) == 0) {
+        if (pthread_cond_init(&p->cv, NULL) == 0) {
+            p->threaded = pthread_create(&p->tid, NULL, part_writer_main, p) == 0;
+            if (!p->threaded)
+                pthread_cond_destroy(&p->cv);
+        }
+        if (!p->threaded)
+            pthread_mutex_destroy(&p->mu);
+    }
     *out = p;
-    return GDT_OK;
-}
-
-/* Writes buf[0, n) at off and starts its writeback at once (where the
- * system can), so that the disk works while the part goes on and the sync
- * at the end has little left to wait for. */
-static gdt_status part_write(gdt_ply_part *p, size_t n, uint64_t off, gdt_error *err)
-{
-    int e = gdt_fd_write_all(p->fd, p->buf, n, (int64_t)off);
-    if (e != 0)
-        return gdt_error_set(err, GDT_EIO, 4721, "%s: write failed: %s", p->path, strerror(e));
-#ifdef SYNC_FILE_RANGE_WRITE
-    (void)sync_file_range(p->fd, (off_t)off, (off_t)n, SYNC_FILE_RANGE_WRITE);
-#endif
     return GDT_OK;
 }
 
@@ -674,9 +865,13 @@ gdt_status gdt_ply_part_vertices(gdt_ply_part *p, uint64_t first, const double *
                              p->path, first, n, p->nvert);
     for (size_t done = 0; done < n;) {
         size_t m = n - done < per ? n - done : per;
+        const uint64_t off = p->header + PLY_VERTEX_BYTES * (first + done);
+        unsigned char *q0 = NULL;
+        if (part_take(p, off, &q0, err) != GDT_OK)
+            return err->status;
         for (size_t i = 0; i < m; i++) {
             const double *v = xyz + 3 * (done + i);
-            unsigned char *q = p->buf + PLY_VERTEX_BYTES * i;
+            unsigned char *q = q0 + PLY_VERTEX_BYTES * i;
             if (!isfinite(v[0]) || !isfinite(v[1]) || !isfinite(v[2]))
                 return gdt_error_set(err, GDT_EINTERNAL, 7707,
                                      "%s: vertex %" PRIu64 " is not finite (%g %g %g)", p->path,
@@ -685,8 +880,7 @@ gdt_status gdt_ply_part_vertices(gdt_ply_part *p, uint64_t first, const double *
             gdt_le_put_f64(q + 8, v[1]);
             gdt_le_put_f64(q + 16, v[2]);
         }
-        if (part_write(p, PLY_VERTEX_BYTES * m, p->header + PLY_VERTEX_BYTES * (first + done),
-                       err) != GDT_OK)
+        if (part_submit(p, PLY_VERTEX_BYTES * m, off, err) != GDT_OK)
             return err->status;
         done += m;
     }
@@ -700,9 +894,13 @@ gdt_status gdt_ply_part_faces(gdt_ply_part *p, uint64_t first, const int32_t *tr
     const uint64_t at = p->header + PLY_VERTEX_BYTES * p->nvert;
     for (size_t done = 0; done < n;) {
         size_t m = n - done < per ? n - done : per;
+        const uint64_t off = at + PLY_FACE_BYTES * (first + done);
+        unsigned char *q0 = NULL;
+        if (part_take(p, off, &q0, err) != GDT_OK)
+            return err->status;
         for (size_t i = 0; i < m; i++) {
             const int32_t *t = tri + 3 * (done + i);
-            unsigned char *q = p->buf + PLY_FACE_BYTES * i;
+            unsigned char *q = q0 + PLY_FACE_BYTES * i;
             for (int k = 0; k < 3; k++)
                 if (t[k] < 0 || (uint64_t)t[k] >= p->nvert)
                     return gdt_error_set(err, GDT_EINTERNAL, 7705,
@@ -719,18 +917,53 @@ gdt_status gdt_ply_part_faces(gdt_ply_part *p, uint64_t first, const int32_t *tr
             gdt_le_put_u32(q + 5, (uint32_t)t[1]);
             gdt_le_put_u32(q + 9, (uint32_t)t[2]);
         }
-        if (part_write(p, PLY_FACE_BYTES * m, at + PLY_FACE_BYTES * (first + done), err) != GDT_OK)
+        if (part_submit(p, PLY_FACE_BYTES * m, off, err) != GDT_OK)
             return err->status;
         done += m;
     }
     return GDT_OK;
 }
 
+gdt_status gdt_ply_part_flush(gdt_ply_part *p, gdt_error *err)
+{
+    int e = 0;
+    if (p->threaded) {
+        pthread_mutex_lock(&p->mu);
+        while (p->queued > 0)
+            pthread_cond_wait(&p->cv, &p->mu);
+        e = p->wr_errno;
+        pthread_mutex_unlock(&p->mu);
+    }
+    return e != 0 ? part_failed(p, e, err) : GDT_OK;
+}
+
+uint64_t gdt_ply_part_direct_bytes(gdt_ply_part *p)
+{
+    uint64_t n;
+    if (!p->threaded)
+        return p->direct_bytes;
+    pthread_mutex_lock(&p->mu);
+    n = p->direct_bytes;
+    pthread_mutex_unlock(&p->mu);
+    return n;
+}
+
 gdt_status gdt_ply_part_close(gdt_ply_part *p, gdt_error *err)
 {
     gdt_status st;
+    int e;
     if (p == NULL)
         return GDT_OK;
+    e = part_drain(p);
+    if (p->dfd >= 0)
+        close(p->dfd);
+    p->dfd = -1;
+    if (e != 0) {
+        st = part_failed(p, e, err);
+        gdt_ply_part_abort(p);
+        return st;
+    }
+    /* one file: its sync covers the direct writes too */
     st = gdt_fd_sync_close_part(p->fd, p->path, err);
     p->fd = -1;
     gdt_ply_part_abort(p);
@@ -741,11 +974,12 @@ void gdt_ply_part_abort(gdt_ply_part *p)
 {
     if (p == NULL)
         return;
+    (void)part_drain(p);
+    if (p->dfd >= 0)
+        close(p->dfd);
     if (p->fd >= 0)
         close(p->fd);
-    free(p->buf);
-    free(p->path);
-    free(p);
+    part_free(p);
 }
 
 void gdt_ply_abort(gdt_ply_writer *w)

@@ -8,13 +8,17 @@
  * (vertices after faces, bad indices, bad comments, bad lattice, too many
  * vertices) is refused with its message number and leaves no file behind;
  * a file written in parts (gdt_ply_begin_parts, gdt_ply_part_*) has the
- * sequential writer's bytes, and a missing part is refused.
+ * sequential writer's bytes, also in parts of many chunks written by two
+ * part writers at once (their whole blocks directly), and a missing part
+ * is refused.
  * The writer bypasses the page cache (O_DIRECT, whole 4 KiB blocks) where
  * the file system allows it; the large file crosses many block and buffer
  * boundaries with odd record counts per call.
  */
+#define _GNU_SOURCE 1 /* O_DIRECT */
 #include <dirent.h>
 #include <errno.h>
+#include <fcntl.h>
 #include <inttypes.h>
 #include <math.h>
 #include <stdarg.h>
@@ -693,6 +697,97 @@ static void test_parts(tctx *t)
     free(tri);
 }
 
+/* Whether the directory of path takes direct I/O (O_DIRECT), as the part
+ * writers' direct writes need. */
+static int takes_direct_io(const char *path)
+{
+    int fd = open(path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC | O_DIRECT, 0600);
+    if (fd >= 0)
+        close(fd);
+    unlink(path);
+    return fd >= 0;
+}
+
+/* Parts of several chunks each, written by two part writers at once in
+ * shuffled order with boundaries at no block multiple, have the bytes of
+ * the sequential file: the whole blocks inside a chunk go out with direct
+ * I/O (where the file system takes it: counted by the writers), the
+ * partial blocks at the chunks' ends, shared between writers, through the
+ * page cache; flush reports nothing failed. */
+static void test_parts_chunks(tctx *t)
+{
+    enum { NV = 140003, NF = 280011, NB = 7 };
+    char seq[4200], par[4200], probe[4200];
+    gdt_ply_meta m = plain_meta();
+    gdt_ply_writer *w = NULL;
+    gdt_ply_part *p[2] = {NULL, NULL};
+    gdt_error err;
+    double *xyz = malloc(3 * (size_t)NV * sizeof *xyz);
+    int32_t *tri = malloc(3 * (size_t)NF * sizeof *tri);
+    /* the blocks' bounds: a few records, then chunks and more */
+    const uint64_t vb[NB + 1] = {0, 3, 4100, 50001, 50002, 97777, 131072, NV};
+    const uint64_t fb[NB + 1] = {0, 1, 80659, 80660, 161319, 200000, 279000, NF};
+    const int order[NB] = {5, 0, 3, 6, 1, 4, 2};
+    uint64_t hb = 0, direct = 0;
+    unsigned char *a, *b;
+    size_t na = 0, nb = 0;
+
+    CHECK(t, xyz != NULL && tri != NULL, "%s", "out of memory");
+    if (xyz == NULL || tri == NULL) {
+        free(xyz);
+        free(tri);
+        return;
+    }
+    gdt_error_clear(&err);
+    for (int i = 0; i < 3 * NV; i++)
+        xyz[i] = 0.5 * i - 1.0 / (i + 3);
+    for (int f = 0; f < NF; f++) {
+        tri[3 * f] = f % NV;
+        tri[3 * f + 1] = (f + 1) % NV;
+        tri[3 * f + 2] = (f + 2) % NV;
+    }
+    path_in(t, seq, sizeof seq, "chunks-seq.ply");
+    path_in(t, par, sizeof par, "chunks-par.ply");
+    path_in(t, probe, sizeof probe, "direct-probe");
+    CHECK(t, gdt_ply_create(&w, seq, &m, &err) == GDT_OK, "%s", err.msg);
+    CHECK(t, gdt_ply_write_vertices(w, xyz, NV, &err) == GDT_OK, "%s", err.msg);
+    CHECK(t, gdt_ply_write_faces(w, tri, NF, &err) == GDT_OK, "%s", err.msg);
+    CHECK(t, gdt_ply_finish(w, &err) == GDT_OK, "%s", err.msg);
+
+    CHECK(t, gdt_ply_create(&w, par, &m, &err) == GDT_OK, "%s", err.msg);
+    CHECK(t, gdt_ply_begin_parts(w, NV, &hb, &err) == GDT_OK, "%s", err.msg);
+    for (int i = 0; i < 2; i++)
+        CHECK(t, gdt_ply_part_open(&p[i], gdt_ply_temp_path(w), hb, NV, &err) == GDT_OK, "%s",
+              err.msg);
+    for (int j = 0; j < NB && p[0] != NULL && p[1] != NULL; j++) {
+        int i = order[j];
+        CHECK(t, gdt_ply_part_vertices(p[j % 2], vb[i], xyz + 3 * vb[i], vb[i + 1] - vb[i],
+                                       &err) == GDT_OK, "vertices: %s", err.msg);
+        CHECK(t, gdt_ply_part_faces(p[(j + 1) % 2], fb[i], tri + 3 * fb[i], fb[i + 1] - fb[i],
+                                    &err) == GDT_OK, "faces: %s", err.msg);
+    }
+    for (int i = 0; i < 2 && p[i] != NULL; i++) {
+        CHECK(t, gdt_ply_part_flush(p[i], &err) == GDT_OK, "flush: %s", err.msg);
+        direct += gdt_ply_part_direct_bytes(p[i]);
+        CHECK(t, gdt_ply_part_close(p[i], &err) == GDT_OK, "%s", err.msg);
+    }
+    CHECK(t, gdt_ply_finish_parts(w, NF, &err) == GDT_OK, "%s", err.msg);
+    a = slurp(seq, &na);
+    b = slurp(par, &nb);
+    CHECK(t, a != NULL && b != NULL && na == nb && memcmp(a, b, na) == 0,
+          "parts in chunks differ from the sequential file (%zu and %zu bytes)", na, nb);
+    /* most of the records' bytes went directly, whole blocks only */
+    if (takes_direct_io(probe))
+        CHECK(t, direct % 4096 == 0 && direct > (uint64_t)na * 9 / 10,
+              "%" PRIu64 " of %zu bytes written with direct I/O", direct, na);
+    else
+        CHECK(t, direct == 0, "%" PRIu64 " bytes direct where O_DIRECT is refused", direct);
+    free(a);
+    free(b);
+    free(xyz);
+    free(tri);
+}
+
 int main(int argc, char **argv)
 {
     tctx t;
@@ -718,6 +813,7 @@ int main(int argc, char **argv)
     test_replace_and_abort(&t);
     test_special_path_kept(&t);
     test_parts(&t);
+    test_parts_chunks(&t);
 
     int rc = gdt_check_finish(&t.c, "test_ply");
     if (rc == 0)
