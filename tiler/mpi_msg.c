@@ -79,6 +79,27 @@ gdt_status mr_tile_owners(const uint64_t *pre, uint64_t n, int size, int *owner,
     return GDT_OK;
 }
 
+uint64_t mr_tile_dealt(const uint64_t *pre, uint64_t n)
+{
+    const uint64_t total = pre[n] - pre[0];
+    uint64_t lo = 0, hi = n;
+    /* the first k with pre[k] - pre[0] >= total - total / MR_TAIL_PARTS */
+    while (lo < hi) {
+        uint64_t mid = lo + (hi - lo) / 2;
+        if (pre[mid] - pre[0] >= total - total / MR_TAIL_PARTS)
+            hi = mid;
+        else
+            lo = mid + 1;
+    }
+    return lo;
+}
+
+uint64_t mr_grant_size(uint64_t next, uint64_t n, int size)
+{
+    uint64_t left = next < n ? n - next : 0, g = left / (2 * (uint64_t)(size > 0 ? size : 1));
+    return left == 0 ? 0 : g < 1 ? 1 : g;
+}
+
 void mr_pack_status(gdt_pack *p, gdt_status st, const gdt_error *err)
 {
     gdt_pack_u64(p, (uint64_t)st);

@@ -7,7 +7,10 @@
  *     shared through the hooks of mpi_pass1.c, mpi_spill.c, mpi_pass2.c;
  *     then GO to every other rank: the run's status so far, and when it is
  *     GDT_OK the job's id, the tiler's state and the rank's tiles with
- *     their journal records.
+ *     their journal records (those before the last quarter of the
+ *     vertices), and whether tiles are left to take on demand: a rank
+ *     asks for them with MORE and GRANT answers with the next ones in tile
+ *     order and their records, or none.
  *   every rank: its tiles (tr_run_tiles over a tr_tile_set).  Another rank
  *     sends RECORD (durable finished tiles: k, size, checksum) and DONE
  *     (tile k finished or reused) to rank 0, which records them in the
@@ -41,11 +44,12 @@
 
 /* The counts of a rank's tile stage, in FINISHED: the fields of tr_summary
  * that the tile stage fills, and the rank's own share. */
-static void pack_report(gdt_pack *p, const tr_run *c, uint64_t tiles, uint64_t vertices)
+static void pack_report(gdt_pack *p, const tr_run *c, uint64_t tiles, uint64_t vertices,
+                        uint64_t taken)
 {
     const tr_summary *s = &c->s;
     const gdt_cert_stats *q = &s->cert;
-    const uint64_t v[] = {tiles, vertices, s->certified, c->seam_total, s->tiles_reused,
+    const uint64_t v[] = {tiles, vertices, taken, s->certified, c->seam_total, s->tiles_reused,
                           s->tiles_redone, s->gcd_tiles, s->insert_tiles, s->max_tile_points,
                           s->max_halo_points, q->triangles, q->certified, q->inner,
                           q->outside_known, q->halo_hit, q->halo_tests, q->pred.orient_calls,
@@ -72,6 +76,7 @@ static void unpack_report(gdt_unpack *u, tr_summary *sum, uint64_t *seam, tr_ran
     memset(r, 0, sizeof *r);
     r->tiles = gdt_unpack_u64(u);
     r->vertices = gdt_unpack_u64(u);
+    r->on_demand = gdt_unpack_u64(u);
     r->certified = gdt_unpack_u64(u);
     sum->certified += r->certified;
     *seam += gdt_unpack_u64(u);
@@ -229,6 +234,50 @@ static gdt_status r0_finished(mr_ctx *m, gdt_unpack *u, int from, gdt_error *err
     return GDT_OK;
 }
 
+/* GRANT to rank r, which asked for more tiles: the next ones in tile
+ * order (mr_grant_size of them) with their journal records, or none when
+ * every tile is dealt (also after a failure: the job stops). */
+static gdt_status r0_grant(mr_ctx *m, int r, gdt_error *err)
+{
+    tr_run *c = m->c;
+    uint64_t g = m->job_st == GDT_OK ? mr_grant_size(m->next_tile, m->ntiles, m->size) : 0;
+    gdt_status st = GDT_OK;
+    gdt_pack p;
+    memset(&p, 0, sizeof p);
+    gdt_pack_u64(&p, g);
+    for (uint64_t i = 0; st == GDT_OK && i < g; i++) {
+        uint64_t k = m->next_tile++, size = 0, sum = 0;
+        int found = 0;
+        m->towner[k] = r;
+        st = gdt_job_get_tile(c->jobdb, k, &found, &size, &sum, err);
+        gdt_pack_u64(&p, k);
+        gdt_pack_u64(&p, (uint64_t)found);
+        gdt_pack_u64(&p, size);
+        gdt_pack_u64(&p, sum);
+    }
+    if (st != GDT_OK) {
+        gdt_pack_free(&p);
+        return st;
+    }
+    return mr_send_pack(m, r, TAG_GRANT, &p, err);
+}
+
+/* The growing set of rank 0's tiles: when its own run out, it takes the
+ * next tile not dealt yet, if any. */
+static gdt_status r0_more(void *ctx, uint64_t i, uint64_t *n, gdt_error *err)
+{
+    mr_ctx *m = ctx;
+    (void)err;
+    if (i == m->nmine && m->next_tile < m->ntiles && m->job_st == GDT_OK) {
+        uint64_t k = m->next_tile++;
+        m->towner[k] = 0;
+        m->mine[m->nmine++] = k;
+        m->taken++;
+    }
+    *n = m->nmine;
+    return GDT_OK;
+}
+
 /* Handles one waiting message, if any (*got). */
 static gdt_status r0_handle(mr_ctx *m, int wait, int *got, gdt_error *err)
 {
@@ -264,6 +313,9 @@ static gdt_status r0_handle(mr_ctx *m, int wait, int *got, gdt_error *err)
     }
     case TAG_FINISHED:
         st = r0_finished(m, &u, from, err);
+        break;
+    case TAG_MORE:
+        st = r0_grant(m, from, err);
         break;
     default:
         st = mr_bad_message(from, tag, err);
@@ -326,6 +378,9 @@ static gdt_status r0_go(mr_ctx *m, int r, gdt_status run_st, const unsigned char
             gdt_pack_u64(&p, size);
             gdt_pack_u64(&p, sum);
         }
+        /* whether tiles are left to take on demand, and how many there are */
+        gdt_pack_u64(&p, (uint64_t)(m->next_tile < m->ntiles));
+        gdt_pack_u64(&p, m->ntiles);
         mr_parts_pack_layout(m, &p);
     }
     if (st != GDT_OK) {
@@ -336,14 +391,14 @@ static gdt_status r0_go(mr_ctx *m, int r, gdt_status run_st, const unsigned char
 }
 
 static gdt_status run_share(mr_ctx *m, const uint64_t *ks, uint64_t n, const tr_tile_rec *rec,
-                            gdt_error *err);
+                            int grows, gdt_error *err);
 
 static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
 {
     gdt_status st = tr_run_init(c, c->opts, err);
     unsigned char *state = NULL;
     size_t slen = 0;
-    uint64_t *mine = NULL, nmine = 0, vmine = 0;
+    uint64_t vmine = 0;
     double t_tiles0 = 0, t_own = 0;
 
     /* the ranks share the removal of the tile files at the end */
@@ -389,12 +444,22 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
     if (st == GDT_OK) {
         m->ntiles = gdt_tiler_tile_count(c->tiler);
         m->done = calloc(m->ntiles + 1, 1);
-        mine = malloc((m->ntiles + 1) * sizeof *mine);
+        m->mine = malloc((m->ntiles + 1) * sizeof *m->mine);
         m->towner = malloc((m->ntiles + 1) * sizeof *m->towner);
-        if (m->done == NULL || mine == NULL || m->towner == NULL)
+        if (m->done == NULL || m->mine == NULL || m->towner == NULL)
             st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        /* GO deals out the tiles before the last quarter of the vertices;
+         * the rest are taken on demand, in tile order, by the ranks that
+         * run out first (rank 0 takes its own without a message).  With
+         * lanes rank 0 could not take a tile past its first ones, so then
+         * every tile is dealt out at once. */
+        m->next_tile = m->size > 1 && c->cstart.nmore == 0 && m->ntiles > 0
+                           ? mr_tile_dealt(c->base, m->ntiles)
+                           : m->ntiles;
+        for (uint64_t k = 0; m->towner != NULL && k <= m->ntiles; k++)
+            m->towner[k] = -1;
         if (st == GDT_OK)
-            st = mr_tile_owners(c->base, m->ntiles, m->size, m->towner, err);
+            st = mr_tile_owners(c->base, m->next_tile, m->size, m->towner, err);
     }
     /* every other rank waits for its GO, also when there is nothing to do */
     for (int r = 1; r < m->size; r++) {
@@ -409,19 +474,16 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
         }
     }
     free(state);
-    if (st != GDT_OK) {
-        free(mine);
+    if (st != GDT_OK)
         return st;
-    }
     for (uint64_t k = 0; k < m->ntiles; k++)
-        if (owner(m, k) == 0) {
-            mine[nmine++] = k;
-            vmine += c->base[k + 1] - c->base[k];
-        }
+        if (owner(m, k) == 0)
+            m->mine[m->nmine++] = k;
     t_tiles0 = gdt_now();
-    st = run_share(m, mine, nmine, NULL, err);
+    st = run_share(m, m->mine, m->nmine, NULL, m->next_tile < m->ntiles, err);
     t_own = c->s.t_tiles;
-    free(mine);
+    for (uint64_t i = 0; i < m->nmine; i++)
+        vmine += c->base[m->mine[i] + 1] - c->base[m->mine[i]];
     if (st != GDT_OK) {
         /* the job's error, or rank 0's own first */
         if (m->job_st == GDT_OK)
@@ -451,7 +513,8 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
         /* rank 0's own share, then every rank's counts in the summary */
         tr_summary *s = &c->s, *o = &m->remote;
         tr_rank_stats *r0 = &s->ranks[0];
-        r0->tiles = nmine;
+        r0->tiles = m->nmine;
+        r0->on_demand = m->taken;
         r0->vertices = vmine;
         r0->certified = s->certified;
         r0->reused = s->tiles_reused;
@@ -587,12 +650,90 @@ static gdt_status rn_poll(void *ctx, gdt_error *err)
     return gdt_error_set(err, GDT_EINTERRUPTED, 1303, "stopped: another rank failed");
 }
 
+/* Takes a GRANT (msg, len): its tiles join the rank's own, or none are
+ * left. */
+static gdt_status rn_take(mr_ctx *m, const unsigned char *msg, size_t len, gdt_error *err)
+{
+    gdt_unpack u;
+    uint64_t g;
+    memset(&u, 0, sizeof u);
+    u.p = msg;
+    u.n = len;
+    g = gdt_unpack_u64(&u);
+    if (u.bad || g > (u.n - u.at) / 32 || g > m->own_cap - m->own_n)
+        return mr_bad_message(0, TAG_GRANT, err);
+    for (uint64_t i = 0; i < g; i++) {
+        uint64_t k = gdt_unpack_u64(&u);
+        tr_tile_rec *r = &m->own_rec[m->own_n];
+        r->found = gdt_unpack_u64(&u) != 0;
+        r->size = gdt_unpack_u64(&u);
+        r->sum = gdt_unpack_u64(&u);
+        if (u.bad || k >= m->own_cap || (m->own_n > 0 && k <= m->own_ks[m->own_n - 1]))
+            return mr_bad_message(0, TAG_GRANT, err);
+        m->own_ks[m->own_n++] = k;
+    }
+    m->asked = 0;
+    m->no_more = g == 0;
+    m->taken += g;
+    return GDT_OK;
+}
+
+/* The growing set of this rank's tiles: takes the grants that came, asks
+ * for more when one tile is left to start (the answer comes while it
+ * runs), and, out of tiles, waits for the answer, placing faces as FPLACE
+ * comes meanwhile. */
+static gdt_status rn_more(void *ctx, uint64_t i, uint64_t *n, gdt_error *err)
+{
+    mr_ctx *m = ctx;
+    gdt_status st = GDT_OK;
+    for (;;) {
+        int ready = 0, from = 0, tag = 0;
+        size_t len = 0;
+        unsigned char *buf = NULL;
+        st = gdt_comm_probe(m->comm, 0, TAG_GRANT, &ready, &from, &tag, &len, err);
+        if (st != GDT_OK || !ready)
+            break;
+        st = mr_recv(m, 0, TAG_GRANT, len, &buf, err);
+        if (st == GDT_OK)
+            st = rn_take(m, buf, len, err);
+        free(buf);
+        if (st != GDT_OK)
+            break;
+    }
+    if (st == GDT_OK && !m->no_more && !m->asked && m->own_n - i <= 1) {
+        uint64_t z = 0;
+        st = gdt_comm_send(m->comm, 0, TAG_MORE, &z, sizeof z, err);
+        m->asked = st == GDT_OK;
+    }
+    while (st == GDT_OK && i == m->own_n && !m->no_more) {
+        int ready = 0, from = 0, tag = 0;
+        size_t len = 0;
+        unsigned char *buf = NULL;
+        st = gdt_comm_wait(m->comm, 0, -1, NULL, &ready, &from, &tag, &len, err);
+        if (st == GDT_OK && tag != TAG_GRANT && tag != TAG_FPLACE && tag != TAG_STOP)
+            st = mr_bad_message(0, tag, err);
+        if (st == GDT_OK)
+            st = mr_recv(m, 0, tag, len, &buf, err);
+        if (st == GDT_OK && tag == TAG_GRANT) {
+            st = rn_take(m, buf, len, err);
+        } else if (st == GDT_OK && tag == TAG_FPLACE) {
+            mr_parts_place(m, buf, len);
+        } else if (st == GDT_OK) {
+            m->stopped = 1;
+            st = gdt_error_set(err, GDT_EINTERRUPTED, 1303, "stopped: another rank failed");
+        }
+        free(buf);
+    }
+    *n = m->own_n;
+    return st;
+}
+
 static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
 {
     gdt_status st = tr_run_init(c, c->opts, err), run_st = GDT_OK;
     unsigned char *go = NULL, *fin = NULL;
     size_t len = 0;
-    uint64_t *ks = NULL, n = 0, vmine = 0;
+    uint64_t *ks = NULL, n = 0, vmine = 0, ntiles = 0;
     tr_tile_rec *rec = NULL;
     gdt_unpack u;
     gdt_pack p;
@@ -633,10 +774,31 @@ static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
             rec[i].size = gdt_unpack_u64(&u);
             rec[i].sum = gdt_unpack_u64(&u);
         }
+        m->on_demand = gdt_unpack_u64(&u) != 0;
+        ntiles = gdt_unpack_u64(&u);
+        if (st == GDT_OK && (u.bad || n > ntiles))
+            st = mr_bad_message(0, TAG_GO, err);
         if (st == GDT_OK)
             st = mr_parts_read_layout(m, &u, err);
         if (st == GDT_OK)
             st = tr_run_attach(c, id, state, slen, err);
+        if (st == GDT_OK && ntiles != gdt_tiler_tile_count(c->tiler))
+            st = mr_bad_message(0, TAG_GO, err);
+        /* room for every tile this rank may take on demand */
+        m->own_cap = m->on_demand ? ntiles : n;
+        if (st == GDT_OK && m->on_demand) {
+            uint64_t *k2 = realloc(ks, (ntiles + 1) * sizeof *ks);
+            tr_tile_rec *r2 = k2 != NULL ? realloc(rec, (ntiles + 1) * sizeof *rec) : NULL;
+            if (k2 != NULL)
+                ks = k2;
+            if (r2 != NULL)
+                rec = r2;
+            if (k2 == NULL || r2 == NULL)
+                st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
+        }
+        m->own_ks = ks;
+        m->own_rec = rec;
+        m->own_n = n;
         /* with --concavity this rank's faces are written after the merge,
          * from its .tri files: kept in the page cache for that, not read
          * from the disk at the end; otherwise they are read as their
@@ -649,26 +811,27 @@ static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
             st = mr_parts_open(m, err);
         }
         if (st == GDT_OK && m->parts) {
-            m->own_ks = ks;
-            m->own_n = n;
-            m->fwritten = calloc(n + 1, 1);
+            m->fwritten = calloc(m->own_cap + 1, 1);
             if (m->fwritten == NULL)
                 st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
         }
     }
     free(go);
-    if (st == GDT_OK) {
-        for (uint64_t i = 0; i < n; i++)
-            vmine += c->base != NULL && ks[i] < c->s.tiles ? c->base[ks[i] + 1] - c->base[ks[i]] : 0;
-        st = run_share(m, ks, n, rec, err);
-    }
+    /* with lanes this rank takes no tile on demand: they run ahead over
+     * its first ones (the others take what is left) */
+    if (st == GDT_OK)
+        st = run_share(m, ks, n, rec, m->on_demand && c->cstart.nmore == 0, err);
+    n = m->own_n;
+    for (uint64_t i = 0; i < n; i++)
+        vmine += c->base != NULL && ks[i] < c->s.tiles ? c->base[ks[i] + 1] - c->base[ks[i]] : 0;
+    m->own_rec = NULL;
     free(rec);
     /* FINISHED: rank 0 waits for it from every rank */
     memset(&p, 0, sizeof p);
     gdt_pack_u64(&p, (uint64_t)st);
     gdt_pack_u64(&p, st != GDT_OK ? (uint64_t)err->code : 0);
     gdt_pack_bytes(&p, st != GDT_OK ? err->msg : "", st != GDT_OK ? strlen(err->msg) : 0);
-    pack_report(&p, c, n, vmine);
+    pack_report(&p, c, n, vmine, m->taken);
     {
         gdt_error e2;
         gdt_error_clear(&e2);
@@ -746,9 +909,11 @@ static void remove_shared(mr_ctx *m, tr_run *c)
 }
 
 /* The tile stage over this rank's tiles ks[0, n): rank 0 with the journal
- * (rec NULL), another rank with the records GO gave. */
+ * (rec NULL), another rank with the records GO gave; when grows, ks and
+ * rec have room for every tile and the set grows with the tiles the rank
+ * takes on demand. */
 static gdt_status run_share(mr_ctx *m, const uint64_t *ks, uint64_t n, const tr_tile_rec *rec,
-                            gdt_error *err)
+                            int grows, gdt_error *err)
 {
     tr_tile_set set;
     memset(&set, 0, sizeof set);
@@ -759,6 +924,8 @@ static gdt_status run_share(mr_ctx *m, const uint64_t *ks, uint64_t n, const tr_
     set.done = m->rank == 0 ? r0_done : rn_done;
     set.poll = m->rank == 0 ? r0_poll : rn_poll;
     set.record = m->rank == 0 ? NULL : rn_record;
+    if (grows)
+        set.more = m->rank == 0 ? r0_more : rn_more;
     return tr_run_tiles(m->c, &set, err);
 }
 
@@ -819,6 +986,7 @@ gdt_status gdt_cli_tiled_mpi(const gdt_options *opts, gdt_comm *comm, gdt_error 
     free(m.p1_kept);
     free(m.p1_counts);
     free(m.towner);
+    free(m.mine);
     free(m.first);
     free(m.fwritten);
     if (m.rank != 0)

@@ -217,6 +217,7 @@ static gdt_status write_summary(const tr_run *c, gdt_error *err)
             gdt_json_int(&j, "rank", r);
             gdt_json_string(&j, "device", q->device);
             gdt_json_uint(&j, "tiles", q->tiles);
+            gdt_json_uint(&j, "tiles_on_demand", q->on_demand);
             gdt_json_uint(&j, "tiles_reused", q->reused);
             gdt_json_uint(&j, "vertices", q->vertices);
             gdt_json_uint(&j, "certified_faces", q->certified);

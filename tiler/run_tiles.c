@@ -572,7 +572,8 @@ static gdt_status post_join_slot(tr_run *c, tr_slot **posting, gdt_error *err)
     return st;
 }
 
-/* The n tiles of set in order; counts takes the figures of c->core.  With
+/* The n tiles of set in order (more as set->more gives them); counts takes
+ * the figures of c->core.  With
  * one device the i-th tile uses slot[i & 1]: the core fills one slot while
  * the post stage empties the other; with several, the lanes' slots, each
  * given back once its post stage was joined. */
@@ -582,10 +583,12 @@ static gdt_status tiles_loop(tr_run *c, const tr_tile_set *set, uint64_t n,
     tr_slot *posting = NULL; /* the slot of the post stage started last */
     gdt_status st;
 
-    for (uint64_t i = 0; i < n; i++) {
-        uint64_t k = set->k != NULL ? set->k[i] : i, size = 0, sum = 0;
+    for (uint64_t i = 0;; i++) {
+        uint64_t k, size = 0, sum = 0;
         int found = 0, ok = 0;
         tr_slot *sl = &c->slot[i & 1];
+        if (set->more == NULL && i >= n)
+            break;
         if (tr_stopped(c)) {
             /* keep what is done: a rerun reuses it */
             gdt_error e2;
@@ -597,6 +600,11 @@ static gdt_status tiles_loop(tr_run *c, const tr_tile_set *set, uint64_t n,
         }
         if (set->poll != NULL && (st = set->poll(set->ctx, err)) != GDT_OK)
             return st;
+        if (set->more != NULL && (st = set->more(set->ctx, i, &n, err)) != GDT_OK)
+            return st;
+        if (i >= n)
+            break;
+        k = set->k != NULL ? set->k[i] : i;
         if (set->rec != NULL) {
             found = set->rec[i].found;
             size = set->rec[i].size;
@@ -673,7 +681,7 @@ gdt_status tr_run_tiles(tr_run *c, const tr_tile_set *set, gdt_error *err)
 {
     size_t ndev;
     double busy0;
-    static const tr_tile_set all = {NULL, 0, NULL, NULL, NULL, NULL, NULL};
+    static const tr_tile_set all = {NULL, 0, NULL, NULL, NULL, NULL, NULL, NULL};
     uint64_t ntiles = gdt_tiler_tile_count(c->tiler), n;
     tr_core_counts counts;
     double t0;
@@ -682,6 +690,9 @@ gdt_status tr_run_tiles(tr_run *c, const tr_tile_set *set, gdt_error *err)
     if (set == NULL)
         set = &all;
     n = set->k != NULL ? set->n : ntiles;
+    if (set->more != NULL && c->cstart.nmore > 0)
+        return gdt_error_set(err, GDT_EINTERNAL, 7832,
+                             "the tile stage was given a growing set with lanes");
     busy0 = devices_busy(c, &ndev);
     t0 = gdt_now();
     memset(&counts, 0, sizeof counts);

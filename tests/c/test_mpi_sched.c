@@ -10,7 +10,10 @@
  * least weight so far (the lowest on a tie), so equal weights go round
  * robin; the result is a pure function of the weights.  The shares of pass
  * 2 (mr_owner_of) stay contiguous runs of tile order that start at rank 0
- * and never go back.
+ * and never go back.  GO deals out the shortest prefix of tile order that
+ * holds all but a quarter of the weight (mr_tile_dealt); the rest goes in
+ * grants that shrink to one tile and never exceed what is left
+ * (mr_grant_size).
  */
 #include <stdint.h>
 #include <stdio.h>
@@ -75,6 +78,23 @@ static void one_case(const uint64_t *w, uint64_t n, int size)
     free(again);
 }
 
+/* The tiles GO deals out: the shortest prefix holding at least all but
+ * 1 / MR_TAIL_PARTS of the weights; the grants: a shrinking part of what
+ * is left, at least one tile while any is left. */
+static void dealt_case(const uint64_t *w, uint64_t n)
+{
+    uint64_t *pre = malloc((n + 1) * sizeof *pre), d, total;
+    pre[0] = 17; /* an offset: only differences count */
+    for (uint64_t k = 0; k < n; k++)
+        pre[k + 1] = pre[k] + w[k];
+    total = pre[n] - pre[0];
+    d = mr_tile_dealt(pre, n);
+    CHECK(d <= n);
+    CHECK(pre[d] - pre[0] >= total - total / MR_TAIL_PARTS);
+    CHECK(d == 0 || pre[d - 1] - pre[0] < total - total / MR_TAIL_PARTS);
+    free(pre);
+}
+
 int main(void)
 {
     enum { N = 300 };
@@ -106,6 +126,24 @@ int main(void)
             for (int k = 0; k < 12; k++)
                 CHECK(own[k] == k % size);
         }
+    }
+    {
+        uint64_t eq[100], one[10] = {0, 0, 0, 0, 0, 0, 0, 0, 0, 50};
+        for (int k = 0; k < 100; k++)
+            eq[k] = 8;
+        dealt_case(eq, 100);
+        CHECK(mr_tile_dealt((const uint64_t[]){0, 8, 16, 24, 32}, 4) == 3);
+        dealt_case(one, 10);
+        dealt_case(w, N);
+        dealt_case(w, 1);
+        dealt_case(w, 0);
+        for (uint64_t next = 0; next <= 100; next++)
+            for (int size = 1; size <= 8; size++) {
+                uint64_t g = mr_grant_size(next, 100, size);
+                CHECK(next == 100 ? g == 0 : g >= 1 && g <= 100 - next);
+                CHECK(next == 100 || g == 1 || g * 2 * (uint64_t)size <= 100 - next);
+            }
+        CHECK(mr_grant_size(0, 80, 2) == 20 && mr_grant_size(79, 80, 2) == 1);
     }
     return gdt_check_finish(&T, "test_mpi_sched");
 }

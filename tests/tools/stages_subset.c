@@ -27,7 +27,7 @@ int main(int argc, char **argv)
     gdt_options opts;
     gdt_error err;
     tr_run c;
-    tr_tile_set set = {NULL, 0, on_done, NULL, NULL, NULL, NULL};
+    tr_tile_set set = {NULL, 0, on_done, NULL, NULL, NULL, NULL, NULL};
     uint64_t *ks = NULL;
     const char *p;
     gdt_status st;

@@ -35,7 +35,9 @@ enum {
     TAG_TSIZES = 22,   /* r -> 0: a text mesh's part: its fragments' lengths (mpi_parts.c) */
     TAG_TPLACE = 23,   /* 0 -> r: where to place them */
     TAG_REMOVED = 24,  /* r -> 0: the rank's share of the tile files is removed */
-    TAG_FPLACE = 25    /* 0 -> r: where the faces of some of its done tiles go (mpi_parts.c) */
+    TAG_FPLACE = 25,   /* 0 -> r: where the faces of some of its done tiles go (mpi_parts.c) */
+    TAG_MORE = 26,     /* r -> 0: this rank takes more tiles */
+    TAG_GRANT = 27     /* 0 -> r: the tiles it takes (with their records), or none left */
 };
 
 /* Records per TAG_RECDATA message (32 MiB of gdt_point). */
@@ -84,13 +86,23 @@ typedef struct mr_ctx {
     gdt_error part_err;
     double part_t;           /* seconds this rank spent writing its part */
     gdt_trim_counts part_tc; /* its tiles' faces and drops (a trimmed mesh) */
-    int *towner;       /* rank 0: the rank of each tile in the tile stage (mr_tile_owners) */
+    int *towner;       /* rank 0: the rank of each tile in the tile stage (mr_tile_owners
+                        * for GO's tiles, then as they are taken; -1 before) */
+    uint64_t next_tile; /* rank 0: the first tile not dealt yet (ntiles: none left);
+                         * the tiles from it on are taken on demand, in order */
+    uint64_t *mine, nmine; /* rank 0: its tiles (room for every tile) */
+    int on_demand;      /* another rank: GO left tiles to take on demand */
+    int asked;          /* another rank: MORE sent, its GRANT not yet here */
+    int no_more;        /* another rank: a GRANT said no tile is left */
+    uint64_t own_cap;   /* another rank: room in own_ks and own_rec */
+    tr_tile_rec *own_rec; /* another rank: the records of own_ks */
+    uint64_t taken;     /* the tiles this rank took on demand */
     int placing;       /* rank 0: faces are placed as the prefix of done tiles grows */
     uint64_t *first;   /* rank 0: ntiles + 1: first[k + 1] is known for k < fplaced */
     uint64_t fplaced;  /* rank 0: tiles [0, fplaced) have their place in the mesh */
     uint8_t *fwritten; /* per tile (rank 0) or per tile of own_ks (another rank):
                         * its faces are in the mesh */
-    const uint64_t *own_ks; /* another rank: its tiles, increasing (from GO) */
+    uint64_t *own_ks; /* another rank: its tiles, increasing (GO's, then those taken) */
     uint64_t own_n;
     uint64_t placed_early; /* another rank: its tiles FPLACE placed (for WROTE) */
     /* the shared ground filter (mpi_ground.c), rank 0 */
@@ -139,6 +151,21 @@ int mr_owner_of(const uint64_t *pre, uint64_t n, uint64_t k, int size);
  * returns: GDT_OK; GDT_EINTERNAL 7001. */
 gdt_status mr_tile_owners(const uint64_t *pre, uint64_t n, int size, int *owner,
                           gdt_error *err);
+
+/* The share of the vertices, in parts of MR_TAIL_PARTS, that the tile
+ * stage leaves to be taken on demand at its end. */
+#define MR_TAIL_PARTS 4
+
+/* How many tiles GO deals out (mr_tile_owners over them): those before the
+ * last 1 / MR_TAIL_PARTS of the weights pre[0, n] (their prefix sums);
+ * the rest are taken on demand, so that ranks whose cores run at different
+ * speeds in a run, or tiles that cost more than their weight, end the
+ * stage together. */
+uint64_t mr_tile_dealt(const uint64_t *pre, uint64_t n);
+
+/* How many tiles of the n - next left to grant one rank of size at once:
+ * a part of what is left that shrinks to 1 (guided self-scheduling). */
+uint64_t mr_grant_size(uint64_t next, uint64_t n, int size);
 
 /* Rank 0: a rank's failure becomes the job's (the first one stands). */
 void mr_fail(mr_ctx *m, int from, gdt_status st, int code, const char *msg);

@@ -68,6 +68,7 @@ typedef struct tr_rank_stats {
     double t_write; /* its parts of a mesh written in parts: vertices, faces, sync */
     uint64_t placed_early; /* tiles whose faces it wrote as their place became known,
                             * before PARTS */
+    uint64_t on_demand;    /* of its tiles, those it took on demand (after GO's) */
     uint64_t ground_tiles; /* --ground: tiles it classified (or adopted) */
     double t_ground;       /* and its time in the filter */
     uint64_t replayed;     /* compressed inputs (its shares of them) read back from
@@ -541,6 +542,15 @@ typedef struct tr_tile_set {
     /* NULL, or called on the caller's thread before each tile and at the
      * end of the stage (messages of other ranks); an error ends the stage */
     gdt_status (*poll)(void *ctx, gdt_error *err);
+    /* NULL (the set is n tiles), or a set that grows as the stage goes
+     * (tiles taken on demand): called on the caller's thread before tile i,
+     * *n the set's length so far (i <= *n); it may lengthen the set, k and
+     * rec (allocated for every tile it may get) holding the new tiles,
+     * still increasing, and waits for tiles when i == *n; the stage ends
+     * when i == *n on return.  An error ends the stage.  Only for a run
+     * without lanes (c->cstart.nmore == 0): lanes take the first n tiles
+     * ahead. */
+    gdt_status (*more)(void *ctx, uint64_t i, uint64_t *n, gdt_error *err);
     void *ctx;
 } tr_tile_set;
 
