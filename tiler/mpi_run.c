@@ -846,15 +846,19 @@ static gdt_status run_other(mr_ctx *m, tr_run *c, gdt_error *err)
                 s2 = mr_recv(m, 0, TAG_FINAL, len, &fin, &e2);
                 break;
             }
-            if (s2 == GDT_OK && tag != TAG_PARTS && tag != TAG_GOUT && tag != TAG_FPLACE)
+            if (s2 == GDT_OK && tag != TAG_PARTS && tag != TAG_GOUT && tag != TAG_FPLACE &&
+                tag != TAG_GRANT && tag != TAG_STOP)
                 s2 = mr_bad_message(0, tag, &e2);
             if (s2 == GDT_OK)
                 s2 = mr_recv(m, 0, tag, len, &req, &e2);
+            /* dropped: a GRANT asked for before this rank's tiles stopped
+             * early, a STOP sent before rank 0 read FINISHED (the job
+             * fails either way, and FINAL says so) */
             if (s2 == GDT_OK && tag == TAG_PARTS)
                 mr_parts_answer(m, ks, n, req, len);
             else if (s2 == GDT_OK && tag == TAG_FPLACE)
                 mr_parts_place(m, req, len);
-            else if (s2 == GDT_OK)
+            else if (s2 == GDT_OK && tag == TAG_GOUT)
                 mr_gout_answer(m, req, len);
             free(req);
         }
