@@ -823,12 +823,14 @@ gdt_status gdt_ply_part_open(gdt_ply_part **out, const char *tmp_path, uint64_t 
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     p->fd = p->dfd = -1;
     p->path = strdup(tmp_path);
+    int missing = p->path == NULL;
     for (int i = 0; i < PART_SLOTS; i++)
         if (posix_memalign((void **)&p->slot[i].mem, GDT_DIO_BLOCK, PART_CHUNK + GDT_DIO_BLOCK) !=
-            0)
+            0) {
             p->slot[i].mem = NULL;
-    if (p->path == NULL || p->slot[0].mem == NULL || p->slot[1].mem == NULL ||
-        p->slot[2].mem == NULL) {
+            missing = 1;
+        }
+    if (missing) {
         part_free(p);
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     }

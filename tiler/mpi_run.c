@@ -615,25 +615,37 @@ static void rn_done(void *ctx, uint64_t k)
     mr_parts_tile_done(m, k); /* its vertices into the mesh, in parts */
 }
 
+static gdt_status rn_take(mr_ctx *m, const unsigned char *msg, size_t len, gdt_error *err);
+
+/* Every message with tag from rank 0 already waiting, each handled:
+ * FPLACE placed, GRANT taken (rn_take). */
+static gdt_status rn_drain(mr_ctx *m, int tag, gdt_error *err)
+{
+    for (;;) {
+        int ready = 0, from = 0, got = 0;
+        size_t len = 0;
+        unsigned char *buf = NULL;
+        gdt_status st = gdt_comm_probe(m->comm, 0, tag, &ready, &from, &got, &len, err);
+        if (st != GDT_OK || !ready)
+            return st;
+        st = mr_recv(m, 0, tag, len, &buf, err);
+        if (st == GDT_OK && tag == TAG_FPLACE)
+            mr_parts_place(m, buf, len);
+        else if (st == GDT_OK)
+            st = rn_take(m, buf, len, err);
+        free(buf);
+        if (st != GDT_OK)
+            return st;
+    }
+}
+
 static gdt_status rn_poll(void *ctx, gdt_error *err)
 {
     mr_ctx *m = ctx;
     int ready = 0, from = 0, tag = 0;
     size_t len = 0;
-    gdt_status st;
     /* the faces of done tiles whose place is known, between tiles */
-    for (;;) {
-        unsigned char *buf = NULL;
-        st = gdt_comm_probe(m->comm, 0, TAG_FPLACE, &ready, &from, &tag, &len, err);
-        if (st != GDT_OK || !ready)
-            break;
-        st = mr_recv(m, 0, TAG_FPLACE, len, &buf, err);
-        if (st == GDT_OK)
-            mr_parts_place(m, buf, len);
-        free(buf);
-        if (st != GDT_OK)
-            return st;
-    }
+    gdt_status st = rn_drain(m, TAG_FPLACE, err);
     if (st != GDT_OK)
         return st;
     st = gdt_comm_probe(m->comm, 0, TAG_STOP, &ready, &from, &tag, &len, err);
@@ -685,21 +697,7 @@ static gdt_status rn_take(mr_ctx *m, const unsigned char *msg, size_t len, gdt_e
 static gdt_status rn_more(void *ctx, uint64_t i, uint64_t *n, gdt_error *err)
 {
     mr_ctx *m = ctx;
-    gdt_status st = GDT_OK;
-    for (;;) {
-        int ready = 0, from = 0, tag = 0;
-        size_t len = 0;
-        unsigned char *buf = NULL;
-        st = gdt_comm_probe(m->comm, 0, TAG_GRANT, &ready, &from, &tag, &len, err);
-        if (st != GDT_OK || !ready)
-            break;
-        st = mr_recv(m, 0, TAG_GRANT, len, &buf, err);
-        if (st == GDT_OK)
-            st = rn_take(m, buf, len, err);
-        free(buf);
-        if (st != GDT_OK)
-            break;
-    }
+    gdt_status st = rn_drain(m, TAG_GRANT, err);
     if (st == GDT_OK && !m->no_more && !m->asked && m->own_n - i <= 1) {
         uint64_t z = 0;
         st = gdt_comm_send(m->comm, 0, TAG_MORE, &z, sizeof z, err);

@@ -165,8 +165,7 @@ def test_any_rank_count_writes_the_same_bytes(mpi_bin, clouds, tmp_path, case):
         # by the ranks that run out first (GO dealt the others)
         taken = [q["tiles_on_demand"] for q in mpi["per_rank"]]
         assert all(0 <= t <= q["tiles"] for t, q in zip(taken, mpi["per_rank"])), (k, taken)
-        assert (sum(taken) > 0) == (k > 1), (k, case, taken)
-        assert sum(taken) <= j["tiles"] // 2 + 1, (k, case, taken)
+        assert sum(taken) > 0, (k, case, taken)
         assert sum(q["vertices"] for q in mpi["per_rank"]) == j["vertices"]
         assert sum(q["certified_faces"] for q in mpi["per_rank"]) == j["certified_faces"]
         assert mpi["load_balance"] >= 1.0
