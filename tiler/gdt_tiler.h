@@ -59,7 +59,9 @@
  *   tile_<i>_<j>.gpts, .gedge  a subset of the tile's points and its edge
  *                      (gdt_tiler_write_subset), until taken
  * <i>, <j> are the decimal tile indices (may be negative).  Each kept file
- * is written to a temporary name, fsync'd and renamed.  Intermediate files
+ * is written to a temporary name and renamed; pass 2 is done only once all
+ * of them are durable (gdt_tiler_sync_files), and a later run takes a file
+ * back only against its recorded checksum.  Intermediate files
  * (*.tmp: buckets, merge partitions and runs) are removed when done, and
  * pass 2 first removes whatever an interrupted run left.  The bytes of every file depend only on the
  * inputs and the options tile, cell, halo and dup: not on the memory
@@ -334,6 +336,13 @@ gdt_status gdt_tiler_merge_shipped(gdt_tiler *t, uint64_t k, gdt_point *recs, ui
 /* On the shipping tiler: tile k's files as their owner wrote them. */
 gdt_status gdt_tiler_set_tile_files(gdt_tiler *t, uint64_t k, const gdt_tiler_tile_files *in,
                                     gdt_error *err);
+
+/* Makes durable every tile file this process wrote (a syncfs of the job's
+ * file system, then the tile directory): what gdt_tiler_pass2 and
+ * gdt_tiler_pass2_finish do before they return; a process that merged
+ * shipped tiles (gdt_tiler_merge_shipped) calls it before it reports their
+ * files.  returns: GDT_EUSAGE 2505 (no job directory), GDT_EIO 4505. */
+gdt_status gdt_tiler_sync_files(const gdt_tiler *t, gdt_error *err);
 
 /* After gdt_tiler_pass2_shared and the files of every shipped tile: checks
  * them, syncs the tile directory, and leaves the tiler as gdt_tiler_pass2

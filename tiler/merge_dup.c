@@ -450,9 +450,16 @@ static gdt_status merge_tile(gdt_tiler *t, uint64_t k, gdt_point *recs, scratch 
     }
     if (recs == NULL && t->resident == NULL)
         m.buf = scr->buf;
-    st = tl_wfile_init(&wp, pts_tmp, pts, t->sz.part_recs, !t->opts.test_nosync, err);
-    if (st == GDT_OK)
-        st = tl_wfile_init(&we, edge_tmp, edge, t->sz.part_recs, !t->opts.test_nosync, err);
+    /* renamed without waiting for the disk: their writeback starts here and
+     * pass 2 waits for every tile's files at once before it is done
+     * (gdt_tiler_sync_files); a file is only ever taken back against the
+     * checksum the journal recorded */
+    {
+        int dur = t->opts.test_nosync ? TL_SYNC_NONE : TL_SYNC_LATER;
+        st = tl_wfile_init(&wp, pts_tmp, pts, t->sz.part_recs, dur, err);
+        if (st == GDT_OK)
+            st = tl_wfile_init(&we, edge_tmp, edge, t->sz.part_recs, dur, err);
+    }
     if (st != GDT_OK)
         goto fail;
     /* the checksums the journal records, computed as the bytes go out */

@@ -159,33 +159,96 @@ typedef struct rn_tile {
     gdt_point *recs; /* NULL: the tile's .raw file */
 } rn_tile;
 
-void mr_merge_report(mr_ctx *m, uint64_t k, gdt_point *recs, uint64_t n, gdt_status st,
-                     const gdt_error *err)
+/* One tile's FILES report: its files (st GDT_OK) or why there are none. */
+struct mr_report {
+    uint64_t k;
+    gdt_status st;
+    int code;
+    char *msg; /* st != GDT_OK: the message (NULL: out of memory for it) */
+    gdt_tiler_tile_files f;
+};
+
+static void send_report(mr_ctx *m, uint64_t k, gdt_status st, int code, const char *msg,
+                        const gdt_tiler_tile_files *f)
+{
+    gdt_pack p;
+    gdt_error e;
+    if (msg == NULL)
+        msg = "";
+    memset(&p, 0, sizeof p);
+    gdt_pack_u64(&p, k);
+    gdt_pack_u64(&p, (uint64_t)st);
+    gdt_pack_u64(&p, st != GDT_OK ? (uint64_t)code : 0);
+    gdt_pack_bytes(&p, st != GDT_OK ? msg : "", st != GDT_OK ? strlen(msg) : 0);
+    gdt_pack_u64(&p, f->points);
+    gdt_pack_u64(&p, f->edge);
+    gdt_pack_u64(&p, f->sum[0]);
+    gdt_pack_u64(&p, f->sum[1]);
+    gdt_pack_u64(&p, f->deepest);
+    gdt_error_clear(&e);
+    if (mr_send_pack(m, 0, TAG_FILES, &p, &e) != GDT_OK) {
+        gdt_error_print(&e, stderr);
+        gdt_comm_abort(m->comm, (int)e.status);
+    }
+}
+
+void mr_merge_report(mr_ctx *m, mr_reports *b, uint64_t k, gdt_point *recs, uint64_t n,
+                     gdt_status st, const gdt_error *err)
 {
     gdt_tiler_tile_files f;
     gdt_error e;
-    gdt_pack p;
+    struct mr_report *r;
     memset(&f, 0, sizeof f);
     gdt_error_clear(&e);
     if (st == GDT_OK)
         st = gdt_tiler_merge_shipped(m->c->tiler, k, recs, n, &f, &e);
     else
         e = *err;
-    memset(&p, 0, sizeof p);
-    gdt_pack_u64(&p, k);
-    gdt_pack_u64(&p, (uint64_t)st);
-    gdt_pack_u64(&p, st != GDT_OK ? (uint64_t)e.code : 0);
-    gdt_pack_bytes(&p, st != GDT_OK ? e.msg : "", st != GDT_OK ? strlen(e.msg) : 0);
-    gdt_pack_u64(&p, f.points);
-    gdt_pack_u64(&p, f.edge);
-    gdt_pack_u64(&p, f.sum[0]);
-    gdt_pack_u64(&p, f.sum[1]);
-    gdt_pack_u64(&p, f.deepest);
-    gdt_error_clear(&e);
-    if (mr_send_pack(m, 0, TAG_FILES, &p, &e) != GDT_OK) {
-        gdt_error_print(&e, stderr);
-        gdt_comm_abort(m->comm, (int)e.status);
+    if (b->n == b->cap) {
+        size_t cap = b->cap > 0 ? 2 * b->cap : 64;
+        struct mr_report *g = realloc(b->r, cap * sizeof *g);
+        if (g == NULL) {
+            /* no room to hold it: the reports so far, and this one, now */
+            mr_send_reports(m, b);
+            if (st == GDT_OK) {
+                gdt_error_clear(&e);
+                st = gdt_tiler_sync_files(m->c->tiler, &e);
+            }
+            send_report(m, k, st, e.code, e.msg, &f);
+            return;
+        }
+        b->r = g;
+        b->cap = cap;
     }
+    r = &b->r[b->n++];
+    r->k = k;
+    r->st = st;
+    r->code = st != GDT_OK ? e.code : 0;
+    r->msg = st != GDT_OK ? strdup(e.msg) : NULL;
+    r->f = f;
+}
+
+void mr_send_reports(mr_ctx *m, mr_reports *b)
+{
+    gdt_error e;
+    gdt_status sync = GDT_OK;
+    int any = 0;
+    for (size_t i = 0; i < b->n; i++)
+        any |= b->r[i].st == GDT_OK;
+    gdt_error_clear(&e);
+    /* the files are durable before rank 0 can record pass 2 with them */
+    if (any)
+        sync = gdt_tiler_sync_files(m->c->tiler, &e);
+    for (size_t i = 0; i < b->n; i++) {
+        struct mr_report *r = &b->r[i];
+        if (r->st == GDT_OK && sync != GDT_OK)
+            send_report(m, r->k, sync, e.code, e.msg, &r->f);
+        else
+            send_report(m, r->k, r->st, r->code, r->msg, &r->f);
+        free(r->msg);
+    }
+    free(b->r);
+    memset(b, 0, sizeof *b);
 }
 
 /* Another rank: merges its shipped tiles and reports each one's files;
@@ -194,11 +257,14 @@ void mr_merge_report(mr_ctx *m, uint64_t k, gdt_point *recs, uint64_t n, gdt_sta
 static void rn_merge_all(mr_ctx *m, rn_tile *tiles, size_t n, gdt_status st0,
                          const gdt_error *err0)
 {
+    mr_reports b;
+    memset(&b, 0, sizeof b);
     for (size_t i = 0; i < n; i++) {
-        mr_merge_report(m, tiles[i].k, tiles[i].recs, tiles[i].n, st0, err0);
+        mr_merge_report(m, &b, tiles[i].k, tiles[i].recs, tiles[i].n, st0, err0);
         free(tiles[i].recs);
         tiles[i].recs = NULL;
     }
+    mr_send_reports(m, &b);
 }
 
 void mr_pass2_hooks(mr_ctx *m)

@@ -488,6 +488,7 @@ void mr_spill_answer(mr_ctx *m, uint64_t first, uint64_t end, uint64_t base, int
                      gdt_status *pst, gdt_error *pe)
 {
     sp_own own;
+    mr_reports reps;
     int failed = -1;
     gdt_status st = *pst;
 
@@ -510,6 +511,7 @@ void mr_spill_answer(mr_ctx *m, uint64_t first, uint64_t end, uint64_t base, int
         sp_own_free(&own);
         return;
     }
+    memset(&reps, 0, sizeof reps);
     for (uint64_t k = own.ka; k < own.kb; k++) {
         uint64_t j = k - own.ka;
         if (files) {
@@ -520,12 +522,14 @@ void mr_spill_answer(mr_ctx *m, uint64_t first, uint64_t end, uint64_t base, int
             uint64_t npr = 0;
             if (js == GDT_OK)
                 js = gdt_tiler_take_parts(m->c->tiler, k, m->size, &pr, &npr, &e);
-            mr_merge_report(m, k, pr, npr, js, js != GDT_OK && st == GDT_OK ? &e : pe);
+            mr_merge_report(m, &reps, k, pr, npr, js, js != GDT_OK && st == GDT_OK ? &e : pe);
             free(pr);
         } else {
-            mr_merge_report(m, k, own.recs + own.off[j], own.off[j + 1] - own.off[j], st, pe);
+            mr_merge_report(m, &reps, k, own.recs + own.off[j], own.off[j + 1] - own.off[j],
+                            st, pe);
         }
     }
+    mr_send_reports(m, &reps);
     sp_own_free(&own);
     *pst = st;
 }

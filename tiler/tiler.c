@@ -599,7 +599,7 @@ static gdt_status pass2_spill(gdt_tiler *t, double *t1, gdt_error *err)
 /* Every tile merged: the tile directory synced, the counters, state 2. */
 static gdt_status pass2_done(gdt_tiler *t, gdt_error *err)
 {
-    gdt_status st = tl_sync_dir(t->tiles_dir, err);
+    gdt_status st = gdt_tiler_sync_files(t, err);
     if (st != GDT_OK)
         return st;
     t->stats.t_merge = gdt_now() - t->merge_t0;
@@ -608,6 +608,14 @@ static gdt_status pass2_done(gdt_tiler *t, gdt_error *err)
                  t->stats.merged_duplicates, t->stats.t_merge, t->stats.external_merges);
     t->state = 2;
     return GDT_OK;
+}
+
+gdt_status gdt_tiler_sync_files(const gdt_tiler *t, gdt_error *err)
+{
+    if (t->tiles_dir == NULL)
+        return gdt_error_set(err, GDT_EUSAGE, 2505, "no tile directory to sync");
+    return t->opts.test_nosync ? tl_sync_dir(t->tiles_dir, err)
+                               : tl_sync_files(t->tiles_dir, err);
 }
 
 gdt_status gdt_tiler_pass2(gdt_tiler *t, gdt_error *err)

@@ -1,4 +1,5 @@
 /* tiler_io.c — record files of the tiler (see private/tiler_io.h). */
+#define _GNU_SOURCE /* syncfs */
 #include "private/tiler_io.h"
 
 #include <errno.h>
@@ -124,7 +125,11 @@ gdt_status tl_wfile_commit(tl_wfile *w, gdt_error *err)
         if (st != GDT_OK)
             goto fail;
     }
-    if (w->durable && fsync(w->fd) != 0) {
+    /* a refused sync_file_range (a file system without it) leaves the
+     * writeback to tl_sync_files */
+    if (w->durable == TL_SYNC_LATER)
+        (void)sync_file_range(w->fd, 0, 0, SYNC_FILE_RANGE_WRITE);
+    if (w->durable == TL_SYNC_NOW && fsync(w->fd) != 0) {
         st = gdt_error_set(err, GDT_EIO, 4505, "cannot fsync %s: %s", w->tmp_path,
                            strerror(errno));
         goto fail;
@@ -344,6 +349,22 @@ gdt_status tl_file_sum(const char *path, uint64_t seed, uint64_t *size, uint64_t
     *size = h.n;
     *sum = gdt_hash_wide_final(&h);
     return st;
+}
+
+gdt_status tl_sync_files(const char *dir, gdt_error *err)
+{
+    int fd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (fd < 0)
+        return gdt_error_set(err, GDT_EIO, 4505, "cannot open directory %s: %s", dir,
+                             strerror(errno));
+    if (syncfs(fd) != 0) {
+        int e = errno;
+        close(fd);
+        return gdt_error_set(err, GDT_EIO, 4505, "cannot sync the files of %s: %s", dir,
+                             strerror(e));
+    }
+    close(fd);
+    return tl_sync_dir(dir, err);
 }
 
 gdt_status tl_sync_dir(const char *dir, gdt_error *err)

@@ -600,6 +600,35 @@ def test_a_failing_part_write_fails_the_job(mpi_bin, clouds, tools_dir, tmp_path
     assert out.read_bytes() == ref.read_bytes()
 
 
+@pytest.mark.sanitize
+def test_a_rank_whose_tile_files_cannot_be_synced_fails_the_job(mpi_bin, clouds, tools_dir,
+                                                                 tmp_path):
+    """Each rank makes the pass-2 files of its tiles durable (one sync)
+    before it reports them to rank 0, which records pass 2 only with every
+    report: when rank 1's sync fails (an LD_PRELOAD shim on rank 1 only),
+    the job exits 4 with rank 1's message, and a rerun redoes pass 2 to the
+    bytes of a plain run."""
+    shim = tools_dir / "libgdt_fail_write.so"
+    if not shim.exists():
+        pytest.fail(f"libgdt_fail_write.so not built at {shim}")
+    out, job, log = tmp_path / "o.ply", tmp_path / "job", tmp_path / "refused.log"
+    args = [str(clouds["a"]), "-o", str(out), "--tile", "64", "-q", "--job", str(job)]
+    r = run(["mpirun", "--oversubscribe", "-np", "1", mpi_bin, *args, ":", "-np", "1", "env",
+             f"LD_PRELOAD={shim}", f"GDT_TEST_FAIL_SYNCFS_MATCH={job / 'tiles'}",
+             f"GDT_TEST_FAIL_WRITE_LOG={log}", mpi_bin, *args])
+    assert log.exists(), r.stdout + r.stderr  # the shim refused rank 1's sync
+    assert r.returncode == 4, r.stdout + r.stderr
+    assert "rank 1: " in r.stderr and "cannot sync the files of" in r.stderr, r.stderr
+    assert not out.exists() and job.is_dir()
+    r = mpirun(2, mpi_bin, [*args, "--json", tmp_path / "j.json"])
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert json.loads((tmp_path / "j.json").read_text())["reused"]["pass2"] is False
+    ref = tmp_path / "ref.ply"
+    r = run([mpi_bin, clouds["a"], "-o", ref, "--tile", "64", "-q"])
+    assert r.returncode == 0, r.stderr
+    assert out.read_bytes() == ref.read_bytes()
+
+
 def ground_recorded(job):
     """The ground subsets the journal records (.gpts files)."""
     return journal_count(job, "select count(*) from pfile where kind = 5")

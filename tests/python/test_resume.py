@@ -757,6 +757,35 @@ def test_damaged_tiler_file_redoes_pass2(tiny, tmp_path, damage):
     assert s["reused"]["tiles"] + s["redone"]["tiles"] == tiny.ntiles, s
 
 
+@pytest.mark.sanitize
+def test_pass2_is_recorded_only_once_its_files_are_durable(tiny, tools_dir, tmp_path):
+    """Pass 2 renames each tile's .pts and .edge files without a sync of
+    their own and makes them all durable at once before the journal records
+    pass 2: when that sync fails (an LD_PRELOAD shim fails syncfs through
+    the tile directory, as a disk reporting a lost write), the run exits 4
+    naming the directory, writes no output, and the rerun redoes pass 2 (the
+    journal never recorded it) to the uninterrupted run's bytes."""
+    shim = tools_dir / "libgdt_fail_write.so"
+    if not shim.exists():
+        pytest.fail(f"libgdt_fail_write.so not built at {shim}")
+    out, job, log = tmp_path / "o.ply", tmp_path / "job", tmp_path / "refused.log"
+    cmd = tiny.cmd(tiny.las, out, "--job", job)
+    r = run(cmd, env={**os.environ, "LD_PRELOAD": str(shim),
+                      "GDT_TEST_FAIL_SYNCFS_MATCH": str(job / "tiles"),
+                      "GDT_TEST_FAIL_WRITE_LOG": str(log)})
+    assert log.exists(), r.stderr  # the shim refused the sync
+    assert r.returncode == 4, r.stderr
+    assert "cannot sync the files of" in r.stderr and "Input/output error" in r.stderr, r.stderr
+    assert str(job / "tiles") in r.stderr, r.stderr
+    assert not out.exists() and job.is_dir()
+    js = tmp_path / "rerun.json"
+    r = run(cmd + ["--json", js])
+    assert r.returncode == 0, r.stderr
+    tiny.assert_same(out, "rerun after pass 2's sync failed")
+    s = ru.read_json(js)
+    assert s["reused"]["pass2"] is False and s["redone"]["pass2"] is True, s
+
+
 # ------------------------------------------------------------ several devices
 
 def test_a_lane_failing_fails_the_run_then_it_resumes(small, tools_dir, tmp_path):

@@ -4,7 +4,8 @@
  * with ENOSPC, as on a full disk, after the first GDT_TEST_FAIL_WRITE_AFTER
  * of them (0 when unset) have succeeded; fsync of a file whose path
  * contains GDT_TEST_FAIL_FSYNC_MATCH fails with EIO, as when the disk
- * reports a lost write.  Other calls are untouched.  When
+ * reports a lost write, and so does syncfs through a descriptor whose path
+ * contains GDT_TEST_FAIL_SYNCFS_MATCH.  Other calls are untouched.  When
  * GDT_TEST_FAIL_WRITE_LOG names a file, each refusal appends a line to it,
  * so a test can tell that the shim was in effect.
  *
@@ -109,19 +110,31 @@ ssize_t copy_file_range(int in, off_t *in_off, int out, off_t *out_off, size_t n
     return real(in, in_off, out, out_off, n, flags);
 }
 
-int fsync(int fd)
+/* fsync or syncfs (name) of fd: EIO when fd's path contains the value of
+ * var, else the real call. */
+static int sync_call(const char *name, const char *var, int fd)
 {
     char path[PATH_MAX];
     fsync_fn real;
-    if (matches(fd, "GDT_TEST_FAIL_FSYNC_MATCH", path, sizeof path)) {
+    if (matches(fd, var, path, sizeof path)) {
         log_refusal(path);
         errno = EIO;
         return -1;
     }
-    real = (fsync_fn)dlsym(RTLD_NEXT, "fsync");
+    real = (fsync_fn)dlsym(RTLD_NEXT, name);
     if (real == NULL) {
         errno = ENOSYS;
         return -1;
     }
     return real(fd);
+}
+
+int fsync(int fd)
+{
+    return sync_call("fsync", "GDT_TEST_FAIL_FSYNC_MATCH", fd);
+}
+
+int syncfs(int fd)
+{
+    return sync_call("syncfs", "GDT_TEST_FAIL_SYNCFS_MATCH", fd);
 }

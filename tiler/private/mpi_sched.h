@@ -189,10 +189,24 @@ gdt_status mr_raw_prefix(mr_ctx *m, const gdt_tiler *t, gdt_error *err);
  * tiler (a rank's failure in them becomes the job's). */
 gdt_status mr_collect_files(mr_ctx *m, gdt_error *err);
 
+/* Another rank's FILES reports, held until its merged tiles' files are
+ * durable (one sync for all of them); zeroed to start. */
+struct mr_report;
+typedef struct mr_reports {
+    struct mr_report *r;
+    size_t n, cap;
+} mr_reports;
+
 /* Another rank: the --dup merge of tile k from recs[0, n) (or its failure
- * st, err when st is not GDT_OK) reported to rank 0 as FILES. */
-void mr_merge_report(mr_ctx *m, uint64_t k, gdt_point *recs, uint64_t n, gdt_status st,
-                     const gdt_error *err);
+ * st, err when st is not GDT_OK) into b, for mr_send_reports (sent at once,
+ * after a sync, when b cannot grow). */
+void mr_merge_report(mr_ctx *m, mr_reports *b, uint64_t k, gdt_point *recs, uint64_t n,
+                     gdt_status st, const gdt_error *err);
+
+/* Another rank: makes the files of b's merged tiles durable
+ * (gdt_tiler_sync_files; its failure becomes theirs) and sends every
+ * report to rank 0 as FILES, in b's order; b is emptied. */
+void mr_send_reports(mr_ctx *m, mr_reports *b);
 
 /* Rank 0: the hook of pass 2 in shares into m->p2 (mpi_spill.c). */
 void mr_spill_hooks(mr_ctx *m);

@@ -79,10 +79,15 @@ typedef struct tl_wfile {
     int borrowed;          /* buf belongs to the caller */
     size_t len, cap;       /* records */
     uint64_t nrec;         /* records written to the file so far (flushed or not) */
-    int durable;           /* fsync before the rename */
+    int durable;           /* TL_SYNC_*: what the commit does for durability */
     int hashed;            /* hash holds the checksum of the bytes flushed */
     gdt_hash_wide hash;
 } tl_wfile;
+
+/* tl_wfile's durable: nothing; fsync before the rename; or only start the
+ * writeback before the rename (the file is made durable later with the
+ * others of its directory, tl_sync_files, while work goes on). */
+enum { TL_SYNC_NONE = 0, TL_SYNC_NOW = 1, TL_SYNC_LATER = 2 };
 
 /* Prepares a writer (no file yet).  final_path may be NULL.  cap >= 1.
  * Ownership: paths are copied; release with tl_wfile_commit or _abort. */
@@ -153,6 +158,11 @@ gdt_status tl_file_sum(const char *path, uint64_t seed, uint64_t *size, uint64_t
 
 /* fsync of a directory (after renames); GDT_EIO 4505. */
 gdt_status tl_sync_dir(const char *dir, gdt_error *err);
+
+/* Every file written in dir made durable at once: syncfs of its file
+ * system (all that this machine wrote there, one wait instead of one per
+ * file), then the directory itself.  returns: GDT_EIO 4505. */
+gdt_status tl_sync_files(const char *dir, gdt_error *err);
 
 /* Writes all len bytes of p to fd (retrying short writes and EINTR).
  * returns: GDT_EIO 4503 naming path. */
