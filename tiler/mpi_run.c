@@ -691,14 +691,14 @@ static gdt_status rn_take(mr_ctx *m, const unsigned char *msg, size_t len, gdt_e
 }
 
 /* The growing set of this rank's tiles: takes the grants that came, asks
- * for more when one tile is left to start (the answer comes while it
- * runs), and, out of tiles, waits for the answer, placing faces as FPLACE
- * comes meanwhile. */
+ * for more when MR_ASK_AHEAD tiles are left to start (the answer comes
+ * while they run), and, out of tiles, waits for the answer, placing faces
+ * as FPLACE comes meanwhile. */
 static gdt_status rn_more(void *ctx, uint64_t i, uint64_t *n, gdt_error *err)
 {
     mr_ctx *m = ctx;
     gdt_status st = rn_drain(m, TAG_GRANT, err);
-    if (st == GDT_OK && !m->no_more && !m->asked && m->own_n - i <= 1) {
+    if (st == GDT_OK && !m->no_more && !m->asked && m->own_n - i <= MR_ASK_AHEAD) {
         uint64_t z = 0;
         st = gdt_comm_send(m->comm, 0, TAG_MORE, &z, sizeof z, err);
         m->asked = st == GDT_OK;

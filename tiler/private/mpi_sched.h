@@ -152,6 +152,13 @@ int mr_owner_of(const uint64_t *pre, uint64_t n, uint64_t k, int size);
 gdt_status mr_tile_owners(const uint64_t *pre, uint64_t n, int size, int *owner,
                           gdt_error *err);
 
+/* A rank asks rank 0 for more tiles when this many of its own are left to
+ * start: rank 0 answers between its own tiles, so the answer may take one
+ * of rank 0's tiles to come, and two of the asking rank's give it that
+ * time (with one, a rank whose last tile was shorter than rank 0's current
+ * one waited). */
+#define MR_ASK_AHEAD 2
+
 /* The share of the vertices, in parts of MR_TAIL_PARTS, that the tile
  * stage leaves to be taken on demand at its end. */
 #define MR_TAIL_PARTS 4
