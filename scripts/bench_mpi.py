@@ -214,6 +214,10 @@ def main(argv=None):
                          # follows the run's own clock (job removal, exit)
                          "outside_s": wall - j["times"].get("total", 0.0),
                          "load_balance": j.get("mpi", {}).get("load_balance", 1.0),
+                         # each rank's own parts of the passes and its tile stage
+                         "per_rank": [{key: q.get(key, 0.0)
+                                       for key in ("pass1_s", "pass2_s", "tiles_s")}
+                                      for q in j.get("mpi", {}).get("per_rank", [])],
                          "cpu_s": res[k]["cpus"][best],
                          "walls_s": res[k]["walls"]})
         print()
@@ -229,6 +233,12 @@ def main(argv=None):
             print(f"{row['ranks']:>3} {row['wall_s']:8.2f} {row['speedup']:9.3f} " +
                   " ".join(f"{row['times'][s]:9.2f}" for s in STAGES) +
                   f" {row['outside_s']:10.2f} {row['load_balance']:8.3f} {row['cpu_s']:7.2f}")
+        for row in rows:
+            if len(row["per_rank"]) > 1:
+                print(f"  K = {row['ranks']}, each rank's own part (rank 0 first): " + "; ".join(
+                    f"{label} " + " / ".join(f"{q[key]:.2f}" for q in row["per_rank"]) + " s"
+                    for label, key in (("pass 1", "pass1_s"), ("pass 2", "pass2_s"),
+                                       ("tiles", "tiles_s"))))
         last = rows[-1]
         ceiling = None
         if side:

@@ -137,8 +137,11 @@ void mr_pass1_answer(mr_ctx *m, const unsigned char *msg, size_t len, gdt_status
         e = *perr; /* this rank could not start: its failure is the answer */
     else if (u.bad || first > end)
         st = mr_bad_message(0, TAG_P1, &e);
-    else
+    else {
+        double t0 = gdt_now();
         st = tr_run_pass1_share(m->c, first, end, &part, &pl, &kept, &e);
+        m->c->s.t_pass1_own = gdt_now() - t0;
+    }
     /* the build runs beside the answer's wait (and beside the others'
      * reading, had they more to read) */
     if (!*core_started) {

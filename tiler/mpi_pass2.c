@@ -258,6 +258,7 @@ static void rn_merge_all(mr_ctx *m, rn_tile *tiles, size_t n, gdt_status st0,
                          const gdt_error *err0)
 {
     mr_reports b;
+    double t0 = gdt_now();
     memset(&b, 0, sizeof b);
     for (size_t i = 0; i < n; i++) {
         mr_merge_report(m, &b, tiles[i].k, tiles[i].recs, tiles[i].n, st0, err0);
@@ -265,6 +266,7 @@ static void rn_merge_all(mr_ctx *m, rn_tile *tiles, size_t n, gdt_status st0,
         tiles[i].recs = NULL;
     }
     mr_send_reports(m, &b);
+    m->c->s.t_pass2_own = gdt_now() - t0;
 }
 
 void mr_pass2_hooks(mr_ctx *m)

@@ -63,6 +63,8 @@ static void pack_report(gdt_pack *p, const tr_run *c, uint64_t tiles, uint64_t v
         gdt_pack_f64(p, t[i]);
     gdt_pack_bytes(p, s->device, strlen(s->device));
     gdt_pack_u64(p, gdt_cloud_replayed(c->cloud));
+    gdt_pack_f64(p, s->t_pass1_own);
+    gdt_pack_f64(p, s->t_pass2_own);
 }
 
 /* Adds a FINISHED report to sum (seam vertices into *seam) and describes the
@@ -117,6 +119,8 @@ static void unpack_report(gdt_unpack *u, tr_summary *sum, uint64_t *seam, tr_ran
         snprintf(r->device, sizeof r->device, "%.*s",
                  (int)(dl < sizeof r->device ? dl : sizeof r->device - 1), (const char *)dev);
     r->replayed = gdt_unpack_u64(u);
+    r->t_pass1 = gdt_unpack_f64(u);
+    r->t_pass2 = gdt_unpack_f64(u);
 }
 
 /* ---- rank 0 ---- */
@@ -515,6 +519,8 @@ static gdt_status run_rank0(mr_ctx *m, tr_run *c, gdt_error *err)
         tr_rank_stats *r0 = &s->ranks[0];
         r0->tiles = m->nmine;
         r0->on_demand = m->taken;
+        r0->t_pass1 = s->t_pass1_own;
+        r0->t_pass2 = s->t_pass2_own;
         r0->vertices = vmine;
         r0->certified = s->certified;
         r0->reused = s->tiles_reused;

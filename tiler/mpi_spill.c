@@ -371,6 +371,7 @@ static gdt_status p2_spill(void *ctx, int *whole, gdt_error *err)
     size_t nin;
     int files;
     gdt_status st;
+    double t_own;
 
     *whole = 0;
     if (!m->p1_shared || m->p1_bounds == NULL || m->p1_kept == NULL || m->p1_counts == NULL ||
@@ -406,6 +407,7 @@ static gdt_status p2_spill(void *ctx, int *whole, gdt_error *err)
         }
     }
     free(state);
+    t_own = gdt_now();
     sp_run(m, m->p1_bounds[0], m->p1_bounds[1], 0, files, &st, err, &own, &failed);
     /* the cloud counted this share: the whole pass's counts are pass 1's */
     nin = gdt_cloud_get_info(c->cloud)->ninputs;
@@ -455,6 +457,8 @@ static gdt_status p2_spill(void *ctx, int *whole, gdt_error *err)
         free(pr);
     }
     sp_own_free(&own);
+    /* rank 0's files are synced with the job's pass 2 (pass2_finish) */
+    c->s.t_pass2_own = gdt_now() - t_own;
     m->shipped = 0;
     for (uint64_t k = 0; k < m->raw_n; k++)
         m->shipped += sp_owner(m, k) != 0;
@@ -491,6 +495,7 @@ void mr_spill_answer(mr_ctx *m, uint64_t first, uint64_t end, uint64_t base, int
     mr_reports reps;
     int failed = -1;
     gdt_status st = *pst;
+    double t0 = gdt_now();
 
     if (st == GDT_OK)
         st = mr_raw_prefix(m, m->c->tiler, pe);
@@ -530,6 +535,7 @@ void mr_spill_answer(mr_ctx *m, uint64_t first, uint64_t end, uint64_t base, int
         }
     }
     mr_send_reports(m, &reps);
+    m->c->s.t_pass2_own = gdt_now() - t0;
     sp_own_free(&own);
     *pst = st;
 }

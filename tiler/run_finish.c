@@ -221,6 +221,9 @@ static gdt_status write_summary(const tr_run *c, gdt_error *err)
             gdt_json_uint(&j, "tiles_reused", q->reused);
             gdt_json_uint(&j, "vertices", q->vertices);
             gdt_json_uint(&j, "certified_faces", q->certified);
+            /* its own parts of the passes (0: adopted from an earlier run) */
+            gdt_json_double(&j, "pass1_s", q->t_pass1);
+            gdt_json_double(&j, "pass2_s", q->t_pass2);
             gdt_json_double(&j, "tiles_s", q->t_tiles);
             gdt_json_double(&j, "core_s", q->t_core);
             gdt_json_double(&j, "certify_s", q->t_certify);

@@ -397,11 +397,20 @@ static gdt_status pass1_shared(tr_run *c, gdt_error *err)
     gdt_status st = ps->begin(ps->ctx, &shared, &first, &end, err);
     if (st != GDT_OK)
         return st;
-    if (!shared)
-        return gdt_tiler_pass1(c->tiler, err);
-    st = gdt_cloud_set_range(c->cloud, first, end, 0, err);
-    if (st == GDT_OK)
-        st = gdt_tiler_pass1_part(c->tiler, err);
+    if (!shared) {
+        /* rank 0 reads the whole cloud: all of pass 1 is its own */
+        double t0 = gdt_now();
+        st = gdt_tiler_pass1(c->tiler, err);
+        c->s.t_pass1_own = gdt_now() - t0;
+        return st;
+    }
+    {
+        double t0 = gdt_now();
+        st = gdt_cloud_set_range(c->cloud, first, end, 0, err);
+        if (st == GDT_OK)
+            st = gdt_tiler_pass1_part(c->tiler, err);
+        c->s.t_pass1_own = gdt_now() - t0;
+    }
     st = ps->collect(ps->ctx, st, err);
     if (st == GDT_OK)
         st = gdt_tiler_pass1_end(c->tiler, err);
@@ -568,9 +577,11 @@ gdt_status tr_run_pass2(tr_run *c, gdt_error *err)
             /* pass 2 ran in shares */
         } else if (st == GDT_OK && c->p2share != NULL) {
             const tr_pass2_share *ps = c->p2share;
+            double t_own = gdt_now();
             st = ps->begin(ps->ctx, err);
             if (st == GDT_OK)
                 st = gdt_tiler_pass2_shared(c->tiler, &ps->sh, err);
+            c->s.t_pass2_own = gdt_now() - t_own;
             if (st == GDT_OK)
                 st = ps->collect(ps->ctx, err);
             if (st == GDT_OK)

@@ -168,6 +168,16 @@ def test_any_rank_count_writes_the_same_bytes(mpi_bin, clouds, tmp_path, case):
         assert sum(taken) > 0, (k, case, taken)
         assert sum(q["vertices"] for q in mpi["per_rank"]) == j["vertices"]
         assert sum(q["certified_faces"] for q in mpi["per_rank"]) == j["certified_faces"]
+        # each rank's own parts of the passes lie inside the job's: a share of
+        # pass 1 (none for the other ranks when a LAZ of one chunk cannot be
+        # cut) and of pass 2 (every rank merges tiles of its own)
+        p1 = [q["pass1_s"] for q in mpi["per_rank"]]
+        p2 = [q["pass2_s"] for q in mpi["per_rank"]]
+        # (1 ms: where a rank's part is the whole pass, two clocks around it)
+        assert all(0 < t <= j["times"]["pass2"] + 1e-3 for t in p2), (k, case, p2, j["times"])
+        assert all(t <= j["times"]["pass1"] + 1e-3 for t in p1), (k, case, p1, j["times"])
+        assert [t > 0 for t in p1] == [r == 0 or names != ("laz1",) for r in range(k)], \
+            (k, case, p1)
         assert mpi["load_balance"] >= 1.0
         # every rank that triangulated a tile kept its device busy, and the
         # job's busy time is the ranks' sum

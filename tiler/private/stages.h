@@ -66,6 +66,7 @@ typedef struct tr_rank_stats {
     double t_tiles, t_core, t_certify, t_post;
     double t_device, t_device_span; /* as tr_summary's, for its own devices */
     double t_write; /* its parts of a mesh written in parts: vertices, faces, sync */
+    double t_pass1, t_pass2; /* its own parts of the passes (tr_summary's t_pass*_own) */
     uint64_t placed_early; /* tiles whose faces it wrote as their place became known,
                             * before PARTS */
     uint64_t on_demand;    /* of its tiles, those it took on demand (after GO's) */
@@ -86,6 +87,10 @@ typedef struct tr_summary {
      * ratio is the share of the stage the devices worked */
     double t_device, t_device_span;
     double t_parts; /* MPI, a mesh in parts: from PARTS to the last part synced */
+    /* MPI: this rank's own part of pass 1 (reading its share) and of pass 2
+     * (reading and spilling its share or, when rank 0 spills alone, the
+     * whole cloud; merging its tiles; syncing their files) */
+    double t_pass1_own, t_pass2_own;
     gdt_cert_stats cert;
     gdt_merge_stats merge;
     int checked;
