@@ -1091,6 +1091,16 @@ const gdt_las_census *gdt_cloud_input_census(const gdt_cloud *cloud, size_t i)
 
 const gdt_point_filter *gdt_cloud_filter(const gdt_cloud *cloud) { return &cloud->filter; }
 
+void gdt_cloud_release_replay(gdt_cloud *cloud)
+{
+    if (cloud == NULL || cloud->replay == NULL || cloud->replaying || cloud->recording)
+        return;
+    gdt_replay_close(cloud->replay);
+    cloud->replay = NULL;
+    gdt_log_note(cloud->opts.log, "the points decoded by the first pass are released (read "
+                                  "for the last time)");
+}
+
 void gdt_cloud_close(gdt_cloud *cloud)
 {
     if (cloud == NULL)

@@ -232,6 +232,13 @@ void gdt_cloud_report_counts(gdt_cloud *cloud);
  * stream that follows is identical to the first one.  The counts and
  * census start again from zero. */
 gdt_status gdt_cloud_rewind(gdt_cloud *cloud, gdt_error *err);
+/* Drops the decoded records of compressed inputs kept for later passes
+ * (a later pass decodes its inputs again): after the caller's last read,
+ * so that their temporary file is freed before anything (a sync of the
+ * file system) writes it to the disk.  Between passes only; cloud may be
+ * NULL. */
+void gdt_cloud_release_replay(gdt_cloud *cloud);
+
 /* cloud may be NULL. */
 void gdt_cloud_close(gdt_cloud *cloud);
 

@@ -155,6 +155,9 @@ typedef struct gdt_tiler_opts {
     unsigned density_voxels; /* cap of the density grid; 0 = default.  Changes the
                                 density voxel, hence the auto cell: not a budget. */
     int keep_spill;        /* keep the pass-2 files tile_<i>_<j>.raw */
+    int last_read;         /* pass 2 is the cloud's last read: it releases the
+                              cloud's decoded records once it has read them
+                              (gdt_cloud_release_replay) */
     int test_nosync;       /* no fsync of tile files (tests on slow disks): same
                               bytes, but a crash may lose renamed files */
 } gdt_tiler_opts;

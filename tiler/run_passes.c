@@ -386,6 +386,8 @@ static void tiler_opts(tr_run *c, const gdt_cloud *cloud, gdt_tiler_opts *to)
          * classes of every input point */
         to->keep_spill = opts->ground_out != NULL;
     }
+    /* --ground-out reads the cloud a third time */
+    to->last_read = opts->ground_out == NULL;
 }
 
 /* Pass 1 through c->p1share: this process's share, then the others'. */

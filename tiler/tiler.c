@@ -575,6 +575,8 @@ static gdt_status pass2_spill(gdt_tiler *t, double *t1, gdt_error *err)
     st = tl_spill(t, err);
     if (st != GDT_OK)
         return st;
+    if (t->opts.last_read)
+        gdt_cloud_release_replay(t->cloud);
     for (uint64_t k = 0; k < t->ntiles; k++) {
         if (t->tiles[k].written != t->tiles[k].count)
             return gdt_error_set(err, GDT_EINPUT, 3501,

@@ -9,6 +9,7 @@ header bounds, no table) give the documented messages; the mutation tests
 are in test_laz_mutate.py.
 """
 import json
+import os
 import pathlib
 import shutil
 import struct
@@ -488,6 +489,32 @@ def test_pass_2_reads_the_records_pass_1_decoded(gdt_bin, runner, data_dir, tmp_
         ref = tmp_path / f"ref{len(args)}.ply"
         tile(runner, gdt_bin, [las, las], ref, *args)
         assert ply_parts(out)[1] == ply_parts(ref)[1], args
+
+
+def test_the_decoded_records_are_freed_before_pass_2_syncs(gdt_bin, runner, data_dir, tmp_path):
+    """Once pass 2 has read the records pass 1 decoded, and nothing reads the
+    cloud again, their temporary file is freed before pass 2 makes its tile
+    files durable (a sync of the file system would otherwise write 16 bytes
+    a point to the disk only to delete them); with --ground-out, which reads
+    the cloud a third time, they are kept."""
+    laz = sample(data_dir, "autzen_trim.laz")
+    note = "the points decoded by the first pass are released"
+    for extra in ((), ("--ground", "pmf", "--ground-out", tmp_path / "g.las")):
+        job = tmp_path / f"job{len(extra)}"
+        r = runner([gdt_bin, laz, "--tile", 1024, "-o", tmp_path / f"o{len(extra)}.ply", "-v",
+                    "--job", job, *extra], cwd=tmp_path)
+        assert r.returncode == 0, r.stderr[-3000:]
+        lines = r.stderr.splitlines()
+        released = [i for i, ln in enumerate(lines) if note in ln]
+        synced = [i for i, ln in enumerate(lines) if "tiler --dup merge:" in ln]
+        replayed = [ln for ln in lines if "reading the points decoded by the first pass" in ln]
+        assert len(replayed) == 1, r.stderr[-3000:]  # pass 2 read them
+        if extra:
+            assert released == [], r.stderr[-3000:]
+        else:
+            # after pass 2 read them, before the merge's end (its sync)
+            assert len(released) == 1, r.stderr[-3000:]
+            assert len(synced) == 1 and released[0] < synced[0], r.stderr[-3000:]
 
 
 @pytest.mark.parametrize("fmt", [3, 6])
