@@ -242,9 +242,9 @@ static void sp_run(mr_ctx *m, uint64_t first, uint64_t end, uint64_t base, int f
     } else if (*st == GDT_OK) {
         *st = sp_read(m, first, end, base, bins, err);
     }
-    /* the share's decoded records are read for the last time (without
-     * --ground-out): freed before the pass-2 sync would write them out */
-    if (*st == GDT_OK && m->c->opts->ground_out == NULL)
+    /* the share's decoded records, read for the last time, are freed
+     * before the pass-2 sync would write them out */
+    if (*st == GDT_OK && tr_pass2_last_read(m->c->opts))
         gdt_cloud_release_replay(m->c->cloud);
     /* headers: every rank's status, and the points each sends this one */
     hdr[3 * rank] = (uint64_t)*st;

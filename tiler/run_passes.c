@@ -386,8 +386,7 @@ static void tiler_opts(tr_run *c, const gdt_cloud *cloud, gdt_tiler_opts *to)
          * classes of every input point */
         to->keep_spill = opts->ground_out != NULL;
     }
-    /* --ground-out reads the cloud a third time */
-    to->last_read = opts->ground_out == NULL;
+    to->last_read = tr_pass2_last_read(opts);
 }
 
 /* Pass 1 through c->p1share: this process's share, then the others'. */

@@ -87,9 +87,11 @@ typedef struct tr_summary {
      * ratio is the share of the stage the devices worked */
     double t_device, t_device_span;
     double t_parts; /* MPI, a mesh in parts: from PARTS to the last part synced */
-    /* MPI: this rank's own part of pass 1 (reading its share) and of pass 2
-     * (reading and spilling its share or, when rank 0 spills alone, the
-     * whole cloud; merging its tiles; syncing their files) */
+    /* MPI: this rank's own part of pass 1 (reading its share, or the whole
+     * cloud when rank 0 reads alone) and of pass 2 (reading and spilling its
+     * share or, when rank 0 spills alone, the whole cloud; merging its
+     * tiles; on another rank, syncing their files too, which rank 0 does
+     * with the job's pass 2 once every rank has reported) */
     double t_pass1_own, t_pass2_own;
     gdt_cert_stats cert;
     gdt_merge_stats merge;
@@ -402,6 +404,14 @@ gdt_status tr_core_start_join(tr_core_start *cs, gdt_core **core, gdt_error *err
  * returns: GDT_OK; the cloud's, tiler's and core's errors; GDT_EINTERRUPTED
  * 1302. */
 gdt_status tr_run_pass1(tr_run *c, gdt_error *err);
+
+/* Whether pass 2 reads the run's cloud for the last time (--ground-out
+ * reads it a third time): then its decoded records are released once read
+ * (gdt_cloud_release_replay). */
+static inline int tr_pass2_last_read(const gdt_options *opts)
+{
+    return opts->ground_out == NULL;
+}
 
 /* Another rank of an MPI job, told its share of pass 1: opens the run's
  * cloud (c->cloud, kept: its replay holds the share's decoded LAZ records
