@@ -87,11 +87,14 @@ typedef struct gdt_ocl_opts {
     size_t nshare;
 } gdt_ocl_opts;
 
-/* Points POCL_CACHE_DIR at the kernel cache (above) once per process; later
- * calls do nothing.  gdt_ocl_create calls it; setenv must not run while
- * another thread may call getenv (libraries do, e.g. compressors writing
- * the tile index), so a program that creates contexts on a thread of its
- * own calls this first, before it starts that thread.  Thread-safe. */
+/* Points POCL_CACHE_DIR at the kernel cache (above) and sets what the
+ * OpenCL runtime would otherwise add to the environment itself when it
+ * starts (PoCL: HWLOC_PLUGINS_PATH), once per process; later calls do
+ * nothing.  gdt_ocl_create calls it; adding a variable must not happen
+ * while another thread may call getenv (libraries do, e.g. compressors
+ * writing the tile index), so a program that creates contexts on a thread
+ * of its own calls this first, before it starts that thread or any other.
+ * Thread-safe. */
 void gdt_ocl_prepare_env(const char *cache_dir, gdt_log *log);
 
 /* Several devices (the tiled run's --device): a comma-separated list of

@@ -628,6 +628,20 @@ static void prog_save(const gdt_ocl *ocl, cl_program p, const uint64_t key[2])
     free(bin);
 }
 
+/* PoCL's CPU device sets HWLOC_PLUGINS_PATH=/dev/null (overwriting) when
+ * it first looks at the machine's topology, that is on whichever thread
+ * first lists the devices: the core's start-up thread, beside pass 1.
+ * Adding a variable reallocates the environment array and frees the old
+ * one under any getenv running meanwhile (blosc's, inside the tile index's
+ * write, crashed that way); set here, before that thread exists, PoCL's
+ * later setenv only replaces this entry's value, which leaves the array in
+ * place.  The value is PoCL's own, so nothing else changes. */
+static void set_hwloc_plugins(void)
+{
+    if (getenv("HWLOC_PLUGINS_PATH") == NULL)
+        setenv("HWLOC_PLUGINS_PATH", "/dev/null", 0);
+}
+
 void gdt_ocl_prepare_env(const char *cache_dir, gdt_log *log)
 {
     static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
@@ -636,6 +650,7 @@ void gdt_ocl_prepare_env(const char *cache_dir, gdt_log *log)
     pthread_mutex_lock(&lock);
     if (!done) {
         set_pocl_cache(cache_dir, log);
+        set_hwloc_plugins();
         done = 1;
     }
     pthread_mutex_unlock(&lock);

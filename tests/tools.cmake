@@ -13,5 +13,9 @@ gdt_target_flags(gdt_fail_write)
 add_library(gdt_fail_open MODULE ${CMAKE_CURRENT_SOURCE_DIR}/tools/fail_open.c)
 target_link_libraries(gdt_fail_open PRIVATE ${CMAKE_DL_LIBS} Threads::Threads)
 gdt_target_flags(gdt_fail_open)
+# LD_PRELOAD shim that reports environment changes off the main thread.
+add_library(gdt_env_guard MODULE ${CMAKE_CURRENT_SOURCE_DIR}/tools/env_guard.c)
+target_link_libraries(gdt_env_guard PRIVATE ${CMAKE_DL_LIBS})
+gdt_target_flags(gdt_env_guard)
 # The tiled run's stages over a subset of the tiles (tests/python/test_stages.py).
 gdt_add_test_exe(stages_subset ${CMAKE_CURRENT_SOURCE_DIR}/tools/stages_subset.c)
