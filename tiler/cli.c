@@ -680,6 +680,21 @@ static gdt_status start_parallel(gdt_options *opts, gdt_comm **comm, int *follow
     return GDT_OK;
 }
 
+/* The environment the OpenCL runtime needs (gdt_ocl_prepare_env), set
+ * while this is the process's only thread of ours: before MPI_Init, whose
+ * library starts threads of its own, and before any stage starts one.
+ * Warnings go to rank 0's stderr only, as the run's own do. */
+static void prepare_opencl_env(const gdt_options *opts)
+{
+    gdt_launch l;
+    gdt_log log;
+    if (!(opts->mode == GDT_MODE_RUN || opts->mode == GDT_MODE_RESUME))
+        return;
+    gdt_launch_detect(&l);
+    gdt_log_init(&log, l.rank != 0 ? -1 : opts->verbosity);
+    gdt_ocl_prepare_env(NULL, &log);
+}
+
 int gdt_cli_main_stop(int argc, char **argv, volatile sig_atomic_t *stop)
 {
     gdt_options opts;
@@ -704,6 +719,7 @@ int gdt_cli_main_stop(int argc, char **argv, volatile sig_atomic_t *stop)
     default:
         break;
     }
+    prepare_opencl_env(&opts);
     st = start_parallel(&opts, &comm, &follower, &err);
     if (st == GDT_EUSAGE && follower) {
         gdt_options_free(&opts);
