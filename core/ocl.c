@@ -635,7 +635,10 @@ static void prog_save(const gdt_ocl *ocl, cl_program p, const uint64_t key[2])
  * one under any getenv running meanwhile (blosc's, inside the tile index's
  * write, crashed that way); set here, before that thread exists, PoCL's
  * later setenv only replaces this entry's value, which leaves the array in
- * place.  The value is PoCL's own, so nothing else changes. */
+ * place.  The value is PoCL's own.  It also applies to hwloc users that
+ * start later in the process (under mpirun, MPI_Init's): they see the
+ * machine's cores and memory as before, without the I/O devices hwloc's
+ * plug-ins would add, which nothing here uses. */
 static void set_hwloc_plugins(void)
 {
     if (getenv("HWLOC_PLUGINS_PATH") == NULL)
