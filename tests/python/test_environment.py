@@ -10,26 +10,18 @@ fifty on a small cloud with --tile given.  The LD_PRELOAD shim
 tests/tools/env_guard.c logs every such change made off the main thread; each
 mode of the program runs under it here and the log must hold nothing but the
 shim's own "loaded" lines (which show that it was in effect)."""
-import os
-import shutil
 import subprocess
 
 import pytest
 
+import mpi_util as mu
 import resume_util as ru
 import tiled_util as tu
 
-ROOT_OK = {"OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
-LAUNCH_VARS = ("OMPI_COMM_WORLD_SIZE", "OMPI_COMM_WORLD_RANK", "OMPI_COMM_WORLD_LOCAL_RANK",
-               "PMI_SIZE", "PMI_RANK", "MPI_LOCALRANKID", "PMIX_RANK")
-
 
 @pytest.fixture(scope="module")
-def shim(tools_dir):
-    s = tools_dir / "libgdt_env_guard.so"
-    if not s.exists():
-        pytest.fail(f"libgdt_env_guard.so not built at {s}")
-    return s
+def shim(tool):
+    return tool("libgdt_env_guard.so")
 
 
 @pytest.fixture(scope="module")
@@ -43,10 +35,10 @@ def clouds(tmp_path_factory):
 
 def guarded(shim, log, cmd, mpi=False, timeout=300):
     """Runs cmd with the shim preloaded (under mpirun: in every rank only)."""
-    env = {k: v for k, v in os.environ.items() if k not in LAUNCH_VARS}
+    env = mu.clean_env()
     log.unlink(missing_ok=True)
     if mpi:
-        env.update(ROOT_OK)
+        env.update(mu.ROOT_OK)
         env["POCL_MAX_PTHREAD_COUNT"] = "1"
         cmd = ["mpirun", "--oversubscribe", "-np", "2", "-x", f"LD_PRELOAD={shim}", "-x",
                f"GDT_TEST_ENV_LOG={log}", *cmd]
@@ -106,11 +98,9 @@ def test_no_thread_changes_the_environment_on_resume(gdt_bin, shim, clouds, tmp_
 
 
 def test_no_thread_changes_the_environment_under_mpirun(gdt_bin, shim, clouds, tmp_path):
-    if shutil.which("mpirun") is None:
-        pytest.skip("Open MPI's mpirun is not installed")
-    v = subprocess.run([str(gdt_bin), "--version"], capture_output=True, text=True)
-    if "mpi: yes" not in v.stdout:
-        pytest.skip("this gdt-tile was built without MPI")
+    why = mu.why_no_mpi(gdt_bin)
+    if why is not None:
+        pytest.skip(why)
     log = tmp_path / "env.log"
     for what, args in {"K = 2, --tile 64, DEM": ["--tile", "64", "--dem", tmp_path / "m.tif"],
                        "K = 2, tile chosen for the device": []}.items():

@@ -3,15 +3,12 @@ only the tiled run and --resume are shared between ranks (test_mpi.py);
 every other mode, and any parallel launch of a build without MPI, is refused
 on every rank before it touches anything (exit 2, GDT-2951 or GDT-2950, said
 once, by rank 0); one rank runs as a plain process."""
-import os
 import shutil
 import sys
 
 import pytest
 
-ROOT_OK = {"OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
-LAUNCH_VARS = ("OMPI_COMM_WORLD_SIZE", "OMPI_COMM_WORLD_RANK", "OMPI_COMM_WORLD_LOCAL_RANK",
-               "PMI_SIZE", "PMI_RANK", "MPI_LOCALRANKID", "PMIX_RANK")
+from mpi_util import ROOT_OK, clean_env
 
 
 def cloud(runner, root, tmp_path):
@@ -20,12 +17,6 @@ def cloud(runner, root, tmp_path):
                 "--seed", "4", "-q"])
     assert r.returncode == 0, r.stderr
     return path
-
-
-def clean_env(**extra):
-    env = {k: v for k, v in os.environ.items() if k not in LAUNCH_VARS}
-    env.update(extra)
-    return env
 
 
 def has_mpi(gdt_bin, runner):

@@ -6,7 +6,6 @@ the whole job's exit code with one message.  Run as root in CI, so Open MPI
 is told that is allowed; --oversubscribe lets K exceed this machine's cores."""
 import json
 import os
-import shutil
 import signal
 import sqlite3
 import subprocess
@@ -15,16 +14,12 @@ import time
 
 import pytest
 
+import mpi_util as mu
 from laz_util import write_laz
-
-ROOT_OK = {"OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
-LAUNCH_VARS = ("OMPI_COMM_WORLD_SIZE", "OMPI_COMM_WORLD_RANK", "OMPI_COMM_WORLD_LOCAL_RANK",
-               "PMI_SIZE", "PMI_RANK", "MPI_LOCALRANKID", "PMIX_RANK")
 
 
 def env():
-    e = {k: v for k, v in os.environ.items() if k not in LAUNCH_VARS}
-    e.update(ROOT_OK)
+    e = mu.clean_env(**mu.ROOT_OK)
     # one PoCL thread per rank: K ranks on this machine's few cores
     e["POCL_MAX_PTHREAD_COUNT"] = "1"
     if "ASAN_OPTIONS" in e:
@@ -37,11 +32,9 @@ def env():
 
 @pytest.fixture(scope="module")
 def mpi_bin(gdt_bin):
-    if shutil.which("mpirun") is None:
-        pytest.skip("Open MPI's mpirun is not installed")
-    r = subprocess.run([gdt_bin, "--version"], capture_output=True, text=True)
-    if "mpi: yes" not in r.stdout:
-        pytest.skip("this gdt-tile was built without MPI")
+    why = mu.why_no_mpi(gdt_bin)
+    if why is not None:
+        pytest.skip(why)
     return gdt_bin
 
 

@@ -60,12 +60,13 @@ static int off_main(void)
     return (long)syscall(SYS_gettid) != (long)getpid();
 }
 
-/* Whether a variable of that name (namelen bytes) is set now. */
+/* 1 if a variable of that name (namelen bytes) is set now, 0 if not, -1
+ * for a name too long to look up here (not judged, so never reported). */
 static int is_set(const char *name, size_t namelen)
 {
     char buf[256];
     if (namelen >= sizeof buf)
-        return 1; /* a name that long is not ours to judge: not reported */
+        return -1;
     memcpy(buf, name, namelen);
     buf[namelen] = '\0';
     return getenv(buf) != NULL;
@@ -89,7 +90,7 @@ __attribute__((constructor)) static void announce(void)
 int setenv(const char *name, const char *value, int replace)
 {
     setenv_fn real = (setenv_fn)dlsym(RTLD_NEXT, "setenv");
-    if (name != NULL && off_main() && !is_set(name, strlen(name)))
+    if (name != NULL && off_main() && is_set(name, strlen(name)) == 0)
         log_line("setenv", name, strlen(name));
     return real(name, value, replace);
 }
@@ -101,7 +102,7 @@ int putenv(char *string)
         const char *eq = strchr(string, '=');
         size_t len = eq != NULL ? (size_t)(eq - string) : strlen(string);
         /* without '=' putenv removes the variable */
-        if (eq == NULL ? is_set(string, len) : !is_set(string, len))
+        if (is_set(string, len) == (eq == NULL ? 1 : 0))
             log_line("putenv", string, len);
     }
     return real(string);
@@ -110,7 +111,7 @@ int putenv(char *string)
 int unsetenv(const char *name)
 {
     unsetenv_fn real = (unsetenv_fn)dlsym(RTLD_NEXT, "unsetenv");
-    if (off_main() && is_set(name, strlen(name)))
+    if (off_main() && is_set(name, strlen(name)) == 1)
         log_line("unsetenv", name, strlen(name));
     return real(name);
 }
