@@ -42,10 +42,14 @@
  * through a temporary renamed over it).
  *
  * PoCL kernel cache: before the first OpenCL call of the process, the
- * environment variable POCL_CACHE_DIR is pointed at a directory the project
- * controls: opts.cache_dir when given; else an existing POCL_CACHE_DIR is
- * kept; else $XDG_CACHE_HOME/gdt-tile/pocl (default ~/.cache/gdt-tile/pocl).
- * The directory is created if needed.  PoCL reads the variable once per
+ * environment variable POCL_CACHE_DIR is pointed at the first usable one
+ * (created if needed, writable) of: opts.cache_dir when given; a non-empty
+ * POCL_CACHE_DIR already set; $XDG_CACHE_HOME/gdt-tile/pocl;
+ * ~/.cache/gdt-tile/pocl; gdt-tile-pocl-<uid> in $TMPDIR or /tmp, which
+ * must also be this user's and closed to others (a read-only or missing
+ * home).  Each one passed over is a warning (5150) naming it; with none
+ * usable the variable is removed, so PoCL never sees an empty or unusable
+ * one (it aborts on an empty one).  PoCL reads the variable once per
  * process, so the first context created decides.
  *
  * Errors: every OpenCL failure is GDT_EDEVICE (exit 5) with a message
@@ -128,7 +132,10 @@ void gdt_ocl_device_list_free(char **specs, size_t n);
  * options; kernels and buffers are its own, so each queue is driven by its
  * own thread), and the device's busy time is counted once for all its
  * queues (gdt_ocl_busy_seconds).  The first context may be destroyed before
- * the others.
+ * the others.  On a device where gdt_ocl_queues_need_own_programs holds, a
+ * further queue builds programs of its own instead (its build options gain
+ * -DGDT_QUEUE_PROGRAMS=<n>, n distinct per queue of the device; kernels
+ * ignore it), so that no two queues ever launch one program's kernels.
  * Ownership: *out is allocated here; release with gdt_ocl_destroy.
  * Errors: GDT_EUSAGE 2110 (malformed SPEC), GDT_EDEVICE 5101 (no
  * platform/device, or none the SPEC names), 5102 (OpenCL call failed),
@@ -185,6 +192,16 @@ const char *gdt_ocl_kernel_dir(const gdt_ocl *ocl);
  * returns their number. */
 int gdt_ocl_caps_missing(const char *profile, const char *c_version, const char *extensions,
                          char *out, size_t cap);
+
+/* 1 when several command queues of one device must not launch kernels of
+ * one program, from the device's CL_PLATFORM_VERSION and whether it is a
+ * CPU device: PoCL's CPU drivers before PoCL 7 keep one process-wide cache
+ * of compiled work-group functions and match a finished launch to its
+ * entry by kernel and local size only, so two queues running one kernel
+ * with different ranges can release each other's entries, and the runtime
+ * aborts (an assertion in pocl_release_dlhandle_cache).  Kernels of
+ * distinct programs never share an entry. */
+int gdt_ocl_queues_need_own_programs(const char *platform_version, int is_cpu);
 
 /* Lists every platform and device, one line each ("P:D  N  type  name"),
  * into buf (NUL-terminated, truncated to len).  Needs no context. */

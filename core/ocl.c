@@ -79,6 +79,7 @@ typedef struct ocl_shared {
     size_t nq;
     ocl_shared_prog *progs;
     size_t nprogs;
+    unsigned tags; /* program tags given to further queues so far */
     gdt_busy_union busy;
 } ocl_shared;
 
@@ -115,6 +116,11 @@ struct gdt_ocl {
     int further;       /* a further queue: the context is another's */
     gdt_busy_queue bq; /* under sh->mu: this queue in the device's busy union */
     unsigned progs_cached, progs_built; /* programs from the binary cache, from source */
+    /* 0, or (a further queue whose device cannot share programs between
+     * queues, gdt_ocl_queues_need_own_programs) its place among the
+     * device's queues: gdt_ocl_build then adds -DGDT_QUEUE_PROGRAMS=<tag>,
+     * so the runtime sees programs of their own, never the shared ones. */
+    unsigned program_tag;
 };
 
 #define OCL_PEND_MAX 65536 /* pending events before a finish collects them */
@@ -290,8 +296,10 @@ static void shared_free(ocl_shared *sh)
 
 /* Makes ocl a further queue of base's device: base's shared state, made
  * on the first such call from base's programs and its busy time so far
- * (base is idle: the contract of gdt_ocl_create). */
-static gdt_status shared_attach(gdt_ocl *ocl, gdt_ocl *base, gdt_error *err)
+ * (base is idle: the contract of gdt_ocl_create).  own_programs: ocl gets
+ * a program tag no other queue of the device has (tags are never reused,
+ * so a queue made after another was destroyed still differs from all). */
+static gdt_status shared_attach(gdt_ocl *ocl, gdt_ocl *base, int own_programs, gdt_error *err)
 {
     ocl_shared *sh = base->sh;
     if (sh == NULL) {
@@ -338,6 +346,8 @@ static gdt_status shared_attach(gdt_ocl *ocl, gdt_ocl *base, gdt_error *err)
     sh->q[sh->nq++] = ocl;
     ocl->sh = sh;
     ocl->further = 1;
+    if (own_programs)
+        ocl->program_tag = ++sh->tags;
     pthread_mutex_unlock(&sh->mu);
     return GDT_OK;
 }
@@ -473,36 +483,73 @@ static int make_dirs(const char *path)
 
 static void dev_string(cl_device_id d, cl_device_info what, char *buf, size_t len);
 
-/* Points POCL_CACHE_DIR at a project-controlled directory (see gdt_ocl.h).
- * Failure to create the directory is only a warning: PoCL then falls back
- * to compiling without a cache. */
+/* 0 when dir is (now) a directory this process may write, else an errno
+ * value; private: also owned by this user and closed to everyone else
+ * (a directory in a shared temporary directory that another user could
+ * have made, or could write kernel binaries into, is refused). */
+static int usable_dir(const char *dir, int private)
+{
+    struct stat st;
+    int rc = make_dirs(dir);
+    if (rc != 0)
+        return rc;
+    if (private && mkdir(dir, 0700) != 0 && errno != EEXIST)
+        return errno;
+    if (lstat(dir, &st) != 0)
+        return errno;
+    if (!S_ISDIR(st.st_mode))
+        return ENOTDIR;
+    if (private && (st.st_uid != getuid() || (st.st_mode & 077) != 0))
+        return EPERM;
+    return access(dir, W_OK | X_OK) == 0 ? 0 : errno;
+}
+
+/* Points POCL_CACHE_DIR at a usable directory (see gdt_ocl.h): the one
+ * asked for, else the user's own POCL_CACHE_DIR, else
+ * $XDG_CACHE_HOME/gdt-tile/pocl, else ~/.cache/gdt-tile/pocl, else
+ * gdt-tile-pocl-<uid> in $TMPDIR or /tmp (read-only or missing homes: batch
+ * jobs, containers).  Each one that cannot be used is a warning naming it.
+ * None usable: the variable is removed (PoCL never sees an empty or
+ * unusable one; it then chooses its own) and programs are not cached. */
 static void set_pocl_cache(const char *cache_dir, gdt_log *log)
 {
     char dir[4096];
-    const char *xdg, *home, *env;
+    const char *env = getenv("POCL_CACHE_DIR");
+    const char *xdg = getenv("XDG_CACHE_HOME"), *home = getenv("HOME");
+    const char *tmp = getenv("TMPDIR");
     int rc;
 
-    if (cache_dir != NULL && cache_dir[0] != '\0') {
-        snprintf(dir, sizeof dir, "%s", cache_dir);
-    } else if ((env = getenv("POCL_CACHE_DIR")) != NULL) {
-        if (env[0] != '\0' && strlen(env) < sizeof dir)
-            snprintf(g_prog_dir, sizeof g_prog_dir, "%s/programs", env);
-        return;
-    } else if ((xdg = getenv("XDG_CACHE_HOME")) != NULL && xdg[0] == '/') {
-        snprintf(dir, sizeof dir, "%s/gdt-tile/pocl", xdg);
-    } else if ((home = getenv("HOME")) != NULL && home[0] != '\0') {
-        snprintf(dir, sizeof dir, "%s/.cache/gdt-tile/pocl", home);
-    } else {
+    for (int step = 0; step < 5; step++) {
+        int private = 0;
+        dir[0] = '\0';
+        if (step == 0 && cache_dir != NULL && cache_dir[0] != '\0')
+            snprintf(dir, sizeof dir, "%s", cache_dir);
+        else if (step == 1 && env != NULL && env[0] != '\0')
+            snprintf(dir, sizeof dir, "%s", env);
+        else if (step == 2 && xdg != NULL && xdg[0] == '/')
+            snprintf(dir, sizeof dir, "%s/gdt-tile/pocl", xdg);
+        else if (step == 3 && home != NULL && home[0] == '/')
+            snprintf(dir, sizeof dir, "%s/.cache/gdt-tile/pocl", home);
+        else if (step == 4) {
+            snprintf(dir, sizeof dir, "%s/gdt-tile-pocl-%lu",
+                     tmp != NULL && tmp[0] == '/' ? tmp : "/tmp", (unsigned long)getuid());
+            private = 1;
+        }
+        if (dir[0] == '\0' || strlen(dir) + 16 >= sizeof dir)
+            continue;
+        rc = usable_dir(dir, private);
+        if (rc != 0) {
+            gdt_log_warn(log, 5150, "cannot use %s as the OpenCL kernel cache directory: %s",
+                         dir, strerror(rc));
+            continue;
+        }
+        if (env == NULL || strcmp(env, dir) != 0)
+            setenv("POCL_CACHE_DIR", dir, 1);
+        snprintf(g_prog_dir, sizeof g_prog_dir, "%s/programs", dir);
         return;
     }
-    rc = make_dirs(dir);
-    if (rc != 0) {
-        gdt_log_warn(log, 5150, "cannot create the OpenCL kernel cache directory %s: %s",
-                     dir, strerror(rc));
-        return;
-    }
-    setenv("POCL_CACHE_DIR", dir, 1);
-    snprintf(g_prog_dir, sizeof g_prog_dir, "%s/programs", dir);
+    if (env != NULL)
+        unsetenv("POCL_CACHE_DIR");
 }
 
 /* FNV-1a of n bytes, continued from h. */
@@ -1052,6 +1099,19 @@ int gdt_ocl_caps_missing(const char *profile, const char *c_version, const char 
     return missing;
 }
 
+int gdt_ocl_queues_need_own_programs(const char *platform_version, int is_cpu)
+{
+    const char *v;
+    int major = 0;
+    if (!is_cpu || platform_version == NULL)
+        return 0;
+    /* "OpenCL 3.0 PoCL 3.1+debian  Linux, ..." */
+    v = strstr(platform_version, "PoCL ");
+    if (v == NULL || sscanf(v + 5, "%d", &major) != 1)
+        return 0;
+    return major < 7;
+}
+
 static void dev_string(cl_device_id d, cl_device_info what, char *buf, size_t len)
 {
     size_t got = 0;
@@ -1226,10 +1286,26 @@ gdt_status gdt_ocl_create(gdt_ocl **out, const gdt_ocl_opts *opts, gdt_error *er
         goto fail;
     }
     if (base != NULL) {
-        st = shared_attach(ocl, base, err);
+        char pver[256];
+        int own;
+        pver[0] = '\0';
+        clGetPlatformInfo(ocl->platform, CL_PLATFORM_VERSION, sizeof pver - 1, pver, NULL);
+        pver[sizeof pver - 1] = '\0';
+        own = gdt_ocl_queues_need_own_programs(pver, ocl->is_cpu);
+        st = shared_attach(ocl, base, own, err);
         if (st != GDT_OK)
             goto fail;
-        gdt_log_note(opts->log, "OpenCL device %s: a further command queue", ocl->name);
+        if (own) {
+            const char *v = strstr(pver, "PoCL ");
+            int vlen = v != NULL ? (int)strcspn(v + 5, " ") + 5 : 0;
+            gdt_log_note(opts->log,
+                         "OpenCL device %s: a further command queue, with programs of its own "
+                         "(%.*s's CPU driver cannot run one program's kernels from two queues "
+                         "at once)",
+                         ocl->name, vlen, v != NULL ? v : "");
+        }
+        else
+            gdt_log_note(opts->log, "OpenCL device %s: a further command queue", ocl->name);
     } else
         gdt_log_note(opts->log, "OpenCL device %s (%u compute units, %s, kernels from %s)",
                      ocl->name, ocl->compute_units,
@@ -1397,6 +1473,10 @@ gdt_status gdt_ocl_build(gdt_ocl *ocl, const char *file, const char *extra,
              hash_includes(ocl->kernel_dir, text, UINT64_C(14695981039346656037), 0), text);
     snprintf(opts, sizeof opts, "-cl-std=CL1.2 -I %s%s%s%s", ocl->kernel_dir,
              ocl->fp64 ? "" : " -DGDT_X_NO_F64", extra ? " " : "", extra ? extra : "");
+    if (ocl->program_tag > 0) {
+        size_t used = strlen(opts);
+        snprintf(opts + used, sizeof opts - used, " -DGDT_QUEUE_PROGRAMS=%u", ocl->program_tag);
+    }
 
     p = calloc(1, sizeof *p);
     if (p == NULL) {

@@ -135,12 +135,22 @@ add_test(NAME ocl_pages COMMAND test_ocl_pages)
 add_test(NAME ocl_pages_thp_kept COMMAND test_ocl_pages)
 set_tests_properties(ocl_pages ocl_pages_thp_kept PROPERTIES LABELS "gcd" SKIP_RETURN_CODE 77)
 
+# Several command queues of one device launching one kernel at once, over
+# ranges that differ between queues and grow (tests/kernels_queues).
+gdt_add_test_exe(test_ocl_queues ${CMAKE_CURRENT_SOURCE_DIR}/c/test_ocl_queues.c)
+target_compile_definitions(test_ocl_queues PRIVATE
+                           GDT_TEST_QUEUE_KERNELS="${CMAKE_CURRENT_SOURCE_DIR}/kernels_queues")
+target_link_libraries(test_ocl_queues PRIVATE Threads::Threads)
+add_test(NAME ocl_queues COMMAND test_ocl_queues)
+set_tests_properties(ocl_queues PROPERTIES LABELS "gcd" SKIP_RETURN_CODE 77)
+
 # The symbolic predicates of kernels/gcd_geom.clh, evaluated on the host for
 # tests/python/test_gcd.py (compared with big integers at a huge R).
 gdt_add_test_exe(gcd_geom_eval ${CMAKE_CURRENT_SOURCE_DIR}/tools/gcd_geom_eval.c)
 
 # Every OpenCL test gets the leak suppressions above.
-foreach(t kernels_compile gcd_voronoi gcd_phase2 gcd_flip gcd_core gcd_kernels ocl_pages)
+foreach(t kernels_compile gcd_voronoi gcd_phase2 gcd_flip gcd_core gcd_kernels ocl_pages
+          ocl_queues)
   set_tests_properties(${t} PROPERTIES ENVIRONMENT "${GDT_GCD_LSAN}")
 endforeach()
 set_tests_properties(ocl_pages_thp_kept PROPERTIES ENVIRONMENT "${GDT_GCD_LSAN};GDT_THP=1")

@@ -1,7 +1,9 @@
 /* test_ocl_caps — what the core needs of an OpenCL device
  * (gdt_ocl_caps_missing), from the strings devices report: OpenCL C 1.2
  * or later and 64-bit integers; double precision and 64-bit atomics are
- * not needed.  No device is used. */
+ * not needed.  And which runtimes give each further command queue of a
+ * device programs of its own (gdt_ocl_queues_need_own_programs).  No
+ * device is used. */
 #include <string.h>
 
 #include "gdt_check.h"
@@ -45,5 +47,23 @@ int main(void)
     /* a short buffer is cut, still terminated */
     n = gdt_ocl_caps_missing("EMBEDDED_PROFILE", "OpenCL C 1.0", "", out, 12);
     CHECK(n == 2 && strlen(out) < 12, "cut: %d: %s", n, out);
+
+    /* which devices' further queues need programs of their own: PoCL's CPU
+     * drivers before PoCL 7, nothing else */
+    CHECK(gdt_ocl_queues_need_own_programs("OpenCL 3.0 PoCL 3.1+debian  Linux, None+Asserts, "
+                                           "RELOC, SPIR, LLVM 15.0.6, SLEEF, DISTRO, POCL_DEBUG",
+                                           1),
+          "PoCL 3.1 CPU");
+    CHECK(gdt_ocl_queues_need_own_programs("OpenCL 3.0 PoCL 6.0  Linux, Release", 1), "PoCL 6.0");
+    CHECK(gdt_ocl_queues_need_own_programs("OpenCL 1.2 PoCL 1.8", 1), "PoCL 1.8");
+    CHECK(!gdt_ocl_queues_need_own_programs("OpenCL 3.0 PoCL 7.0  Linux, Release", 1),
+          "PoCL 7.0 CPU");
+    CHECK(!gdt_ocl_queues_need_own_programs("OpenCL 3.0 PoCL 12.1", 1), "PoCL 12.1 CPU");
+    CHECK(!gdt_ocl_queues_need_own_programs("OpenCL 3.0 PoCL 3.1+debian  Linux", 0),
+          "PoCL 3.1, not a CPU device (its CUDA driver)");
+    CHECK(!gdt_ocl_queues_need_own_programs("OpenCL 3.0 CUDA 12.4.131", 0), "NVIDIA");
+    CHECK(!gdt_ocl_queues_need_own_programs("OpenCL 2.1 AMD-APP (3614.0)", 1), "AMD's CPU");
+    CHECK(!gdt_ocl_queues_need_own_programs("OpenCL 3.0 PoCL", 1), "no version number");
+    CHECK(!gdt_ocl_queues_need_own_programs(NULL, 1), "nothing reported");
     return gdt_check_finish(&checks, "test_ocl_caps");
 }

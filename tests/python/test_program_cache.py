@@ -80,3 +80,65 @@ def test_programs_come_from_the_cache_and_damage_is_ignored(gdt_bin, tmp_path):
     assert counts(err) == (total, 0), err
     assert (tmp_path / "d.ply").read_bytes() == first
     assert not list(programs.glob("*.tmp-*"))
+
+
+def seeded_cache(path, mode=0o755):
+    """A kernel cache directory at path holding the session's PoCL kernels
+    and programs, linked where the file system allows (no compiling)."""
+    def link(src, dst):
+        try:
+            os.link(src, dst)
+        except OSError:
+            shutil.copy2(src, dst)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        shutil.copytree(os.environ["POCL_CACHE_DIR"], path, copy_function=link,
+                        ignore=shutil.ignore_patterns("*.tmp*"), dirs_exist_ok=True)
+    except shutil.Error:
+        pass  # a file another worker renamed away meanwhile: PoCL rebuilds it
+    path.chmod(mode)
+    return path
+
+
+def test_an_empty_or_unusable_cache_directory_is_passed_over(gdt_bin, tmp_path):
+    """POCL_CACHE_DIR empty (PoCL itself aborts on one) or not a directory, a
+    home that cannot be written (batch jobs, containers): the run uses the next
+    place (XDG_CACHE_HOME, then gdt-tile-pocl-<uid> in TMPDIR), names each one
+    passed over in a warning, and makes the same mesh.  A directory in TMPDIR
+    that others may write is never used."""
+    cloud = tu.gen_cloud(tmp_path / "c.las", 3000, 5, "lidar")
+    xdg = tmp_path / "xdg"
+    seeded_cache(xdg / "gdt-tile" / "pocl")
+    tmp = tmp_path / "tmp"
+    own = seeded_cache(tmp / f"gdt-tile-pocl-{os.getuid()}", 0o700)
+    not_a_dir = tmp_path / "file"
+    not_a_dir.write_text("x")
+    base = {k: v for k, v in os.environ.items()
+            if k not in ("POCL_CACHE_DIR", "XDG_CACHE_HOME", "HOME", "TMPDIR")}
+    meshes = set()
+    for name, env, used, passed in (
+            ("empty", dict(POCL_CACHE_DIR="", XDG_CACHE_HOME=str(xdg)),
+             xdg / "gdt-tile" / "pocl", []),
+            ("a file", dict(POCL_CACHE_DIR=str(not_a_dir), XDG_CACHE_HOME=str(xdg)),
+             xdg / "gdt-tile" / "pocl", [not_a_dir]),
+            ("no home", dict(HOME="/proc/gdt-no-home", TMPDIR=str(tmp)), own,
+             ["/proc/gdt-no-home/.cache/gdt-tile/pocl"])):
+        out = tmp_path / f"{name}.ply"
+        r = tu.run([gdt_bin, cloud, "--tile", "128", "-o", out, "-v"], env=dict(base, **env))
+        assert r.returncode == 0, (name, r.stderr)
+        assert f"{used}/programs" in r.stderr, (name, r.stderr)
+        for p in passed:
+            assert f"cannot use {p} as the OpenCL kernel cache directory" in r.stderr, \
+                (name, r.stderr)
+        assert r.stderr.count("as the OpenCL kernel cache directory") == len(passed), r.stderr
+        meshes.add(out.read_bytes())
+    assert len(meshes) == 1
+
+    # a place in TMPDIR open to others is refused, whatever happens next
+    own.chmod(0o777)
+    r = tu.run([gdt_bin, cloud, "--tile", "128", "-o", tmp_path / "open.ply", "-v"],
+               env=dict(base, HOME="/proc/gdt-no-home", TMPDIR=str(tmp)))
+    assert f"cannot use {own} as the OpenCL kernel cache directory: Operation not permitted" \
+        in r.stderr, r.stderr
+    assert f"{own}/programs" not in r.stderr
+    assert "Assertion" not in r.stderr and r.returncode in (0, 5), r.stderr

@@ -18,6 +18,7 @@ with the certified faces, merge faces only on seam vertices.
 """
 import json
 import os
+import re
 import pathlib
 
 import numpy as np
@@ -769,8 +770,12 @@ def test_queues_share_the_device(gdt_bin, tmp_path):
     """--queues N gives the device N command queues in the tile stage, the
     further ones in its context with its built kernels (-v says so), and a
     device named twice in --device gets one further queue, not a second
-    context; a CPU device gets one queue unless asked."""
+    context; a CPU device gets one queue unless asked.  Where the runtime
+    cannot launch one program's kernels from two queues (PoCL's CPU drivers
+    before PoCL 7), every further queue has programs of its own and says so.
+    The mesh is the same bytes whatever the queues."""
     cloud = tu.gen_cloud(tmp_path / "c.las", 5000, 3, "lidar")
+    meshes = set()
     for args, queues in (([], 1), (["--queues", "3"], 3), (["--device", "0,0"], 2),
                          (["--device", "0,0", "--queues", "3"], 3)):
         r = tu.run([gdt_bin, cloud, "--tile", "128", "-o", tmp_path / "o.ply", "-v", *args])
@@ -778,6 +783,14 @@ def test_queues_share_the_device(gdt_bin, tmp_path):
         assert r.stderr.count("a further command queue") == queues - 1, (args, r.stderr)
         assert (f"{queues} command queues in the tile stage" in r.stderr) == (queues > 1), \
             (args, r.stderr)
+        own = r.stderr.count("a further command queue, with programs of its own")
+        assert own in (0, queues - 1), (args, r.stderr)
+        pocl = re.search(r"\(PoCL (\d+)\.\d+\S*'s CPU driver", r.stderr)
+        if own:
+            assert pocl and int(pocl.group(1)) < 7, r.stderr
+            assert r.stderr.count("OpenCL programs:") == queues, (args, r.stderr)
+        meshes.add((tmp_path / "o.ply").read_bytes())
+    assert len(meshes) == 1
 
 
 def test_single_tile_refuses_a_device_list(gdt_bin, tmp_path):
