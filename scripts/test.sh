@@ -14,24 +14,39 @@ set -euo pipefail
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$ROOT"
 
+# "== what (at M:SS)": each step with the time since the start, so a log
+# shows where the suite's time goes
+step() { printf '== %s (at %d:%02d)\n' "$1" $((SECONDS / 60)) $((SECONDS % 60)); }
+
+# The builds' kernel compile check and the C tests compile the OpenCL kernels
+# into a kernel cache of the suite's own; each pytest worker's cache starts
+# as a copy of it (tests/python/conftest.py), so no worker compiles them again.
+SEED="$ROOT/build/test-kernel-cache"
+export POCL_CACHE_DIR="$SEED"
+
 scripts/setup.sh --asan --fuzz
 
 JOBS=$(nproc 2>/dev/null || echo 2)
 export ASAN_OPTIONS=${ASAN_OPTIONS:-abort_on_error=0:detect_leaks=1}
 export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
 
-echo "== ctest (release build)"
+step "ctest (release build)"
 ctest --test-dir build --output-on-failure -j"$JOBS"
-echo "== ctest (ASan+UBSan build)"
+step "ctest (ASan+UBSan build)"
 ctest --test-dir build-asan --output-on-failure -j"$JOBS" -LE 'nosanitize|unsafe_fp'
-echo "== pytest (release build)"
-GDT_BUILD_DIR="$ROOT/build" .venv/bin/python -m pytest -q -n "$JOBS" tests/python
-echo "== pytest, sanitize-marked tests (ASan+UBSan build)"
-GDT_BUILD_DIR="$ROOT/build-asan" .venv/bin/python -m pytest -q -n "$JOBS" -m sanitize tests/python
-echo "== pytest, launch tests of a build without MPI (clang ASan+UBSan fuzz build)"
-GDT_BUILD_DIR="$ROOT/build-fuzz" .venv/bin/python -m pytest -q -n "$JOBS" tests/python/test_launch.py
-echo "== ctest, saved fuzz inputs (clang fuzz build)"
+# pytest: a kernel cache per worker, seeded; worksteal: a worker that runs
+# out of tests takes some of the other's
+unset POCL_CACHE_DIR
+export GDT_TEST_POCL_SEED="$SEED"
+PYTEST=(.venv/bin/python -m pytest -q -n "$JOBS" --dist worksteal)
+step "pytest (release build)"
+GDT_BUILD_DIR="$ROOT/build" "${PYTEST[@]}" tests/python
+step "pytest, sanitize-marked tests (ASan+UBSan build)"
+GDT_BUILD_DIR="$ROOT/build-asan" "${PYTEST[@]}" -m sanitize tests/python
+step "pytest, launch tests of a build without MPI (clang ASan+UBSan fuzz build)"
+GDT_BUILD_DIR="$ROOT/build-fuzz" "${PYTEST[@]}" tests/python/test_launch.py
+step "ctest, saved fuzz inputs (clang fuzz build)"
 ctest --test-dir build-fuzz --output-on-failure -L fuzz
-echo "== fuzz smoke run (clang fuzz build)"
+step "fuzz smoke run (clang fuzz build)"
 scripts/fuzz.sh smoke build-fuzz 10
-echo "== all tests passed"
+step "all tests passed"
