@@ -3,7 +3,7 @@
 # CTest and pytest on the release build, the sanitizer-marked tests again on
 # the ASan+UBSan build (with MPI), and on the clang fuzz build (ASan+UBSan,
 # without MPI) the launch tests of a build without MPI, the saved fuzz
-# inputs and a smoke run of every fuzz target (10 s each).  pytest runs its tests on one
+# inputs and a smoke run of every fuzz target (5 s each).  pytest runs its tests on one
 # worker process per CPU (pytest-xdist): every test has its own temporary
 # directory, and the few that time a run compare CPU seconds of their own
 # children, so they do not depend on what runs beside them.
@@ -48,5 +48,5 @@ GDT_BUILD_DIR="$ROOT/build-fuzz" "${PYTEST[@]}" tests/python/test_launch.py
 step "ctest, saved fuzz inputs (clang fuzz build)"
 ctest --test-dir build-fuzz --output-on-failure -L fuzz
 step "fuzz smoke run (clang fuzz build)"
-scripts/fuzz.sh smoke build-fuzz 10
+scripts/fuzz.sh smoke build-fuzz 5
 step "all tests passed"
