@@ -117,9 +117,10 @@ struct gdt_ocl {
     gdt_busy_queue bq; /* under sh->mu: this queue in the device's busy union */
     unsigned progs_cached, progs_built; /* programs from the binary cache, from source */
     /* 0, or (a further queue whose device cannot share programs between
-     * queues, gdt_ocl_queues_need_own_programs) its place among the
-     * device's queues: gdt_ocl_build then adds -DGDT_QUEUE_PROGRAMS=<tag>,
-     * so the runtime sees programs of their own, never the shared ones. */
+     * queues, gdt_ocl_queues_need_own_programs) a number no other queue of
+     * the device had (1, 2, ... in the order they were made):
+     * gdt_ocl_build then adds -DGDT_QUEUE_PROGRAMS=<tag>, so the runtime
+     * sees programs of their own, never the shared ones. */
     unsigned program_tag;
 };
 
@@ -490,11 +491,14 @@ static void dev_string(cl_device_id d, cl_device_info what, char *buf, size_t le
 static int usable_dir(const char *dir, int private)
 {
     struct stat st;
-    int rc = make_dirs(dir);
-    if (rc != 0)
-        return rc;
-    if (private && mkdir(dir, 0700) != 0 && errno != EEXIST)
-        return errno;
+    if (private) { /* made closed (its parent, the temporary directory, exists) */
+        if (mkdir(dir, 0700) != 0 && errno != EEXIST)
+            return errno;
+    } else {
+        int rc = make_dirs(dir);
+        if (rc != 0)
+            return rc;
+    }
     if (lstat(dir, &st) != 0)
         return errno;
     if (!S_ISDIR(st.st_mode))

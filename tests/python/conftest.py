@@ -6,11 +6,12 @@ repository; tests that need them skip with a message where it is absent.
 """
 import os
 import pathlib
-import shutil
 import subprocess
 import tempfile
 
 import pytest
+
+from cache_util import copy_cache
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 DATA = pathlib.Path(os.environ.get("GDT_TEST_DATA_DIR", ROOT.parent / "shared" / "data"))
@@ -24,23 +25,7 @@ DATA = pathlib.Path(os.environ.get("GDT_TEST_DATA_DIR", ROOT.parent / "shared" /
 # this file first: a directory chosen here (GDT_TEST_POCL_CACHE names it) is
 # chosen again by each worker, one given by the user is kept.
 # A worker's cache made here starts as a copy of $GDT_TEST_POCL_SEED when
-# that names one (scripts/test.sh: the cache the C tests filled), linked file
-# by file: PoCL replaces a cache file by renaming a new one over it and never
-# writes into one (but for an empty time stamp), so the workers' copies stay
-# apart.
-def _seed_cache(seed: pathlib.Path, cache: pathlib.Path) -> None:
-    def link(src, dst):
-        try:
-            os.link(src, dst)
-        except OSError:
-            shutil.copy2(src, dst)
-    try:
-        shutil.copytree(seed, cache, copy_function=link, dirs_exist_ok=True,
-                        ignore=shutil.ignore_patterns("*.tmp*", "*tmp_*"))
-    except (shutil.Error, OSError):
-        pass  # a part not copied is compiled again when needed
-
-
+# that names one (scripts/test.sh: the cache the builds and C tests filled).
 if "POCL_CACHE_DIR" not in os.environ or \
         os.environ.get("GDT_TEST_POCL_CACHE") == os.environ["POCL_CACHE_DIR"]:
     _worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
@@ -49,7 +34,7 @@ if "POCL_CACHE_DIR" not in os.environ or \
     _cache.mkdir(parents=True, exist_ok=True)
     _seed = os.environ.get("GDT_TEST_POCL_SEED", "")
     if _fresh and _seed and pathlib.Path(_seed).is_dir():
-        _seed_cache(pathlib.Path(_seed), _cache)
+        copy_cache(pathlib.Path(_seed), _cache)
     os.environ["POCL_CACHE_DIR"] = str(_cache)
     os.environ["GDT_TEST_POCL_CACHE"] = str(_cache)
 

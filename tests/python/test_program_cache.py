@@ -8,6 +8,7 @@ import pathlib
 import shutil
 
 import tiled_util as tu
+from cache_util import copy_cache
 
 MAGIC = b"GDTPROG2"
 
@@ -84,18 +85,9 @@ def test_programs_come_from_the_cache_and_damage_is_ignored(gdt_bin, tmp_path):
 
 def seeded_cache(path, mode=0o755):
     """A kernel cache directory at path holding the session's PoCL kernels
-    and programs, linked where the file system allows (no compiling)."""
-    def link(src, dst):
-        try:
-            os.link(src, dst)
-        except OSError:
-            shutil.copy2(src, dst)
+    and programs (no compiling)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        shutil.copytree(os.environ["POCL_CACHE_DIR"], path, copy_function=link,
-                        ignore=shutil.ignore_patterns("*.tmp*"), dirs_exist_ok=True)
-    except shutil.Error:
-        pass  # a file another worker renamed away meanwhile: PoCL rebuilds it
+    copy_cache(pathlib.Path(os.environ["POCL_CACHE_DIR"]), path)
     path.chmod(mode)
     return path
 
@@ -142,3 +134,20 @@ def test_an_empty_or_unusable_cache_directory_is_passed_over(gdt_bin, tmp_path):
         in r.stderr, r.stderr
     assert f"{own}/programs" not in r.stderr
     assert "Assertion" not in r.stderr and r.returncode in (0, 5), r.stderr
+
+
+def test_the_temporary_cache_directory_is_made_private(gdt_bin, tmp_path):
+    """Without a usable home the cache directory made in TMPDIR is the
+    user's alone (mode 0700), whatever the umask: the next run takes it.
+    The input is missing, so the run stops right after choosing it."""
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("POCL_CACHE_DIR", "XDG_CACHE_HOME", "HOME", "TMPDIR")}
+    env.update(HOME="/proc/gdt-no-home", TMPDIR=str(tmp))
+    made = tmp / f"gdt-tile-pocl-{os.getuid()}"
+    for _ in range(2):
+        r = tu.run([gdt_bin, tmp_path / "missing.las", "-o", tmp_path / "o.ply"], env=env)
+        assert r.returncode != 0 and "missing.las" in r.stderr, r.stderr
+        assert made.is_dir() and (made.stat().st_mode & 0o777) == 0o700, oct(made.stat().st_mode)
+        assert f"cannot use {made}" not in r.stderr, r.stderr
