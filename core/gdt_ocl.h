@@ -20,11 +20,13 @@
  *                GPUs, local ranks 0..7 use GPUs 0, 1, 2, 3, 0, 1, 2, 3);
  *                the local rank is gdt_ocl_opts.local_rank (0 alone).
  *
- * Programs: kernels/<file> is read, every #include "x.clh" of the kernel
- * directory is hashed into a comment line prepended to the source (so a
- * kernel binary cache keyed on the source text never serves a stale build
- * after a header changed), and the program is built with
- *   -cl-std=CL1.2 -I <kernel dir> [-DGDT_X_NO_F64] [extra options]
+ * Programs: kernels/<file> is read with every #include "x.clh" line of it
+ * and of its headers replaced by that header of the kernel directory
+ * (framed by #line directives; core/private/kernel_text.h), so the program
+ * depends on its text and options only: a kernel binary cache keyed on
+ * them never serves a stale build after a header changed, and still serves
+ * a kernel directory that was moved or copied.  It is built with
+ *   -cl-std=CL1.2 [-DGDT_X_NO_F64] [extra options]
  * and never with any of OpenCL's relaxed or unsafe math build options (the
  * exact predicates rely on IEEE double rounding).  -DGDT_X_NO_F64 is passed
  * when the device lacks cl_khr_fp64, or when the caller forces the integer
@@ -34,7 +36,7 @@
  * device's binary (clGetProgramInfo) in "programs" of the kernel cache
  * directory below, named by a hash of everything it depends on (platform,
  * device, driver and their versions, the build options, the source text
- * with its headers' hash), checked against a second hash and, for its
+ * with its headers in place), checked against a second hash and, for its
  * body, a hash of the binary itself; later builds
  * of the same take it from there (clCreateProgramWithBinary), without the
  * compiler front end.  An entry that does not load or build is ignored: the

@@ -8,6 +8,7 @@
 
 #include "gdt_ocl.h"
 #include "private/busy_union.h"
+#include "private/kernel_text.h"
 
 #include <ctype.h>
 #include <errno.h>
@@ -24,7 +25,6 @@
 #define GDT_KERNEL_DIR "kernels"
 #endif
 
-#define OCL_MAX_INCLUDE_DEPTH 8
 #define OCL_HUGE_MIN ((size_t)4 << 20)
 #define OCL_HUGE_ALIGN ((size_t)2 << 20)
 #define OCL_NAME_MAX 640
@@ -569,8 +569,8 @@ static uint64_t fnv(uint64_t h, const void *data, size_t n)
 
 /* The key of a program binary: two independent 64-bit hashes of everything
  * the binary depends on (the platform, device and driver and their
- * versions, the build options, the whole source text, which starts with
- * the hash of its headers), each string with its terminating NUL. */
+ * versions, the build options, the whole source text with its headers
+ * in place), each string with its terminating NUL. */
 static void prog_key(const gdt_ocl *ocl, const char *opts, const char *src, uint64_t key[2])
 {
     static const cl_platform_info pinfo[] = {CL_PLATFORM_NAME, CL_PLATFORM_VERSION};
@@ -1371,90 +1371,12 @@ uint64_t gdt_ocl_global_mem(const gdt_ocl *ocl) { return ocl->global_mem; }
 uint64_t gdt_ocl_peak_bytes(const gdt_ocl *ocl) { return ocl->peak_bytes; }
 const char *gdt_ocl_kernel_dir(const gdt_ocl *ocl) { return ocl->kernel_dir; }
 
-/* Reads a whole text file.  *out is malloc'ed and NUL-terminated. */
-static int read_text(const char *path, char **out, size_t *len)
-{
-    FILE *f = fopen(path, "rb");
-    char *buf = NULL;
-    size_t cap = 0, n = 0;
-    int e;
-
-    *out = NULL;
-    if (f == NULL)
-        return errno ? errno : EIO;
-    for (;;) {
-        size_t got;
-        if (cap - n < 4096) {
-            size_t nc = cap ? 2 * cap : 16384;
-            char *g = realloc(buf, nc + 1);
-            if (g == NULL) {
-                free(buf);
-                fclose(f);
-                return ENOMEM;
-            }
-            buf = g;
-            cap = nc;
-        }
-        got = fread(buf + n, 1, cap - n, f);
-        n += got;
-        if (got == 0)
-            break;
-    }
-    e = ferror(f) ? EIO : 0;
-    fclose(f);
-    if (e != 0) {
-        free(buf);
-        return e;
-    }
-    buf[n] = '\0';
-    *out = buf;
-    if (len)
-        *len = n;
-    return 0;
-}
-
-/* FNV-1a over the contents of every header the text includes with
- * #include "name", recursively (headers are looked up in dir). */
-static uint64_t hash_includes(const char *dir, const char *text, uint64_t h, int depth)
-{
-    const char *s = text;
-    if (depth > OCL_MAX_INCLUDE_DEPTH)
-        return h;
-    while ((s = strstr(s, "#include")) != NULL) {
-        const char *q = s + 8, *e;
-        char path[4096], name[256];
-        char *inc = NULL;
-        size_t len = 0;
-        while (*q == ' ' || *q == '\t')
-            q++;
-        s += 8;
-        if (*q != '"')
-            continue;
-        e = strchr(q + 1, '"');
-        if (e == NULL || (size_t)(e - q - 1) >= sizeof name)
-            continue;
-        memcpy(name, q + 1, (size_t)(e - q - 1));
-        name[e - q - 1] = '\0';
-        snprintf(path, sizeof path, "%s/%s", dir, name);
-        if (read_text(path, &inc, &len) != 0)
-            continue;
-        for (size_t i = 0; i < len; i++) {
-            h ^= (unsigned char)inc[i];
-            h *= UINT64_C(1099511628211);
-        }
-        h = hash_includes(dir, inc, h, depth + 1);
-        free(inc);
-    }
-    return h;
-}
-
 gdt_status gdt_ocl_build(gdt_ocl *ocl, const char *file, const char *extra,
                          gdt_ocl_program **out, gdt_error *err)
 {
     gdt_ocl_program *p = NULL;
     char path[4096], opts[4096 + 512];
-    char *text = NULL, *src = NULL, *log = NULL;
-    size_t len = 0, srclen;
+    char *src = NULL, *log = NULL;
     cl_kernel *ks = NULL;
     cl_uint nk = 0;
     cl_int rc;
@@ -1462,21 +1384,15 @@ gdt_status gdt_ocl_build(gdt_ocl *ocl, const char *file, const char *extra,
     gdt_status st = GDT_OK;
 
     *out = NULL;
-    snprintf(path, sizeof path, "%s/%s", ocl->kernel_dir, file);
-    e = read_text(path, &text, &len);
+    /* the text with its headers in place: the options never name the
+     * kernel directory, so a moved one keeps its cached binaries */
+    e = gdt_kernel_text(ocl->kernel_dir, file, &src, NULL, path, sizeof path);
     if (e != 0)
         return gdt_error_set(err, GDT_EDEVICE, 5103, "cannot read the OpenCL kernel source %s: %s",
-                             path, strerror(e));
-    srclen = len + 64;
-    src = malloc(srclen);
-    if (src == NULL) {
-        st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
-        goto fail;
-    }
-    snprintf(src, srclen, "/* headers %016" PRIx64 " */\n%s",
-             hash_includes(ocl->kernel_dir, text, UINT64_C(14695981039346656037), 0), text);
-    snprintf(opts, sizeof opts, "-cl-std=CL1.2 -I %s%s%s%s", ocl->kernel_dir,
-             ocl->fp64 ? "" : " -DGDT_X_NO_F64", extra ? " " : "", extra ? extra : "");
+                             path, e == ELOOP ? "headers nested too deep" : strerror(e));
+    snprintf(path, sizeof path, "%s/%s", ocl->kernel_dir, file);
+    snprintf(opts, sizeof opts, "-cl-std=CL1.2%s%s%s", ocl->fp64 ? "" : " -DGDT_X_NO_F64",
+             extra ? " " : "", extra ? extra : "");
     if (ocl->program_tag > 0) {
         size_t used = strlen(opts);
         snprintf(opts + used, sizeof opts - used, " -DGDT_QUEUE_PROGRAMS=%u", ocl->program_tag);
@@ -1620,7 +1536,6 @@ fail:
     }
     free(log);
     free(src);
-    free(text);
     return st;
 }
 

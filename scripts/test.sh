@@ -30,8 +30,27 @@ JOBS=$(nproc 2>/dev/null || echo 2)
 export ASAN_OPTIONS=${ASAN_OPTIONS:-abort_on_error=0:detect_leaks=1}
 export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
 
+# PoCL's CPU device builds a set of programs for every further command queue
+# (core/gdt_ocl.h): one run with three queues, beside the release C tests,
+# puts two such sets into the suite's cache for the pytest workers.  Not a
+# test (those that check several queues are in pytest): a failure here only
+# leaves the workers to compile the sets themselves.
+warm_queue_programs() {
+  local d rc=0
+  d=$(mktemp -d)
+  build/tests/gcd_run --gen lidar 5000 3 --grid 256 --dump-pcd "$d/q.pcd" --dump-only \
+      > /dev/null 2>&1 &&
+    build/tiler/gdt-tile "$d/q.pcd" -o "$d/q.ply" --queues 3 --tile 128 -q > /dev/null 2>&1 ||
+    rc=$?
+  rm -rf "$d"
+  [ "$rc" -eq 0 ] || echo "note: the kernel cache was not filled for several queues (exit $rc)"
+}
+
 step "ctest (release build)"
+warm_queue_programs &
+WARM=$!
 ctest --test-dir build --output-on-failure -j"$JOBS"
+wait "$WARM"
 step "ctest (ASan+UBSan build)"
 ctest --test-dir build-asan --output-on-failure -j"$JOBS" -LE 'nosanitize|unsafe_fp'
 # pytest: a kernel cache per worker, seeded; worksteal: a worker that runs

@@ -75,6 +75,9 @@ set_tests_properties(gcd_flip PROPERTIES LABELS "gcd" SKIP_RETURN_CODE 77)
 gdt_add_test_exe(test_busy_union ${CMAKE_CURRENT_SOURCE_DIR}/c/test_busy_union.c)
 add_test(NAME busy_union COMMAND test_busy_union)
 set_tests_properties(busy_union PROPERTIES LABELS "gcd")
+gdt_add_test_exe(test_kernel_text ${CMAKE_CURRENT_SOURCE_DIR}/c/test_kernel_text.c)
+add_test(NAME kernel_text COMMAND test_kernel_text)
+set_tests_properties(kernel_text PROPERTIES LABELS "gcd")
 
 gdt_add_test_exe(test_gcd_core ${CMAKE_CURRENT_SOURCE_DIR}/c/test_gcd_core.c ${GDT_GCD_GEN})
 

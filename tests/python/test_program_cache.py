@@ -151,3 +151,49 @@ def test_the_temporary_cache_directory_is_made_private(gdt_bin, tmp_path):
         assert r.returncode != 0 and "missing.las" in r.stderr, r.stderr
         assert made.is_dir() and (made.stat().st_mode & 0o777) == 0o700, oct(made.stat().st_mode)
         assert f"cannot use {made}" not in r.stderr, r.stderr
+
+
+def test_a_moved_kernel_directory_keeps_its_compiled_programs(gdt_bin, root, tmp_path):
+    """A program's text carries its headers, not the kernel directory's path:
+    the kernels copied elsewhere (an install, a bundle on another machine)
+    take every program from the cache; a changed header builds those that
+    include it again; an error in a header is reported at its own line."""
+    cloud = tu.gen_cloud(tmp_path / "c.las", 4000, 4, "lidar")
+    cache = private_cache(tmp_path)
+
+    def run_in(kdir, out):
+        return tu.run([gdt_bin, cloud, "--tile", "128", "-o", out, "-v"],
+                      env=dict(os.environ, POCL_CACHE_DIR=str(cache), GDT_KERNEL_DIR=str(kdir)))
+
+    first = tmp_path / "k1"
+    shutil.copytree(root / "kernels", first)
+    r = run_in(first, tmp_path / "a.ply")
+    assert r.returncode == 0, r.stderr
+    built = counts(r.stderr)[1]
+    assert built > 0, r.stderr
+    moved = tmp_path / "elsewhere" / "kernels"
+    moved.parent.mkdir()
+    shutil.move(str(first), str(moved))
+    r = run_in(moved, tmp_path / "b.ply")
+    assert r.returncode == 0, r.stderr
+    assert counts(r.stderr) == (built, 0), r.stderr
+    assert (tmp_path / "b.ply").read_bytes() == (tmp_path / "a.ply").read_bytes()
+
+    # the predicates header is in every program; gcd_tri.clh in some only
+    tri = moved / "gcd_tri.clh"
+    tri.write_text(tri.read_text() + "\n/* changed */\n")
+    r = run_in(moved, tmp_path / "c.ply")
+    assert r.returncode == 0, r.stderr
+    cached, rebuilt = counts(r.stderr)
+    assert 0 < rebuilt < built and cached + rebuilt == built, r.stderr
+    assert (tmp_path / "c.ply").read_bytes() == (tmp_path / "a.ply").read_bytes()
+
+    geom = moved / "gcd_geom.clh"
+    lines = geom.read_text().split("\n")
+    at = next(i for i, ln in enumerate(lines) if ln.startswith("#define")) + 1
+    lines.insert(at, "this is not OpenCL C;")
+    geom.write_text("\n".join(lines))
+    r = run_in(moved, tmp_path / "d.ply")
+    assert r.returncode == 5, r.stderr
+    assert f"gcd_geom.clh:{at + 1}:" in r.stderr, r.stderr
+    assert not (tmp_path / "d.ply").exists()
