@@ -378,6 +378,12 @@ gdt_status gdt_core_create(gdt_core **out, const gdt_core_opts *opts, gdt_error 
     snprintf(extra, sizeof extra, "-DSTRIP=%u", c->strip);
     for (size_t p = 0; p < sizeof PROGRAMS / sizeof PROGRAMS[0]; p++) {
         gdt_ocl_program *prog = NULL;
+        if (c->opts.stop != NULL && *c->opts.stop != 0) {
+            st = gdt_error_set(err, GDT_EINTERRUPTED, 1303,
+                               "stopped by a signal before building the OpenCL program %s",
+                               PROGRAMS[p]);
+            goto fail;
+        }
         st = gdt_ocl_build(c->ocl, PROGRAMS[p], extra, &prog, err);
         if (st != GDT_OK)
             goto fail;

@@ -53,6 +53,7 @@
 #ifndef GDT_CORE_H
 #define GDT_CORE_H
 
+#include <signal.h>
 #include <stddef.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -101,6 +102,10 @@ typedef struct gdt_core_opts {
      * context and uses its built kernels (gdt_ocl_create, opts->share). */
     struct gdt_core *const *share;
     size_t nshare;
+    /* A signal handler's flag (may be NULL): once nonzero, gdt_core_create
+     * builds no further program and fails with GDT_EINTERRUPTED, so a stop
+     * during a cold kernel build waits for one program, not all of them. */
+    const volatile sig_atomic_t *stop;
 } gdt_core_opts;
 
 /* Per-phase figures of one gdt_core_triangulate call (cf. Fig. 11 of the

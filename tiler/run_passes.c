@@ -234,7 +234,7 @@ static void *core_start_main(void *arg)
         sigaltstack(&ss, NULL);
     /* GDAL's hundred libraries load here too, beside pass 1, not on the
      * way of the tile stage */
-    if (cs->preload_dem)
+    if (cs->preload_dem && !(cs->opts.stop != NULL && *cs->opts.stop != 0))
         gdt_dem_preload();
     return NULL;
 }
@@ -315,6 +315,7 @@ gdt_status tr_run_start_core(tr_run *c, gdt_error *err)
     c->cstart.opts.device = c->opts->device;
     c->cstart.opts.local_rank = gdt_comm_local_rank(c->opts->comm);
     c->cstart.opts.log = &c->log;
+    c->cstart.opts.stop = c->opts->stop;
     /* the environment first: a look at the devices starts OpenCL */
     gdt_ocl_prepare_env(c->cstart.opts.cache_dir, c->cstart.opts.log);
     if (gdt_ocl_spec_is_list(c->opts->device)) {

@@ -155,6 +155,7 @@ gdt_status gdt_cli_single_tile(const gdt_options *opts, gdt_error *err)
     memset(&copt, 0, sizeof copt);
     copt.device = opts->device;
     copt.log = &log;
+    copt.stop = opts->stop;
     st = gdt_core_create(&core, &copt, err);
     if (opts->stop != NULL && *opts->stop != 0) {
         /* a signal during the kernel build; when the build failed, the
