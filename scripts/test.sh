@@ -49,7 +49,7 @@ warm_queue_programs() {
 step "ctest (release build)"
 warm_queue_programs &
 WARM=$!
-ctest --test-dir build --output-on-failure -j"$JOBS"
+ctest --test-dir build --output-on-failure -j"$JOBS" || { rc=$?; wait "$WARM"; exit "$rc"; }
 wait "$WARM"
 step "ctest (ASan+UBSan build)"
 ctest --test-dir build-asan --output-on-failure -j"$JOBS" -LE 'nosanitize|unsafe_fp'
