@@ -1384,12 +1384,6 @@ gdt_status gdt_ocl_build(gdt_ocl *ocl, const char *file, const char *extra,
     gdt_status st = GDT_OK;
 
     *out = NULL;
-    /* the text with its headers in place: the options never name the
-     * kernel directory, so a moved one keeps its cached binaries */
-    e = gdt_kernel_text(ocl->kernel_dir, file, &src, NULL, path, sizeof path);
-    if (e != 0)
-        return gdt_error_set(err, GDT_EDEVICE, 5103, "cannot read the OpenCL kernel source %s: %s",
-                             path, e == ELOOP ? "headers nested too deep" : strerror(e));
     snprintf(path, sizeof path, "%s/%s", ocl->kernel_dir, file);
     snprintf(opts, sizeof opts, "-cl-std=CL1.2%s%s%s", ocl->fp64 ? "" : " -DGDT_X_NO_F64",
              extra ? " " : "", extra ? extra : "");
@@ -1412,7 +1406,7 @@ gdt_status gdt_ocl_build(gdt_ocl *ocl, const char *file, const char *extra,
     /* a further queue: the program the device's first context built from
      * the same file and options (the source text, headers included, is
      * part of neither, but both were read from the same directory at the
-     * start of the same run) */
+     * start of the same run, so it is not read again) */
     if (ocl->sh != NULL)
         for (size_t i = 0; i < ocl->sh->nprogs && p->prog == NULL; i++)
             if (strcmp(ocl->sh->progs[i].file, file) == 0 &&
@@ -1426,6 +1420,15 @@ gdt_status gdt_ocl_build(gdt_ocl *ocl, const char *file, const char *extra,
         uint64_t key[2];
         size_t nbin = 0;
         unsigned char *bin;
+        char failed[4096];
+        /* the text with its headers in place: the options never name the
+         * kernel directory, so a moved one keeps its cached binaries */
+        e = gdt_kernel_text(ocl->kernel_dir, file, &src, NULL, failed, sizeof failed);
+        if (e != 0) {
+            st = gdt_error_set(err, GDT_EDEVICE, 5103, "cannot read the OpenCL kernel source %s: %s",
+                               failed, e == ELOOP ? "headers nested too deep" : strerror(e));
+            goto fail;
+        }
         prog_key(ocl, opts, src, key);
         /* a binary this process or an earlier one built from the same source
          * for the same device and driver: no compiler front end (PoCL

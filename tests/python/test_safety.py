@@ -394,7 +394,7 @@ def test_signal_during_single_tile_is_not_ignored(gdt_bin, big_cloud, tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("mode,delay", [("tiled", 0.2), ("tiled", 0.8), ("single-tile", 0.4)])
-def test_signal_during_the_kernel_build(gdt_bin, cloud, tmp_path, mode, delay):
+def test_signal_during_the_kernel_build(gdt_bin, root, cloud, tmp_path, mode, delay):
     """A cold kernel cache: the OpenCL compiler runs for seconds after pass 1
     (it removes its files on SIGINT, failing the build); the run must report
     the interruption, not the build failure it caused, and stop after the
@@ -407,8 +407,9 @@ def test_signal_during_the_kernel_build(gdt_bin, cloud, tmp_path, mode, delay):
     assert rc == 130, f"exit {rc}\n{err}"
     assert "(interrupted)" in err and "clBuildProgram" not in err, err
     assert not (tmp_path / "o.ply").exists()
+    # the core builds every kernel file once (one program each)
     built = list((tmp_path / "cache" / "gdt-tile" / "pocl" / "programs").glob("*.bin"))
-    assert len(built) < 7, built
+    assert len(built) < len(list((root / "kernels").glob("*.cl"))), built
 
 
 if __name__ == "__main__":
