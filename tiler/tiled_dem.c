@@ -1,17 +1,23 @@
 /* tiled_dem.c — --dem in the tiled run (see private/tiled_dem.h).
  *
- * A tile's faces are rasterised by the caller and up to TD_HELPERS helper
- * threads (--threads - 1 of them), each taking one contiguous part of the
- * faces, once the tile stage is over (while it runs, the caller works alone:
- * measured on 2 cores, helpers then only took turns with the OpenCL core
- * and the run was 0.2 s slower).  Each rasteriser collects its cell runs in its own buffer and
- * hands them to the writer in batches, so the writer's lock is taken once
- * per batch, not once per run.  The DEM does not depend on the split: every
- * cell centre is owned by one face, and the writer refuses a second value.
+ * While the tile stage runs, a tile's faces are rasterised on the caller's
+ * thread alone (measured on 2 cores: helpers then only took turns with the
+ * OpenCL core and the run was 0.2 s slower).  Once it is over, the faces
+ * become a job of parts of TD_PART faces that up to TD_HELPERS helper
+ * threads (--threads - 1 of them) take one by one while the caller reads
+ * and copies the next faces; the caller takes the parts still left when it
+ * comes back with the next job (tr_dem_tile_faces) or waits
+ * (tr_dem_tile_wait).  Each rasteriser collects its cell runs in its own
+ * buffer and hands them to the writer in batches, so the writer's lock is
+ * taken once per batch, not once per run.  The DEM does not depend on the
+ * split: every cell centre is owned by one face, and the writer refuses a
+ * second value.
  *
  * Invariants: mu guards w (the writer) and nothing else; job_mu serialises
- * the callers of tr_dem_tile_faces; jmu/jcv guard the job fields (gen,
- * pending, stop) the helpers wait on. */
+ * the callers of tr_dem_tile_faces and tr_dem_tile_wait; jmu/jcv guard the
+ * job fields (active, next, left, the failure, stop) the helpers wait on;
+ * a job's tile and faces (jtri, its own copy) are not changed while it has
+ * parts left. */
 #include "private/tiled_dem.h"
 #include "private/cli_modes.h"
 #include "private/tiled_files.h"
@@ -30,7 +36,7 @@
 #include "gdt_raster.h"
 
 #define TD_HELPERS 15       /* most helper threads */
-#define TD_MIN_PART 4096    /* fewer faces per part are not worth a thread */
+#define TD_PART 4096        /* faces per part of a job */
 #define TD_BATCH_RUNS 2048  /* runs per batch */
 #define TD_BATCH_CELLS 8192 /* cells per batch (a run has at most 256) */
 
@@ -44,14 +50,13 @@ typedef struct td_batch {
     float z[TD_BATCH_CELLS];
 } td_batch;
 
-/* One part of a job: faces [lo, hi) of the current job. */
+/* One rasteriser: the caller (index 0) or a helper thread. */
 typedef struct td_part {
     struct tr_dem *d;
-    int index; /* 1 .. helpers (the caller is part 0) */
+    int index; /* 1 .. helpers (the caller is 0) */
     pthread_t thread;
     int started;
-    gdt_status st;
-    gdt_error err;
+    gdt_error err; /* of its last part */
     td_batch batch;
 } td_part;
 
@@ -80,18 +85,24 @@ struct tr_dem {
     td_window win;      /* window mode: the current tile's cells */
     uint64_t dense_max; /* window mode: the largest dense window, cells */
     pthread_mutex_t mu;
-    /* the job the helpers work on */
+    /* the job the helpers work on: faces jtri[3 m] of tile at base, in
+     * nparts parts of TD_PART faces; parts [next, nparts) are not taken
+     * yet, left are not finished; fail_part is the first failing part in
+     * face order (SIZE_MAX: none) with its error */
     pthread_mutex_t job_mu, jmu;
     pthread_cond_t jcv, done_cv;
-    uint64_t gen; /* job number: a helper works once per new value */
-    int pending;  /* helpers still working on job gen */
+    int active; /* a job was started and not yet waited for */
+    size_t nparts, next, left, fail_part;
+    gdt_status fail_st;
+    gdt_error fail_err;
     int stop;
     int helpers; /* started helper threads */
-    tr_dem_tile tile; /* the current job's tile */
+    tr_dem_tile tile;
     size_t m;
     uint64_t base;
-    const int32_t *tri;
-    td_part *parts; /* [0 .. helpers], part 0 the caller's */
+    int32_t *jtri; /* the job's own copy of the faces */
+    size_t jcap;
+    td_part *parts; /* [0 .. helpers], 0 the caller's */
 };
 
 /* Window mode: cells (row, col .. col + n - 1) get z[0 .. n) in the
@@ -223,35 +234,61 @@ static gdt_status raster_range(tr_dem *d, td_batch *b, const tr_dem_tile *t, uin
     return st;
 }
 
-/* Part p of the current job (of parts parts). */
-static void run_part(tr_dem *d, td_part *p, int parts)
+/* Takes the next part of the job and rasterises it with p's batch.
+ * Called and returns with jmu held; next < nparts. */
+static void take_part(tr_dem *d, td_part *p)
 {
-    size_t lo = d->m * (size_t)p->index / (size_t)parts;
-    size_t hi = d->m * (size_t)(p->index + 1) / (size_t)parts;
-    p->st = raster_range(d, &p->batch, &d->tile, d->base, d->tri, lo, hi, &p->err);
+    size_t i = d->next++, lo = i * TD_PART, hi = lo + TD_PART < d->m ? lo + TD_PART : d->m;
+    gdt_status st;
+    pthread_mutex_unlock(&d->jmu);
+    st = raster_range(d, &p->batch, &d->tile, d->base, d->jtri, lo, hi, &p->err);
+    pthread_mutex_lock(&d->jmu);
+    if (st != GDT_OK && i < d->fail_part) {
+        d->fail_part = i;
+        d->fail_st = st;
+        d->fail_err = p->err;
+    }
+    if (--d->left == 0)
+        pthread_cond_broadcast(&d->done_cv);
 }
 
 static void *helper_main(void *arg)
 {
     td_part *p = arg;
     tr_dem *d = p->d;
-    uint64_t seen = 0;
 
     pthread_mutex_lock(&d->jmu);
     for (;;) {
-        while (!d->stop && d->gen == seen)
+        while (!d->stop && !(d->active && d->next < d->nparts))
             pthread_cond_wait(&d->jcv, &d->jmu);
         if (d->stop)
             break;
-        seen = d->gen;
-        pthread_mutex_unlock(&d->jmu);
-        run_part(d, p, d->helpers + 1);
-        pthread_mutex_lock(&d->jmu);
-        if (--d->pending == 0)
-            pthread_cond_signal(&d->done_cv);
+        take_part(d, p);
     }
     pthread_mutex_unlock(&d->jmu);
     return NULL;
+}
+
+/* Finishes the job (the caller takes the parts still left, then waits for
+ * the helpers' last ones) and returns its status: the first failing part's
+ * in face order.  job_mu held; no job: GDT_OK. */
+static gdt_status job_finish(tr_dem *d, gdt_error *err)
+{
+    gdt_status st = GDT_OK;
+    pthread_mutex_lock(&d->jmu);
+    if (d->active) {
+        while (d->next < d->nparts)
+            take_part(d, &d->parts[0]);
+        while (d->left > 0)
+            pthread_cond_wait(&d->done_cv, &d->jmu);
+        d->active = 0;
+        if (d->fail_part != SIZE_MAX) {
+            st = d->fail_st;
+            *err = d->fail_err;
+        }
+    }
+    pthread_mutex_unlock(&d->jmu);
+    return st;
 }
 
 /* Starts up to want helpers; fewer (even none) when threads cannot be
@@ -284,6 +321,7 @@ static gdt_status start_helpers(tr_dem *d, int want, gdt_error *err)
     return GDT_OK;
 }
 
+/* Stops the helpers (after the part each is on) and frees the batches. */
 static void stop_helpers(tr_dem *d)
 {
     pthread_mutex_lock(&d->jmu);
@@ -647,37 +685,39 @@ gdt_status tr_dem_tile_faces(tr_dem *d, const tr_dem_tile *t, uint64_t base, con
                              size_t m, int alone, gdt_error *err)
 {
     gdt_status st;
-    int parts;
 
     pthread_mutex_lock(&d->job_mu);
-    if (alone || d->helpers == 0 || m < 2 * (size_t)TD_MIN_PART) {
+    st = job_finish(d, err);
+    if (st == GDT_OK && (alone || d->helpers == 0 || m < TD_PART)) {
         st = raster_range(d, &d->parts[0].batch, t, base, tri, 0, m, err);
-        pthread_mutex_unlock(&d->job_mu);
-        return st;
-    }
-    parts = d->helpers + 1;
-    pthread_mutex_lock(&d->jmu);
-    d->tile = *t;
-    d->base = base;
-    d->tri = tri;
-    d->m = m;
-    d->pending = d->helpers;
-    d->gen++;
-    pthread_cond_broadcast(&d->jcv);
-    pthread_mutex_unlock(&d->jmu);
-    run_part(d, &d->parts[0], parts);
-    pthread_mutex_lock(&d->jmu);
-    while (d->pending > 0)
-        pthread_cond_wait(&d->done_cv, &d->jmu);
-    pthread_mutex_unlock(&d->jmu);
-    /* the first failing part in face order names the error */
-    st = GDT_OK;
-    for (int i = 0; i < parts; i++)
-        if (d->parts[i].st != GDT_OK) {
-            st = d->parts[i].st;
-            *err = d->parts[i].err;
-            break;
+    } else if (st == GDT_OK && m > 0) {
+        if (m > SIZE_MAX / (3 * sizeof *tri) ||
+            gdt_grow(&d->jtri, &d->jcap, 3 * m, sizeof *d->jtri, 3 * 65536) != 0) {
+            st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory (a DEM job of %zu faces)",
+                               m);
+        } else {
+            memcpy(d->jtri, tri, 3 * m * sizeof *tri);
+            pthread_mutex_lock(&d->jmu);
+            d->tile = *t;
+            d->base = base;
+            d->m = m;
+            d->nparts = d->left = (m + TD_PART - 1) / TD_PART;
+            d->next = 0;
+            d->fail_part = SIZE_MAX;
+            d->active = 1;
+            pthread_cond_broadcast(&d->jcv);
+            pthread_mutex_unlock(&d->jmu);
         }
+    }
+    pthread_mutex_unlock(&d->job_mu);
+    return st;
+}
+
+gdt_status tr_dem_tile_wait(tr_dem *d, gdt_error *err)
+{
+    gdt_status st;
+    pthread_mutex_lock(&d->job_mu);
+    st = job_finish(d, err);
     pthread_mutex_unlock(&d->job_mu);
     return st;
 }
@@ -694,7 +734,10 @@ gdt_status tr_dem_faces(tr_dem *d, const gdt_raster_vertex *v, size_t m, gdt_err
 
 gdt_status tr_dem_build(tr_dem *d, gdt_dem_geo *geo, gdt_dem_stats *stats, gdt_error *err)
 {
+    gdt_status st = tr_dem_tile_wait(d, err);
     stop_helpers(d); /* the rasterising is over */
+    if (st != GDT_OK)
+        return st;
     if (geo != NULL)
         *geo = d->grid.geo;
     return gdt_dem_build(d->w, stats, err);
@@ -713,6 +756,7 @@ void tr_dem_abort(tr_dem *d)
     if (d == NULL)
         return;
     stop_helpers(d);
+    free(d->jtri);
     window_drop(&d->win);
     free(d->win.cells);
     gdt_dem_abort(d->w);

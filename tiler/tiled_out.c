@@ -361,6 +361,15 @@ static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
         }
         done += m;
     }
+    if (o->src.dem != NULL) {
+        /* the tile's points (o->tile_pts) are the helpers' until they finish */
+        gdt_error werr;
+        gdt_status ws = tr_dem_tile_wait(o->src.dem, &werr);
+        if (st == GDT_OK && ws != GDT_OK) {
+            st = ws;
+            *err = werr;
+        }
+    }
     if (st == GDT_OK)
         o->tc.faces += nf;
     tr_dread_close(&r);

@@ -60,21 +60,31 @@ typedef struct tr_dem_tile {
 } tr_dem_tile;
 
 /* Rasterises m faces tri[3m] (output vertex indices) of a tile whose points
- * t (tr_dem_tile) have the output indices base..base+n-1;
- * alone: on the caller's thread only (the helpers stay idle), else split
- * with the helper threads.  The DEM is the same either way.
+ * t (tr_dem_tile) have the output indices base..base+n-1, after finishing
+ * the faces given before.  alone: now, on the caller's thread only (the
+ * helpers stay idle); else (with helper threads) the faces are copied and
+ * handed to the helpers, and the call returns at once: the caller takes
+ * the parts still left at its next call or at tr_dem_tile_wait.  tri may be
+ * reused when the call returns; t's points must stay as they are until the
+ * next call or tr_dem_tile_wait.  The DEM is the same either way.
  * Thread-safe.
- * returns: GDT_OK; GDT_EINTERNAL 7663 (an index outside the tile); the
- * writer's errors. */
+ * returns: GDT_OK; GDT_EINTERNAL 7663 (an index outside the tile), 7001;
+ * the writer's errors; a failure of the faces given before (the first in
+ * face order) is returned by the next call or tr_dem_tile_wait. */
 gdt_status tr_dem_tile_faces(tr_dem *d, const tr_dem_tile *t, uint64_t base, const int32_t *tri,
                              size_t m, int alone, gdt_error *err);
+
+/* Finishes the faces handed to the helpers (the caller takes the parts
+ * still left) and returns their status.  Thread-safe. */
+gdt_status tr_dem_tile_wait(tr_dem *d, gdt_error *err);
 
 /* Rasterises m faces given by their vertices v[3 m] (global lattice, z).
  * Thread-safe.  returns: GDT_OK; the writer's errors. */
 gdt_status tr_dem_faces(tr_dem *d, const gdt_raster_vertex *v, size_t m, gdt_error *err);
 
 /* Writes the DEM in two steps (gdt_dem_build, gdt_dem_commit): the build
- * stops the helpers and writes the temporaries, once every face is in (geo
+ * finishes the faces handed to the helpers (tr_dem_tile_wait), stops the
+ * helpers and writes the temporaries, once every face is in (geo
  * and stats, may be NULL, receive what was written); it may run on another
  * thread than the rest.  The commit (only after a successful build) puts
  * them in place and releases d; else tr_dem_abort. */
