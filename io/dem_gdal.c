@@ -144,6 +144,30 @@ static gdt_status block_overviews(GDALRasterBandH band, int levels, const float 
             for (int i = 0; i < cw; i++) {
                 double sum = 0.0;
                 uint32_t cnt = 0;
+                if (k == 1 && 2 * j + 1 < ph && 2 * i + 1 < pw) {
+                    /* a whole 2 x 2 group of the block, without branches: a
+                     * cell without a value adds -0.0, which leaves every
+                     * sum as it is (also -0.0), so the sum is the loop's
+                     * below, bit for bit */
+                    const float *q0 = buf + (size_t)(2 * j) * stride + (size_t)(2 * i);
+                    const float *q1 = q0 + stride;
+                    float v[4];
+                    v[0] = q0[0];
+                    v[1] = q0[1];
+                    v[2] = q1[0];
+                    v[3] = q1[1];
+                    for (int t = 0; t < 4; t++) {
+                        uint32_t bits;
+                        memcpy(&bits, &v[t], sizeof bits);
+                        sum += bits != nd_bits ? (double)v[t] : -0.0;
+                        cnt += bits != nd_bits;
+                    }
+                    o->sum[cur][(size_t)j * GDT_DEM_BLOCK + (size_t)i] = sum;
+                    o->count[cur][(size_t)j * GDT_DEM_BLOCK + (size_t)i] = cnt;
+                    o->out[(size_t)j * (size_t)cw + (size_t)i] = cnt > 0 ? (float)(sum / cnt) : nd;
+                    any |= cnt > 0;
+                    continue;
+                }
                 for (int dj = 0; dj < 2; dj++)
                     for (int di = 0; di < 2; di++) {
                         int r = 2 * j + dj, c = 2 * i + di;
