@@ -24,3 +24,8 @@ add_test(NAME tile_files_tri COMMAND test_tri_seam)
 # The tile files' checksum and the input fingerprint hash see damage.
 gdt_add_test_exe(test_hash ${CMAKE_CURRENT_SOURCE_DIR}/c/test_hash.c)
 add_test(NAME hash COMMAND test_hash)
+# The tiled run's DEM rasteriser: the same GeoTIFF bytes whether a tile's
+# faces are rasterised by the caller alone or handed to helper threads, and
+# a bad face reported in face order.
+gdt_add_test_exe(test_tiled_dem ${CMAKE_CURRENT_SOURCE_DIR}/c/test_tiled_dem.c)
+add_test(NAME tiled_dem COMMAND test_tiled_dem ${CMAKE_CURRENT_BINARY_DIR}/tiled-dem-work)
