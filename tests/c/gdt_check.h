@@ -13,6 +13,7 @@
 #include <stdarg.h>
 #include <stdint.h>
 #include <stdio.h>
+#include <stdlib.h>
 
 /* Counts of one test program; {0, 0} is the start. */
 typedef struct gdt_checks {
@@ -76,6 +77,27 @@ static inline uint64_t gdt_splitmix64(uint64_t *state)
     z = (z ^ (z >> 30)) * UINT64_C(0xbf58476d1ce4e5b9);
     z = (z ^ (z >> 27)) * UINT64_C(0x94d049bb133111eb);
     return z ^ (z >> 31);
+}
+
+/* The whole file at path in a malloc'd buffer (free it), its length in *n;
+ * NULL (*n = 0) when it cannot be read or is empty. */
+static inline unsigned char *gdt_check_slurp(const char *path, size_t *n)
+{
+    FILE *f = fopen(path, "rb");
+    unsigned char *b = NULL;
+    long len;
+    *n = 0;
+    if (f == NULL)
+        return NULL;
+    if (fseek(f, 0, SEEK_END) == 0 && (len = ftell(f)) > 0 && fseek(f, 0, SEEK_SET) == 0 &&
+        (b = malloc((size_t)len)) != NULL && fread(b, 1, (size_t)len, f) == (size_t)len)
+        *n = (size_t)len;
+    fclose(f);
+    if (*n == 0) {
+        free(b);
+        b = NULL;
+    }
+    return b;
 }
 
 #endif

@@ -38,21 +38,6 @@ static void make_records(unsigned char *r)
     }
 }
 
-static unsigned char *slurp(const char *path, size_t *n)
-{
-    FILE *f = fopen(path, "rb");
-    unsigned char *b = NULL;
-    long len;
-    *n = 0;
-    if (f == NULL)
-        return NULL;
-    if (fseek(f, 0, SEEK_END) == 0 && (len = ftell(f)) > 0 && fseek(f, 0, SEEK_SET) == 0 &&
-        (b = malloc((size_t)len)) != NULL && fread(b, 1, (size_t)len, f) == (size_t)len)
-        *n = (size_t)len;
-    fclose(f);
-    return b;
-}
-
 static int sequential(const char *path, const unsigned char *recs)
 {
     gdt_las_copy *w = NULL;
@@ -138,12 +123,12 @@ int main(int argc, char **argv)
     snprintf(a, sizeof a, "%s/las-copy-seq.las", dir);
     snprintf(b, sizeof b, "%s/las-copy-parts.las", dir);
     CHECK(sequential(a, recs));
-    fa = slurp(a, &na);
+    fa = gdt_check_slurp(a, &na);
     CHECK(fa != NULL && na == 227 + (size_t)NREC * RL);
     for (int t = 0; t < 4; t++) {
         int ok = t < 3 ? in_parts(b, recs, cuts3, 3, order3[t]) : in_parts(b, recs, cuts4, 4, order4);
         CHECK(ok);
-        fb = slurp(b, &nb);
+        fb = gdt_check_slurp(b, &nb);
         GDT_CHECK(&checks, fa != NULL && fb != NULL && na == nb && memcmp(fa, fb, na) == 0,
                   "case %d: the file in parts differs from the sequential one", t);
         free(fb);

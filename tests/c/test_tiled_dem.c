@@ -142,21 +142,6 @@ static gdt_status run(const cloud *c, const int32_t *faces, const char *path, in
     return st;
 }
 
-static unsigned char *slurp(const char *path, size_t *len)
-{
-    FILE *f = fopen(path, "rb");
-    unsigned char *b = NULL;
-    long n;
-    *len = 0;
-    if (f == NULL)
-        return NULL;
-    if (fseek(f, 0, SEEK_END) == 0 && (n = ftell(f)) > 0 && fseek(f, 0, SEEK_SET) == 0 &&
-        (b = malloc((size_t)n)) != NULL && fread(b, 1, (size_t)n, f) == (size_t)n)
-        *len = (size_t)n;
-    fclose(f);
-    return b;
-}
-
 int main(int argc, char **argv)
 {
     cloud c;
@@ -184,7 +169,7 @@ int main(int argc, char **argv)
     gdt_error_clear(&err);
     st = run(&c, c.tri, ref, 1, ALONE, &err);
     CHECK(st == GDT_OK, "one thread: %s", err.msg);
-    want = slurp(ref, &want_len);
+    want = gdt_check_slurp(ref, &want_len);
     CHECK(want != NULL && want_len > 1000, "%s: no DEM written", ref);
 
     {
@@ -203,7 +188,7 @@ int main(int argc, char **argv)
             gdt_error_clear(&err);
             st = run(&c, c.tri, path, ways[w].threads, ways[w].mode, &err);
             CHECK(st == GDT_OK, "%s: %s", ways[w].name, err.msg);
-            got = slurp(path, &len);
+            got = gdt_check_slurp(path, &len);
             CHECK(got != NULL && want != NULL && len == want_len &&
                       memcmp(got, want, len) == 0,
                   "%s: DEM bytes differ from one thread's (%zu against %zu bytes)",
