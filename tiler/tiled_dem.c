@@ -37,6 +37,7 @@
 
 #define TD_HELPERS 15       /* most helper threads */
 #define TD_PART 4096        /* faces per part of a job */
+#define TD_AHEAD 8          /* faces between a prefetch of points and their use */
 #define TD_BATCH_RUNS 2048  /* runs per batch */
 #define TD_BATCH_CELLS 8192 /* cells per batch (a run has at most 256) */
 
@@ -211,6 +212,13 @@ static gdt_status raster_range(tr_dem *d, td_batch *b, const tr_dem_tile *t, uin
     gdt_status st = GDT_OK;
     for (size_t f = lo; f < hi && st == GDT_OK; f++) {
         gdt_raster_vertex v[3];
+        if (f + TD_AHEAD < hi) /* the points of a face a few ahead: they are scattered */
+            for (int i = 0; i < 3; i++) {
+                uint64_t k = (uint64_t)((int64_t)tri[3 * (f + TD_AHEAD) + (size_t)i] -
+                                        (int64_t)base);
+                if (k < t->n)
+                    __builtin_prefetch(&t->pts[k]);
+            }
         for (int i = 0; i < 3; i++) {
             int64_t k = (int64_t)tri[3 * f + (size_t)i] - (int64_t)base;
             if (k < 0 || (uint64_t)k >= t->n) {
