@@ -52,7 +52,11 @@
  * home).  Each one passed over is a warning (5150) naming it; with none
  * usable the variable is removed, so PoCL never sees an empty or unusable
  * one (it aborts on an empty one).  PoCL reads the variable once per
- * process, so the first context created decides.
+ * process, so the first context created decides.  PoCL (3.1) leaves one
+ * empty file, "tempfile_" and six characters, in that directory at every
+ * start: those of this user older than an hour are removed then, so the
+ * directory holds no more of them than an hour's runs left.  (Program
+ * binaries of kernel texts no longer built are not removed.)
  *
  * Errors: every OpenCL failure is GDT_EDEVICE (exit 5) with a message
  * naming the call and the OpenCL error (e.g. "clBuildProgram(gcd_pba.cl):

@@ -11,7 +11,9 @@
 #include "private/kernel_text.h"
 
 #include <ctype.h>
+#include <dirent.h>
 #include <errno.h>
+#include <fcntl.h>
 #include <inttypes.h>
 #include <pthread.h>
 #include <stdio.h>
@@ -19,6 +21,7 @@
 #include <string.h>
 #include <sys/mman.h>
 #include <sys/stat.h>
+#include <time.h>
 #include <unistd.h>
 
 #ifndef GDT_KERNEL_DIR
@@ -508,6 +511,46 @@ static int usable_dir(const char *dir, int private)
     return access(dir, W_OK | X_OK) == 0 ? 0 : errno;
 }
 
+/* Whether name is one of PoCL's temporary files: "tempfile_" and the six
+ * characters mkstemp chose, without a suffix. */
+static int pocl_tempfile_name(const char *name)
+{
+    if (strncmp(name, "tempfile_", 9) != 0 || strlen(name) != 15)
+        return 0;
+    for (int i = 9; i < 15; i++)
+        if (!isalnum((unsigned char)name[i]))
+            return 0;
+    return 1;
+}
+
+/* Removes from PoCL's cache directory dir the empty files PoCL leaves
+ * behind (see gdt_ocl.h): this user's, named as pocl_tempfile_name says,
+ * empty, and older than OCL_TEMPFILE_AGE seconds, so that none another
+ * process has just created (and may be about to fill) is touched.
+ * Best effort: what cannot be read or removed is left. */
+#define OCL_TEMPFILE_AGE 3600
+static void sweep_pocl_tempfiles(const char *dir)
+{
+    DIR *d = opendir(dir);
+    struct dirent *e;
+    time_t now = time(NULL);
+    int fd;
+
+    if (d == NULL)
+        return;
+    fd = dirfd(d);
+    while ((e = readdir(d)) != NULL) {
+        struct stat st;
+        if (!pocl_tempfile_name(e->d_name) ||
+            fstatat(fd, e->d_name, &st, AT_SYMLINK_NOFOLLOW) != 0)
+            continue;
+        if (S_ISREG(st.st_mode) && st.st_size == 0 && st.st_uid == getuid() &&
+            st.st_mtime < now - OCL_TEMPFILE_AGE)
+            (void)unlinkat(fd, e->d_name, 0);
+    }
+    closedir(d);
+}
+
 /* Points POCL_CACHE_DIR at a usable directory (see gdt_ocl.h): the one
  * asked for, else the user's own POCL_CACHE_DIR, else
  * $XDG_CACHE_HOME/gdt-tile/pocl, else ~/.cache/gdt-tile/pocl, else
@@ -550,6 +593,7 @@ static void set_pocl_cache(const char *cache_dir, gdt_log *log)
         if (env == NULL || strcmp(env, dir) != 0)
             setenv("POCL_CACHE_DIR", dir, 1);
         snprintf(g_prog_dir, sizeof g_prog_dir, "%s/programs", dir);
+        sweep_pocl_tempfiles(dir);
         return;
     }
     if (env != NULL)

@@ -6,6 +6,7 @@ the entry is written again, and the output is the same bytes."""
 import os
 import pathlib
 import shutil
+import time
 
 import tiled_util as tu
 from cache_util import copy_cache
@@ -151,6 +152,35 @@ def test_the_temporary_cache_directory_is_made_private(gdt_bin, tmp_path):
         assert r.returncode != 0 and "missing.las" in r.stderr, r.stderr
         assert made.is_dir() and (made.stat().st_mode & 0o777) == 0o700, oct(made.stat().st_mode)
         assert f"cannot use {made}" not in r.stderr, r.stderr
+
+
+def test_pocl_leftover_files_older_than_an_hour_are_removed(gdt_bin, tmp_path):
+    """PoCL 3.1 leaves an empty "tempfile_XXXXXX" in its cache directory at
+    every start; a run removes those of this user older than an hour, and
+    nothing else: not a recent one (another process may be about to fill
+    it), not one with data, a suffix or another length, not a directory."""
+    cloud = tu.gen_cloud(tmp_path / "c.las", 3000, 4, "lidar")
+    cache = private_cache(tmp_path)
+    for f in cache.glob("tempfile_*"):
+        f.unlink()
+    old = time.time() - 2 * 3600
+    gone = [cache / n for n in ("tempfile_Ab12Cd", "tempfile_000000", "tempfile_zZzZzZ")]
+    kept = [cache / n for n in ("tempfile_Qq11Ww", "tempfile_Rr22Tt.so", "tempfile_abc",
+                                "tempfile_Fresh1", "tempfile_Dd33Ee", "tempfileX000000")]
+    for f in gone + kept:
+        if f.name == "tempfile_Dd33Ee":
+            f.mkdir()
+        else:
+            f.write_bytes(b"x" if f.name == "tempfile_Qq11Ww" else b"")
+        if f.name != "tempfile_Fresh1":
+            os.utime(f, (old, old))
+    run(gdt_bin, cloud, tmp_path / "a.ply", cache)
+    for f in gone:
+        assert not f.exists(), f
+    for f in kept:
+        assert f.exists(), f
+    new = set(cache.glob("tempfile_*")) - set(kept)
+    assert len(new) <= 1, sorted(new)  # this run's own, at most
 
 
 def test_a_moved_kernel_directory_keeps_its_compiled_programs(gdt_bin, root, tmp_path):
