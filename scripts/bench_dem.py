@@ -17,6 +17,8 @@ CPU time (user + system, all threads) of the best run.  The ratios with --dem /
 without are the targets, each PASS or MISS:
   time ratio  <= --target-time (1.15)
   RSS ratio   <= --target-rss (1.10)
+Beside them, not targets: each DEM run's time over the no-DEM run of its own
+round, and their median (the machine's speed drifts between rounds).
 
 For scale, a --subset of the cloud (default 1M points, the whole cloud when
 smaller), the records nearest its centre (a window of the cloud's aspect, in
@@ -44,6 +46,7 @@ import math
 import os
 import pathlib
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -259,6 +262,10 @@ def main(argv=None):
         for (name, cmd, _), res in zip(cmds, (None, 1.0, res_sp)):
             r = dict(t[name], name=name, dem_res=res, command=cmd)
             if res is not None:
+                # each round's run against the no-DEM run of the same round: not a
+                # target, a view of the machine's noise beside the best-of figures
+                r["round_ratios"] = [w / b for w, b in zip(r["walls_s"], base["walls_s"])]
+                r["median_round_ratio"] = statistics.median(r["round_ratios"])
                 r["time_ratio"] = r["wall_s"] / base["wall_s"]
                 r["rss_ratio"] = r["peak_rss_bytes"] / base["peak_rss_bytes"]
                 for what, v, target in (("time ratio", r["time_ratio"], a.target_time),
@@ -295,6 +302,10 @@ def main(argv=None):
             print(line)
         print(f"targets: time ratio <= {a.target_time}, peak RSS ratio <= {a.target_rss} "
               f"(with --dem / without)")
+        for r in runs[1:]:
+            print(f"{r['name']}: time ratio of each round to that round's run without "
+                  f"--dem: {' '.join(f'{x:.3f}' for x in r['round_ratios'])} "
+                  f"(median {r['median_round_ratio']:.3f})")
         s = subset
         print(f"\n{be.size_label(s['points'])}-point subset, R = 1 m, {s['cols']} x {s['rows']} "
               f"cells:")

@@ -35,6 +35,9 @@ def test_bench_dem_runs_at_a_tiny_size(gdt_bin, tmp_path):
         assert x["wall_s"] > 0 and x["peak_rss_bytes"] > 0
     for x in d["runs"][1:]:
         assert {"time_ratio", "rss_ratio", "time_pass", "rss_pass"} <= set(x)
+        assert len(x["round_ratios"]) == 1 and x["median_round_ratio"] == x["round_ratios"][0]
+        assert abs(x["round_ratios"][0] - x["time_ratio"]) < 1e-12  # one round: the same
+    assert out.count("median") == 2, out
     assert len(d["targets"]) == 4 and d["pass"] == all(t["pass"] for t in d["targets"])
     assert (r.returncode == 0) == d["pass"]
     s = d["subset"]
