@@ -154,6 +154,25 @@ static inline gdt_i128 gdt_orient2d_half_det(gdt_pred_stats *st, gdt_hpt a, gdt_
            (gdt_i128)(b.y - a.y) * (gdt_i128)(p.x - a.x);
 }
 
+/* The same determinant for small relative coordinates: the cross product
+ * (ux, uy) x (vx, vy) = ux vy - uy vx, exact in 64 bits when every
+ * |component| <= GDT_SMALL_DET_MAX (products up to 2^60, their difference
+ * up to 2^61).  An orientation determinant does not change under
+ * translation, so gdt_orient2d_half_det(a, b, p) equals this of b - a and
+ * p - a whenever those are that small.  Counts one orient2d call. */
+#define GDT_SMALL_DET_MAX (INT64_C(1) << 30)
+
+static inline int64_t gdt_orient2d_small_det(gdt_pred_stats *st, int64_t ux, int64_t uy,
+                                             int64_t vx, int64_t vy)
+{
+    assert(ux >= -GDT_SMALL_DET_MAX && ux <= GDT_SMALL_DET_MAX && uy >= -GDT_SMALL_DET_MAX &&
+           uy <= GDT_SMALL_DET_MAX && vx >= -GDT_SMALL_DET_MAX && vx <= GDT_SMALL_DET_MAX &&
+           vy >= -GDT_SMALL_DET_MAX && vy <= GDT_SMALL_DET_MAX);
+    if (st != NULL)
+        st->orient_calls++;
+    return ux * vy - uy * vx;
+}
+
 /* The half-open ownership rule of an edge u -> v of a counter-clockwise
  * triangle (its interior on the left): returns 1 if p lies strictly left of
  * the directed line u -> v, or on it and the edge is *owned*:

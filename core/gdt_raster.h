@@ -64,6 +64,12 @@ typedef struct gdt_raster_grid {
     double inv_dx, inv_dy; /* 1 / (2 mx), 1 / (2 my): estimates for cell indices */
     uint64_t mag_dx, mag_dy; /* floor((2^64 - 1) / d) + 1 for d = 2 mx, 2 my: exact
                               * quotients of 32-bit numerators; 0 = not set */
+    int64_t x1;          /* lattice x of the east edge of the last column */
+    int64_t y1;          /* lattice y of the south edge of the last row */
+    int fast;            /* the grid spans under 2^32 doubled steps each way: with
+                          * mag_dx, mag_dy set, faces inside it take exact
+                          * multiply-high cell bounds; 0 = the general path
+                          * always (the same cells, values and runs) */
 } gdt_raster_grid;
 
 /* A TIN vertex: global lattice integers (|x|, |y| < 2^53, as gdt_point)

@@ -1,7 +1,14 @@
 /* raster.c — the DEM grid on the lattice and the rasterisation of TIN
  * triangles (gdt_raster.h).  Every geometric decision goes through the
  * half-lattice predicates of gdt_predicates.h; this file only does the
- * index arithmetic of the grid. */
+ * index arithmetic of the grid.
+ *
+ * Two ways through a face, with the same cells, values and runs (tested
+ * call by call): a face inside a grid that spans under 2^32 doubled steps
+ * (nearly every one) gets its cell bounds from one multiply-high each, and
+ * when its box holds at most 2 x 2 centres (nearly every face of a grid
+ * about as fine as the points) it is tested in 64-bit determinants
+ * relative to its box; everything else takes general_triangle. */
 #include "gdt_raster.h"
 
 #include <math.h>
@@ -14,6 +21,10 @@
 #define RASTER_RUN 256
 #define RASTER_SMALL 16 /* bounding boxes of at most this many centres: tested cell by cell */
 #define RASTER_REL_TOL 1e-9
+/* faces whose box spans at most this many doubled steps each way may take
+ * tiny_triangle: coordinates relative to the box stay within
+ * gdt_orient2d_small_det's range */
+#define RASTER_TINY_SPAN GDT_SMALL_DET_MAX
 
 static int64_t floor_div(int64_t n, int64_t d) /* d > 0 */
 {
@@ -50,6 +61,13 @@ static int64_t floor_div_mag(int64_t n, int64_t d, double inv, uint64_t mag)
     if (mag != 0 && n >= 0 && n < (INT64_C(1) << 32))
         return (int64_t)(((unsigned __int128)mag * (uint64_t)n) >> 64);
     return floor_div_inv(n, d, inv);
+}
+
+/* The high half of m n: floor(n / d) for m = floor((2^64 - 1) / d) + 1,
+ * 0 <= n < 2^32 and 2 <= d <= 2^32 (see floor_div_mag). */
+static int64_t mul_hi(uint64_t m, int64_t n)
+{
+    return (int64_t)(((unsigned __int128)m * (uint64_t)n) >> 64);
 }
 
 static int64_t ceil_div_mag(int64_t n, int64_t d, double inv, uint64_t mag)
@@ -179,6 +197,12 @@ gdt_status gdt_raster_grid_define(gdt_raster_grid *g, const gdt_lattice *lat, in
                              opt, res, (long long)g->geo.ncols, (long long)g->geo.nrows, opt);
     g->x0 = ax + kc0 * g->mx;
     g->y0 = ay + kn * g->my;
+    g->x1 = g->x0 + g->geo.ncols * g->mx;
+    g->y1 = g->y0 - g->geo.nrows * g->my;
+    /* the bounds' numerators of a box inside the grid are at most
+     * (2 ncols + 1) mx and (2 nrows + 1) my */
+    g->fast = (2 * g->geo.ncols + 1) * g->mx < (INT64_C(1) << 32) &&
+              (2 * g->geo.nrows + 1) * g->my < (INT64_C(1) << 32);
     g->geo.res_x = g->geo.res_y = res;
     g->geo.west = al_x ? (double)kc0 * res : lat->ox + lat->sx * (double)g->x0;
     g->geo.north = al_y ? (double)kn * res : lat->oy + lat->sy * (double)g->y0;
@@ -254,9 +278,100 @@ static gdt_status small_triangle(const gdt_raster_grid *g, gdt_pred_stats *st, g
     return GDT_OK;
 }
 
-gdt_status gdt_raster_triangle(const gdt_raster_grid *g, gdt_pred_stats *st,
-                               const gdt_raster_vertex v[3], gdt_raster_sink sink, void *ctx,
-                               gdt_error *err)
+/* The cells of a face whose bounding box [ox, ox + RASTER_TINY_SPAN] x
+ * [oy, oy + RASTER_TINY_SPAN] (doubled coordinates) holds at most 2 x 2
+ * centres, columns c_lo..c_hi and rows r_lo..r_hi: nearly every face when
+ * the grid is about as fine as the points.  Relative to (ox, oy) every
+ * vertex and candidate centre lies in [0, RASTER_TINY_SPAN]^2, so
+ * gdt_orient2d_small_det is exact, and the determinants of the other
+ * centres follow by exact integer steps.  Owns exactly the centres
+ * small_triangle owns, with the same values and the same runs: orientation
+ * and ownership do not change under translation, and the weights are the
+ * same integers. */
+static gdt_status tiny_triangle(const gdt_raster_grid *g, gdt_pred_stats *st, const gdt_hpt p[3],
+                                const double z[3], int64_t ox, int64_t oy, int64_t r_lo,
+                                int64_t r_hi, int64_t c_lo, int64_t c_hi, gdt_raster_sink sink,
+                                void *ctx, gdt_error *err)
+{
+    const int64_t qx = 2 * g->x0 + g->mx * (2 * c_lo + 1) - ox;
+    const int64_t qy = 2 * g->y0 - g->my * (2 * r_lo + 1) - oy;
+    const int64_t dx = 2 * g->mx, dy = 2 * g->my;
+    int64_t det, ax, ay, bx, by, cx, cy, ea, eb, ec, sxa, sxb, sxc, sya, syb, syc;
+    int oa, ob, oc, f;
+    double za, zb, zc, dd, zr[3];
+
+    det = gdt_orient2d_small_det(st, p[1].x - p[0].x, p[1].y - p[0].y, p[2].x - p[0].x,
+                                 p[2].y - p[0].y);
+    if (det == 0)
+        return GDT_OK;
+    /* a, b, c counter-clockwise */
+    ax = p[0].x - ox;
+    ay = p[0].y - oy;
+    za = z[0];
+    if (det > 0) {
+        bx = p[1].x - ox, by = p[1].y - oy, zb = z[1];
+        cx = p[2].x - ox, cy = p[2].y - oy, zc = z[2];
+    } else {
+        bx = p[2].x - ox, by = p[2].y - oy, zb = z[2];
+        cx = p[1].x - ox, cy = p[1].y - oy, zc = z[1];
+        det = -det;
+    }
+    /* the weight of a is e_a(q) = (c - b) x (q - b), of b (a - c) x (q - c),
+     * of c (b - a) x (q - a), at the first centre q; a column east adds
+     * sx, a row south sy; o: the edge owns centres on its line
+     * (gdt_edge_owns_half), so it owns those with e + o > 0 */
+    ea = gdt_orient2d_small_det(st, cx - bx, cy - by, qx - bx, qy - by);
+    eb = gdt_orient2d_small_det(st, ax - cx, ay - cy, qx - cx, qy - cy);
+    ec = gdt_orient2d_small_det(st, bx - ax, by - ay, qx - ax, qy - ay);
+    sxa = -(cy - by) * dx, sya = (cx - bx) * dy;
+    sxb = -(ay - cy) * dx, syb = (ax - cx) * dy;
+    sxc = -(by - ay) * dx, syc = (bx - ax) * dy;
+    oa = (cy < by) | ((cy == by) & (cx > bx));
+    ob = (ay < cy) | ((ay == cy) & (ax > cx));
+    oc = (by < ay) | ((by == ay) & (bx > ax));
+    /* the value's sum starts at the lexicographically smallest vertex */
+    f = (bx < ax || (bx == ax && by < ay)) ? 1 : 0;
+    if (f == 0 ? (cx < ax || (cx == ax && cy < ay)) : (cx < bx || (cx == bx && cy < by)))
+        f = 2;
+    dd = (double)det;
+    for (int64_t r = r_lo; r <= r_hi; r++) {
+        float run[2];
+        int in[2] = {0, 0};
+        int64_t wa = ea, wb = eb, wc = ec;
+        for (int k = 0; k <= (int)(c_hi - c_lo); k++) {
+            if ((wa + oa > 0) & (wb + ob > 0) & (wc + oc > 0)) {
+                zr[0] = (double)wa * za;
+                zr[1] = (double)wb * zb;
+                zr[2] = (double)wc * zc;
+                in[k] = 1;
+                run[k] = (float)(f == 0   ? ((zr[0] + zr[1]) + zr[2]) / dd
+                                 : f == 1 ? ((zr[1] + zr[2]) + zr[0]) / dd
+                                          : ((zr[2] + zr[0]) + zr[1]) / dd);
+            }
+            wa += sxa;
+            wb += sxb;
+            wc += sxc;
+        }
+        if (st != NULL)
+            st->orient_calls += 3 * (uint64_t)(c_hi - c_lo + (r > r_lo));
+        ea -= sya;
+        eb -= syb;
+        ec -= syc;
+        if (in[0] | in[1]) {
+            gdt_status s = sink(ctx, r, in[0] ? c_lo : c_lo + 1, in[0] + in[1],
+                                in[0] ? run : run + 1, err);
+            if (s != GDT_OK)
+                return s;
+        }
+    }
+    return GDT_OK;
+}
+
+/* gdt_raster_triangle for any face: exact for every vertex within
+ * RASTER_VERTEX_LIMIT and any grid from gdt_raster_grid_define. */
+__attribute__((noinline)) static gdt_status
+general_triangle(const gdt_raster_grid *g, gdt_pred_stats *st, const gdt_raster_vertex v[3],
+                 gdt_raster_sink sink, void *ctx, gdt_error *err)
 {
     gdt_hpt p[3], a, b, c;
     double z[3], za, zb, zc, dd, inv_x, inv_y;
@@ -363,6 +478,51 @@ gdt_status gdt_raster_triangle(const gdt_raster_grid *g, gdt_pred_stats *st,
         }
     }
     return GDT_OK;
+}
+
+gdt_status gdt_raster_triangle(const gdt_raster_grid *g, gdt_pred_stats *st,
+                               const gdt_raster_vertex v[3], gdt_raster_sink sink, void *ctx,
+                               gdt_error *err)
+{
+    int64_t minx, maxx, miny, maxy;
+
+    if (!g->fast || g->mag_dx == 0 || g->mag_dy == 0)
+        return general_triangle(g, st, v, sink, ctx, err);
+    minx = v[0].x < v[1].x ? v[0].x : v[1].x;
+    minx = minx < v[2].x ? minx : v[2].x;
+    maxx = v[0].x > v[1].x ? v[0].x : v[1].x;
+    maxx = maxx > v[2].x ? maxx : v[2].x;
+    miny = v[0].y < v[1].y ? v[0].y : v[1].y;
+    miny = miny < v[2].y ? miny : v[2].y;
+    maxy = v[0].y > v[1].y ? v[0].y : v[1].y;
+    maxy = maxy > v[2].y ? maxy : v[2].y;
+    if (minx >= g->x0 && maxx <= g->x1 && miny >= g->y1 && maxy <= g->y0) {
+        /* a box inside the grid's, which spans under 2^32 doubled steps
+         * (g->fast): every numerator of the four cell bounds below is in
+         * [0, 2^32), so the multiply-high quotients are exact, and the
+         * bounds need no clamping (centres of columns 0..ncols - 1, rows
+         * 0..nrows - 1 only) */
+        const int64_t mx = g->mx, my = g->my, xc0 = 2 * g->x0 + mx, yc0 = 2 * g->y0 - my;
+        const int64_t c_lo = mul_hi(g->mag_dx, 2 * minx - xc0 + 2 * mx - 1);
+        const int64_t c_hi = mul_hi(g->mag_dx, 2 * maxx - xc0 + 2 * mx) - 1;
+        const int64_t r_lo = mul_hi(g->mag_dy, yc0 - 2 * maxy + 2 * my - 1);
+        const int64_t r_hi = mul_hi(g->mag_dy, yc0 - 2 * miny + 2 * my) - 1;
+        if (c_lo > c_hi || r_lo > r_hi)
+            return GDT_OK;
+        if (c_hi - c_lo <= 1 && r_hi - r_lo <= 1 && 2 * (maxx - minx) <= RASTER_TINY_SPAN &&
+            2 * (maxy - miny) <= RASTER_TINY_SPAN) {
+            gdt_hpt p[3];
+            double z[3];
+            for (int i = 0; i < 3; i++) {
+                p[i].x = 2 * v[i].x;
+                p[i].y = 2 * v[i].y;
+                z[i] = v[i].z;
+            }
+            return tiny_triangle(g, st, p, z, 2 * minx, 2 * miny, r_lo, r_hi, c_lo, c_hi, sink,
+                                 ctx, err);
+        }
+    }
+    return general_triangle(g, st, v, sink, ctx, err);
 }
 
 gdt_status gdt_raster_faces(const gdt_raster_grid *g, gdt_pred_stats *st, const gdt_point *pts,

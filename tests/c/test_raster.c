@@ -8,6 +8,9 @@
  *     (closed), to none outside, to at most one on the hull; whatever the
  *     face order, rotation and orientation, with the same value bits;
  *   - values: a plane z = 3x - 2y + 5 is reproduced at every centre;
+ *   - faces of a dense cloud: the fast cell bounds and the small-face path
+ *     make the same sink calls as the general path, at fine and coarse
+ *     cell sizes, in either orientation;
  *   - vertices near 2^52 lattice steps: no overflow (UBSan in the sanitizer
  *     tree), the same coverage;
  *   - the grid rule: aligned corners, refused cell sizes, the default size;
@@ -256,6 +259,7 @@ static void test_coverage(int64_t grid_span, int64_t base, int64_t m, int npts, 
     {
         gdt_raster_grid g0 = g;
         g0.mag_dx = g0.mag_dy = 0;
+        g0.fast = 0;
         for (size_t i = 0; i < mesh.ntris; i++)
             order[i] = i;
         rasterise_all(&g0, pts, &mesh, order, 0, &cv2);
@@ -269,6 +273,129 @@ static void test_coverage(int64_t grid_span, int64_t base, int64_t m, int npts, 
     free(cv.val);
     free(cv2.count);
     free(cv2.val);
+    gdt_mesh_free(&mesh);
+    free(pts);
+    free(loc);
+}
+
+/* The sink calls of a rasterisation, in order: an FNV-1a hash of every
+ * (row, col, n, value bits) and their count. */
+typedef struct trace {
+    uint64_t hash, calls, cells;
+} trace;
+
+static void trace_u64(trace *t, uint64_t v)
+{
+    for (int i = 0; i < 8; i++)
+        t->hash = (t->hash ^ ((v >> (8 * i)) & 0xffu)) * UINT64_C(0x100000001b3);
+}
+
+static gdt_status trace_sink(void *ctx, int64_t row, int64_t col, int64_t n, const float *z,
+                             gdt_error *err)
+{
+    trace *t = ctx;
+    (void)err;
+    trace_u64(t, (uint64_t)row);
+    trace_u64(t, (uint64_t)col);
+    trace_u64(t, (uint64_t)n);
+    for (int64_t k = 0; k < n; k++) {
+        uint32_t b;
+        memcpy(&b, &z[k], sizeof b);
+        trace_u64(t, b);
+    }
+    t->calls++;
+    t->cells += (uint64_t)n;
+    return GDT_OK;
+}
+
+/* Faces of a dense cloud at UTM-like magnitudes (lattice 0.01, spacing
+ * about 0.3): at cell sizes near the spacing nearly every face holds at
+ * most 2 x 2 centres, the path of small faces; at coarser ones few do.
+ * Either way the grid's fast bounds and small-face path must make exactly
+ * the sink calls of the general path (g.fast = 0): the same runs, cells and
+ * value bits, in the same order, for faces in either orientation; with
+ * terrain heights and with heights whose weighted sum cancels (there the
+ * order of the value rule's sum decides the bits). */
+static void test_small_faces(void)
+{
+    const int n = 10000;
+    const int64_t side = 3000, bx = 48000000, by = 486000000;
+    const double res[] = {0.01, 0.02, 0.07, 0.2, 0.3, 0.35, 0.5, 1.0, 3.0};
+    gdt_lattice lat = {0.01, 0.01, 0.0, 0.0};
+    gdt_point *pts = calloc((size_t)n, sizeof *pts);
+    gdt_ipt *loc = calloc((size_t)n, sizeof *loc);
+    gdt_mesh mesh;
+    gdt_error err;
+    uint64_t s = 77;
+    int m = 0;
+    unsigned char *used = calloc((size_t)((side + 1) * (side + 1) / 8 + 1), 1);
+
+    gdt_error_clear(&err);
+    gdt_mesh_init(&mesh);
+    while (m < n) { /* distinct points (used: a bitmap of the box); some on centre lines */
+        int64_t x = rnd_in(&s, 0, side), y = rnd_in(&s, 0, side);
+        if (m % 7 == 0)
+            x = x / 10 * 10 + 5 <= side ? x / 10 * 10 + 5 : x / 10 * 10 - 5;
+        if (m % 11 == 0)
+            y = y / 10 * 10 + 5 <= side ? y / 10 * 10 + 5 : y / 10 * 10 - 5;
+        size_t bit = (size_t)(y * (side + 1) + x);
+        if (used[bit / 8] & (1u << (bit % 8)))
+            continue;
+        used[bit / 8] |= (unsigned char)(1u << (bit % 8));
+        loc[m].x = x;
+        loc[m].y = y;
+        pts[m].x = bx + x;
+        pts[m].y = by + y;
+        pts[m].z = 100.0 + (double)(gdt_splitmix64(&s) % 1000003) / 997.0;
+        m++;
+    }
+    free(used);
+    if (gdt_reference_triangulate(NULL, loc, (size_t)n, &mesh, &err) != GDT_OK) {
+        GDT_CHECK(&C, 0, "small faces: %s", err.msg);
+        goto done;
+    }
+    for (size_t k = 0; k < 2 * sizeof res / sizeof res[0]; k++) {
+        gdt_raster_grid g, g0;
+        trace fast[2] = {{UINT64_C(0xcbf29ce484222325), 0, 0}, {UINT64_C(0xcbf29ce484222325), 0, 0}};
+        trace slow[2] = {{UINT64_C(0xcbf29ce484222325), 0, 0}, {UINT64_C(0xcbf29ce484222325), 0, 0}};
+        const double r = res[k % (sizeof res / sizeof res[0])];
+        if (k == sizeof res / sizeof res[0])
+            /* then heights of +-1e17 and small ones: the three products of a
+             * value cancel, so a sum in another order than the value rule's
+             * gives other float bits */
+            for (int i = 0; i < n; i++)
+                pts[i].z = (double)((int)(gdt_splitmix64(&s) % 3) - 1) * 1e17 + (double)(i % 101);
+        GDT_CHECK(&C, gdt_raster_grid_define(&g, &lat, bx, by, bx + side, by + side, (uint64_t)n,
+                                             r, "--dem-res", &err) == GDT_OK,
+                  "%s", err.msg);
+        GDT_CHECK(&C, g.fast, "res %g: the grid takes no fast bounds", r);
+        g0 = g;
+        g0.fast = 0;
+        for (size_t f = 0; f < mesh.ntris; f++)
+            for (int cw = 0; cw < 2; cw++) {
+                gdt_raster_vertex v[3];
+                for (int i = 0; i < 3; i++) {
+                    const gdt_point *p = &pts[mesh.tri[3 * f + (size_t)(cw ? 2 - i : i)]];
+                    v[i].x = p->x;
+                    v[i].y = p->y;
+                    v[i].z = p->z;
+                }
+                GDT_CHECK(&C, gdt_raster_triangle(&g, NULL, v, trace_sink, &fast[cw], &err) ==
+                                  GDT_OK, "%s", err.msg);
+                GDT_CHECK(&C, gdt_raster_triangle(&g0, NULL, v, trace_sink, &slow[cw], &err) ==
+                                  GDT_OK, "%s", err.msg);
+            }
+        for (int cw = 0; cw < 2; cw++)
+            GDT_CHECK(&C, fast[cw].hash == slow[cw].hash && fast[cw].calls == slow[cw].calls &&
+                              fast[cw].cells == slow[cw].cells,
+                      "res %g%s: %llu runs, %llu cells; the general path %llu, %llu (or other "
+                      "values)", r, cw ? ", clockwise" : "",
+                      (unsigned long long)fast[cw].calls, (unsigned long long)fast[cw].cells,
+                      (unsigned long long)slow[cw].calls, (unsigned long long)slow[cw].cells);
+        GDT_CHECK(&C, fast[0].hash == fast[1].hash, "res %g: other calls for clockwise faces", r);
+        GDT_CHECK(&C, fast[0].cells > 0, "res %g: no cells", r);
+    }
+done:
     gdt_mesh_free(&mesh);
     free(pts);
     free(loc);
@@ -554,6 +681,7 @@ int main(int argc, char **argv)
     test_coverage(20, 5, 2, 120, 4, 1);
     test_coverage(60, 1000, 5, 300, 5, 1);
     test_coverage(40, (INT64_C(1) << 52) - 100, 2, 200, 6, 0);
+    test_small_faces();
     test_large_coordinates();
     test_grid_rule();
     test_writer(work);
