@@ -14,13 +14,15 @@
  *     cache) it is one row-major array, raster, instead of the cache; the
  *     build decodes it in place and GDAL's in-memory intermediate takes it
  *     as its band, with no copy. */
-#define _DEFAULT_SOURCE 1 /* mkstemp */
+#define _GNU_SOURCE 1 /* mkstemp, SCHED_IDLE */
 #include "gdt_dem.h"
 
 #include <errno.h>
 #include <fcntl.h>
 #include <float.h>
 #include <math.h>
+#include <pthread.h>
+#include <sched.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -48,6 +50,9 @@ struct gdt_dem {
                           * row-major, and no block cache (cells NULL) */
     void *raster_map;    /* the mapping raster lies in, raster_len bytes */
     size_t raster_len;
+    pthread_t populate_tid; /* the raster's pages being populated (populating) */
+    int populating;
+    int populate_stop; /* __atomic accesses */
     uint32_t *cells;     /* nslots * BLOCK_CELLS */
     int64_t *slot_block; /* block in each slot, -1 free */
     uint64_t *slot_tick; /* last use (LRU) */
@@ -218,6 +223,55 @@ static uint32_t *raster_alloc(gdt_dem *w, size_t bytes)
     return (uint32_t *)a;
 }
 
+/* The raster's pages made present and writable ahead of the rasteriser,
+ * 2 MiB at a time, at idle priority: the first touch of fresh memory (the
+ * kernel zeroing it, a virtual machine's host backing it) then happens on
+ * a core nothing else wants, not in the middle of the rasterising.
+ * MADV_POPULATE_WRITE never changes a page's contents, so the rasteriser
+ * may write cells meanwhile; where the kernel lacks it (before Linux 5.14)
+ * the first call fails and the thread ends.  Advice only: nothing depends
+ * on it having run. */
+static void *populate_main(void *arg)
+{
+    gdt_dem *w = arg;
+#ifdef MADV_POPULATE_WRITE
+    const size_t step = (size_t)2 << 20;
+    const size_t len = (size_t)w->geo.ncols * (size_t)w->geo.nrows * sizeof *w->raster;
+    struct sched_param sp;
+    memset(&sp, 0, sizeof sp);
+    (void)pthread_setschedparam(pthread_self(), SCHED_IDLE, &sp);
+    for (size_t at = 0; at < len && !__atomic_load_n(&w->populate_stop, __ATOMIC_RELAXED);
+         at += step)
+        if (madvise((char *)w->raster + at, len - at < step ? len - at : step,
+                    MADV_POPULATE_WRITE) != 0)
+            break;
+#else
+    (void)w;
+#endif
+    return NULL;
+}
+
+static void populate_start(gdt_dem *w)
+{
+#ifdef MADV_POPULATE_WRITE
+    __atomic_store_n(&w->populate_stop, 0, __ATOMIC_RELAXED);
+    w->populating = pthread_create(&w->populate_tid, NULL, populate_main, w) == 0;
+#else
+    (void)w;
+#endif
+}
+
+/* Stops the populating thread and waits for it: before the raster is read
+ * whole or unmapped. */
+static void populate_join(gdt_dem *w)
+{
+    if (!w->populating)
+        return;
+    __atomic_store_n(&w->populate_stop, 1, __ATOMIC_RELAXED);
+    pthread_join(w->populate_tid, NULL);
+    w->populating = 0;
+}
+
 void gdt_dem_preload(void)
 {
     void *sym;
@@ -292,6 +346,8 @@ gdt_status gdt_dem_create(gdt_dem **out, const gdt_dem_geo *geo, const char *pat
     }
     if ((int64_t)w->nslots >= w->nblocks) {
         w->raster = raster_alloc(w, (size_t)geo->ncols * (size_t)geo->nrows * sizeof *w->raster);
+        if (w->raster != NULL)
+            populate_start(w);
     } else {
         w->cells = cells_alloc(w->nslots * BLOCK_BYTES, &w->cells_aligned);
         w->slot_block = malloc(w->nslots * sizeof *w->slot_block);
@@ -521,6 +577,7 @@ static gdt_status decode_raster(gdt_dem *w, gdt_error *err)
 
 static void free_cache(gdt_dem *w)
 {
+    populate_join(w);
     if (w->raster_map != NULL)
         munmap(w->raster_map, w->raster_len);
     w->raster_map = NULL;
@@ -592,6 +649,7 @@ gdt_status gdt_dem_build(gdt_dem *w, gdt_dem_stats *stats, gdt_error *err)
     if ((w->cells == NULL && w->raster == NULL) || w->built)
         return gdt_error_set(err, GDT_EINTERNAL, 7664,
                              "%s: the DEM was built (or failed to build) already", w->path);
+    populate_join(w); /* every cell is read from here on */
     w->xfer = malloc(BLOCK_BYTES);
     if (w->xfer == NULL) {
         st = gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
