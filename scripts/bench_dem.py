@@ -11,7 +11,10 @@ reused from --workdir) goes through
 three ways: without --dem, with --dem OUT.tif --dem-res 1, and with --dem at the
 point spacing (the mean spacing sqrt(W*H/n) of the cloud's bounding box,
 rounded to a whole number of lattice steps, at least one).  The three
-configurations run in turn, --repeat rounds; each reports its best wall time
+configurations run in turn, --repeat rounds, round k starting with the k-th
+(so each runs first, second and third equally often over three rounds: a
+machine slower after a run does not always weigh on the same one); each
+reports its best wall time
 (the whole process) and its lowest peak RSS (the child's ru_maxrss), with the
 CPU time (user + system, all threads) of the best run.  The ratios with --dem /
 without are the targets, each PASS or MISS:
@@ -75,10 +78,13 @@ def cloud_geometry(las):
 
 def time_runs(cmds, a, run_dir):
     """Runs every (name, cmd, its outputs) of cmds in turn, --repeat rounds, each
-    after deleting its outputs and the job folder; returns name -> figures."""
+    after deleting its outputs and the job folder; round k starts at the k-th
+    command (mod their number), so that each takes every place in a round
+    equally often over a multiple of that many rounds; returns name -> figures
+    (walls_s in round order)."""
     res = {name: {"walls": [], "rss": [], "cpu": []} for name, _, _ in cmds}
     for k in range(a.repeat):
-        for name, cmd, outputs in cmds:
+        for name, cmd, outputs in cmds[k % len(cmds):] + cmds[:k % len(cmds)]:
             for p in outputs:
                 p.unlink(missing_ok=True)
             shutil.rmtree(run_dir / "job", ignore_errors=True)

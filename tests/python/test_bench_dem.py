@@ -41,6 +41,10 @@ def test_bench_dem_runs_at_a_tiny_size(gdt_bin, tmp_path):
         assert x["round_ratios"] == [w / b for w, b in zip(x["walls_s"], base)]
         assert x["median_round_ratio"] == sum(x["round_ratios"]) / 2
     assert out.count("median") == 2, out
+    # the second round starts with the second configuration
+    order = [ln.split(" run ")[0].strip() for ln in r.stderr.splitlines()
+             if " run " in ln and "/2:" in ln and not ln.strip().startswith("subset")]
+    assert order == ["no DEM", "DEM 1 m", "DEM 0.35 m", "DEM 1 m", "DEM 0.35 m", "no DEM"], order
     assert len(d["targets"]) == 4 and d["pass"] == all(t["pass"] for t in d["targets"])
     assert (r.returncode == 0) == d["pass"]
     s = d["subset"]
