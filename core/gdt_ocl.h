@@ -55,8 +55,12 @@
  * process, so the first context created decides.  PoCL (3.1) leaves one
  * empty file, "tempfile_" and six characters, in that directory at every
  * start: those of this user older than an hour are removed then, so the
- * directory holds no more of them than an hour's runs left.  (Program
- * binaries of kernel texts no longer built are not removed.)
+ * directory holds no more of them than an hour's runs left.  Entries no run
+ * used for 30 days are removed then too: program binaries (a run that
+ * loads one renews its time) and, in a directory of gdt-tile's own (not a
+ * POCL_CACHE_DIR the user set), PoCL's program directories (by the
+ * last_accessed file PoCL touches at every build): the directory does not
+ * grow by the kernels of every version that changed them.
  *
  * Errors: every OpenCL failure is GDT_EDEVICE (exit 5) with a message
  * naming the call and the OpenCL error (e.g. "clBuildProgram(gcd_pba.cl):

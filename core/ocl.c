@@ -2,6 +2,7 @@
  * gdt-tile that includes the OpenCL headers. */
 /* madvise(MADV_HUGEPAGE) is a Linux extension */
 #define _DEFAULT_SOURCE 1
+#define _XOPEN_SOURCE 700 /* nftw */
 #define CL_TARGET_OPENCL_VERSION 120
 #define CL_USE_DEPRECATED_OPENCL_1_2_APIS
 #include <CL/cl.h>
@@ -14,6 +15,7 @@
 #include <dirent.h>
 #include <errno.h>
 #include <fcntl.h>
+#include <ftw.h>
 #include <inttypes.h>
 #include <pthread.h>
 #include <stdio.h>
@@ -551,6 +553,101 @@ static void sweep_pocl_tempfiles(const char *dir)
     closedir(d);
 }
 
+/* Whether name is made of n or more of the letters A..P, the alphabet of
+ * PoCL's cache names (a hash, four bits a letter). */
+static int pocl_letters(const char *name, size_t n)
+{
+    size_t k = 0;
+    for (; name[k] != '\0'; k++)
+        if (name[k] < 'A' || name[k] > 'P')
+            return 0;
+    return k >= n;
+}
+
+/* Whether name is a program binary's: 16 lowercase hex digits, ".bin". */
+static int prog_entry_name(const char *name)
+{
+    if (strlen(name) != 20 || strcmp(name + 16, ".bin") != 0)
+        return 0;
+    for (int i = 0; i < 16; i++)
+        if (!isdigit((unsigned char)name[i]) && (name[i] < 'a' || name[i] > 'f'))
+            return 0;
+    return 1;
+}
+
+static int remove_entry(const char *path, const struct stat *sb, int type, struct FTW *ftw)
+{
+    (void)sb;
+    (void)ftw;
+    if (type == FTW_DP)
+        (void)rmdir(path);
+    else
+        (void)unlink(path);
+    return 0; /* best effort: go on */
+}
+
+/* Removes from the kernel cache dir what no run has used for
+ * OCL_CACHE_AGE seconds: program binaries (programs/<16 hex>.bin, whose
+ * time a run that loads one renews) and, when pocl is set (a directory of
+ * gdt-tile's own, not one the user shares through POCL_CACHE_DIR), PoCL's
+ * program directories (<two letters>/<letters>, whose last_accessed file
+ * PoCL 3.1 touches at every build; the directory's own time where there is
+ * none), then the two-letter directories left empty.  Only this user's,
+ * never through a symbolic link.  A kernel text that changes with an
+ * upgrade leaves its old entries behind: without this the directory grows
+ * by every version's kernels.  Best effort, like the sweep above. */
+#define OCL_CACHE_AGE (30L * 86400L)
+static void prune_cache(const char *dir, int pocl)
+{
+    char path[4096 + 64];
+    const time_t old = time(NULL) - OCL_CACHE_AGE;
+    DIR *d;
+    struct dirent *e;
+    struct stat st;
+
+    snprintf(path, sizeof path, "%s/programs", dir);
+    if ((d = opendir(path)) != NULL) {
+        int fd = dirfd(d);
+        while ((e = readdir(d)) != NULL)
+            if (prog_entry_name(e->d_name) &&
+                fstatat(fd, e->d_name, &st, AT_SYMLINK_NOFOLLOW) == 0 && S_ISREG(st.st_mode) &&
+                st.st_uid == getuid() && st.st_mtime < old)
+                (void)unlinkat(fd, e->d_name, 0);
+        closedir(d);
+    }
+    if (!pocl || (d = opendir(dir)) == NULL)
+        return;
+    while ((e = readdir(d)) != NULL) {
+        DIR *sub;
+        struct dirent *f;
+        if (strlen(e->d_name) != 2 || !pocl_letters(e->d_name, 2))
+            continue;
+        snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
+        if (lstat(path, &st) != 0 || !S_ISDIR(st.st_mode) || st.st_uid != getuid() ||
+            (sub = opendir(path)) == NULL)
+            continue;
+        while ((f = readdir(sub)) != NULL) {
+            char prog[sizeof path + 300];
+            struct stat ps, la;
+            if (!pocl_letters(f->d_name, 8) ||
+                (size_t)snprintf(prog, sizeof prog, "%s/%s", path, f->d_name) >= sizeof prog ||
+                lstat(prog, &ps) != 0 || !S_ISDIR(ps.st_mode) || ps.st_uid != getuid())
+                continue;
+            {
+                char last[sizeof prog + 16];
+                snprintf(last, sizeof last, "%s/last_accessed", prog);
+                if (lstat(last, &la) == 0 && S_ISREG(la.st_mode))
+                    ps.st_mtime = la.st_mtime;
+            }
+            if (ps.st_mtime < old)
+                (void)nftw(prog, remove_entry, 16, FTW_DEPTH | FTW_PHYS);
+        }
+        closedir(sub);
+        (void)rmdir(path); /* only when empty */
+    }
+    closedir(d);
+}
+
 /* Points POCL_CACHE_DIR at a usable directory (see gdt_ocl.h): the one
  * asked for, else the user's own POCL_CACHE_DIR, else
  * $XDG_CACHE_HOME/gdt-tile/pocl, else ~/.cache/gdt-tile/pocl, else
@@ -594,6 +691,7 @@ static void set_pocl_cache(const char *cache_dir, gdt_log *log)
             setenv("POCL_CACHE_DIR", dir, 1);
         snprintf(g_prog_dir, sizeof g_prog_dir, "%s/programs", dir);
         sweep_pocl_tempfiles(dir);
+        prune_cache(dir, step != 1);
         return;
     }
     if (env != NULL)
@@ -674,8 +772,10 @@ static unsigned char *prog_load(const uint64_t key[2], size_t *n)
                 fnv(UINT64_C(14695981039346656037), bin, (size_t)size) != sum) {
                 free(bin); /* cut short, longer than it says, or damaged */
                 bin = NULL;
-            } else
+            } else {
                 *n = (size_t)size;
+                (void)futimens(fileno(f), NULL); /* in use: prune_cache keeps it */
+            }
         }
     }
     fclose(f);

@@ -183,6 +183,87 @@ def test_pocl_leftover_files_older_than_an_hour_are_removed(gdt_bin, tmp_path):
     assert len(new) <= 1, sorted(new)  # this run's own, at most
 
 
+def test_cache_entries_unused_for_30_days_are_removed(gdt_bin, tmp_path):
+    """In gdt-tile's own kernel cache ($XDG_CACHE_HOME/gdt-tile/pocl here) a run
+    removes program binaries and PoCL program directories that no run used for
+    30 days (PoCL's last_accessed file, else the directory's time), and the
+    two-letter directories they leave empty; nothing else; a binary a run loads
+    has its time renewed.  In a POCL_CACHE_DIR the user set, PoCL's entries are
+    the user's: only the program binaries are pruned there."""
+    cloud = tu.gen_cloud(tmp_path / "c.las", 3000, 4, "lidar")
+    xdg = tmp_path / "xdg"
+    cache = xdg / "gdt-tile" / "pocl"
+    cache.parent.mkdir(parents=True)
+    shutil.copytree(private_cache(tmp_path), cache)
+    env = {k: v for k, v in os.environ.items() if k != "POCL_CACHE_DIR"}
+    env["XDG_CACHE_HOME"] = str(xdg)
+    old = time.time() - 40 * 86400
+
+    def age(p):
+        for q in sorted(p.rglob("*"), key=lambda q: -len(q.parts)) if p.is_dir() else []:
+            os.utime(q, (old, old), follow_symlinks=False)
+        os.utime(p, (old, old))
+
+    def pocl_entry(rel, last_accessed=True):
+        d = cache / rel
+        (d / "k" / "0-0-0").mkdir(parents=True)
+        (d / "program.bc").write_bytes(b"bc")
+        (d / "k" / "0-0-0" / "k.so").write_bytes(b"so")
+        if last_accessed:
+            (d / "last_accessed").write_bytes(b"")
+        return d
+
+    gone = [pocl_entry("AB/CDEFGHIJKLMNOP"), pocl_entry("AD/PPPPPPPPPP", last_accessed=False)]
+    kept = [pocl_entry("AC/ABCDEFGHIJ"), pocl_entry("zz/ABCDEFGHIJ"), pocl_entry("AE/ABCdefGHIJ"),
+            pocl_entry("AQ/ABCDEFGHIJ"), pocl_entry("AF/ABCDEFG")]
+    for d in gone + kept:
+        age(d)
+        age(d.parent)
+    os.utime(cache / "AC" / "ABCDEFGHIJ" / "last_accessed")  # used today
+    programs = cache / "programs"
+    programs.mkdir(exist_ok=True)
+    old_bin, new_bin, other = (programs / "0123456789abcdef.bin", programs / "fedcba9876543210.bin",
+                               programs / "notes.txt")
+    for f in (old_bin, new_bin, other):
+        f.write_bytes(b"x")
+    for f in (old_bin, other):
+        os.utime(f, (old, old))
+
+    r = tu.run([gdt_bin, cloud, "--tile", "128", "-o", tmp_path / "a.ply", "-v"], env=env)
+    assert r.returncode == 0, r.stderr
+    assert str(programs) in r.stderr
+    for d in gone:
+        assert not d.exists(), d
+    assert not (cache / "AB").exists() and not (cache / "AD").exists()
+    for d in kept:
+        assert (d / "k" / "0-0-0" / "k.so").exists(), d
+    assert not old_bin.exists() and new_bin.exists() and other.exists()
+
+    # a binary loaded again is renewed; one used 20 days ago stays
+    real = sorted(p for p in programs.glob("*.bin") if p != new_bin)
+    assert real, sorted(programs.iterdir())
+    for p in real:
+        os.utime(p, (time.time() - 20 * 86400,) * 2)
+    r = tu.run([gdt_bin, cloud, "--tile", "128", "-o", tmp_path / "b.ply", "-v"], env=env)
+    assert r.returncode == 0, r.stderr
+    assert counts(r.stderr)[0] > 0, r.stderr
+    fresh = [p for p in real if p.exists() and p.stat().st_mtime > time.time() - 3600]
+    assert len(fresh) == counts(r.stderr)[0], (len(fresh), r.stderr)
+
+    # a POCL_CACHE_DIR of the user's: PoCL's old entries stay, old binaries go
+    own = private_cache(tmp_path / "own")
+    keep = own / "AB" / "CDEFGHIJKLMNOP"
+    shutil.copytree(gone[0].parent.parent / "AC", own / "AB")  # any PoCL-like entry
+    (own / "AB" / "ABCDEFGHIJ").rename(keep)
+    age(keep)
+    (own / "programs").mkdir(exist_ok=True)
+    stale = own / "programs" / "0123456789abcdef.bin"
+    stale.write_bytes(b"x")
+    os.utime(stale, (old, old))
+    run(gdt_bin, cloud, tmp_path / "c.ply", own)
+    assert (keep / "program.bc").exists() and not stale.exists()
+
+
 def test_a_moved_kernel_directory_keeps_its_compiled_programs(gdt_bin, root, tmp_path):
     """A program's text carries its headers, not the kernel directory's path:
     the kernels copied elsewhere (an install, a bundle on another machine)
