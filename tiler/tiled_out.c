@@ -226,22 +226,33 @@ static gdt_status load_tile_points(tr_out *o, const gdt_tile_desc *d, gdt_error 
         st = tl_rfile_open_buf(&rf, path, d->points, o->rbuf, TR_CHUNK, err);
     while (st == GDT_OK && n < d->points) {
         size_t m = 0;
-        st = tl_rfile_read(&rf, o->pts,
-                           (size_t)d->points - n < TR_CHUNK ? (size_t)d->points - n : TR_CHUNK, &m,
-                           err);
+        const unsigned char *rec = NULL;
+        /* x, y and z straight from the records (tl_rec_put's layout) */
+        st = tl_rfile_raw(&rf, &rec,
+                          (size_t)d->points - n < TR_CHUNK ? (size_t)d->points - n : TR_CHUNK, &m,
+                          err);
         if (st == GDT_OK && m == 0)
             st = gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
         for (size_t i = 0; st == GDT_OK && i < m; i++) {
-            const int64_t x = o->pts[i].x - d->local_x0, y = o->pts[i].y - d->local_y0;
+            uint64_t w[3];
+            int64_t px, py, x, y;
+            memcpy(w, rec + i * TL_REC, sizeof w);
+            w[0] = tl_le64(w[0]);
+            w[1] = tl_le64(w[1]);
+            w[2] = tl_le64(w[2]);
+            memcpy(&px, &w[0], 8);
+            memcpy(&py, &w[1], 8);
+            x = px - d->local_x0;
+            y = py - d->local_y0;
             if (x < 0 || y < 0 || x > (int64_t)UINT32_MAX || y > (int64_t)UINT32_MAX) {
                 st = gdt_error_set(err, GDT_EJOB, 6802,
                                    "%s: point (%" PRId64 ", %" PRId64 ") outside its tile",
-                                   path, o->pts[i].x, o->pts[i].y);
+                                   path, px, py);
                 break;
             }
             o->tile_pts[n + i].x = (uint32_t)x;
             o->tile_pts[n + i].y = (uint32_t)y;
-            o->tile_pts[n + i].z = o->pts[i].z;
+            memcpy(&o->tile_pts[n + i].z, &w[2], 8);
         }
         n += m;
     }

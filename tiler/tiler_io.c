@@ -302,6 +302,28 @@ gdt_status tl_rfile_read(tl_rfile *r, gdt_point *out, size_t cap, size_t *n, gdt
     return GDT_OK;
 }
 
+gdt_status tl_rfile_raw(tl_rfile *r, const unsigned char **rec, size_t cap, size_t *n,
+                        gdt_error *err)
+{
+    size_t k;
+    *n = 0;
+    *rec = NULL;
+    if (r->pos == r->len) {
+        gdt_status st;
+        if (r->left == 0)
+            return GDT_OK;
+        st = rfile_fill(r, err);
+        if (st != GDT_OK)
+            return st;
+    }
+    k = r->len - r->pos < cap ? r->len - r->pos : cap;
+    *rec = r->buf + r->pos * TL_REC;
+    r->pos += k;
+    r->left -= k;
+    *n = k;
+    return GDT_OK;
+}
+
 void tl_rfile_close(tl_rfile *r)
 {
     if (r->fd >= 0)

@@ -145,6 +145,11 @@ gdt_status tl_rfile_open_buf(tl_rfile *r, const char *path, uint64_t nrec, unsig
 gdt_status tl_rfile_next(tl_rfile *r, gdt_point *p, int *got, gdt_error *err);
 /* Up to cap records into out[]; *n = 0 at the end. */
 gdt_status tl_rfile_read(tl_rfile *r, gdt_point *out, size_t cap, size_t *n, gdt_error *err);
+/* Up to cap records as they are in the file (TL_REC bytes each, decode with
+ * tl_rec_get or field by field): *rec points into r's buffer, valid until
+ * the next read from r; *n = 0 at the end. */
+gdt_status tl_rfile_raw(tl_rfile *r, const unsigned char **rec, size_t cap, size_t *n,
+                        gdt_error *err);
 void tl_rfile_close(tl_rfile *r);
 
 /* Size of a file in records (GDT_EIO 4504 if it cannot be stat'ed or its
