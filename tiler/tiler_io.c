@@ -261,47 +261,6 @@ static gdt_status rfile_fill(tl_rfile *r, gdt_error *err)
     return GDT_OK;
 }
 
-gdt_status tl_rfile_next(tl_rfile *r, gdt_point *p, int *got, gdt_error *err)
-{
-    *got = 0;
-    if (r->pos == r->len) {
-        gdt_status st;
-        if (r->left == 0)
-            return GDT_OK;
-        st = rfile_fill(r, err);
-        if (st != GDT_OK)
-            return st;
-    }
-    tl_rec_get(p, r->buf + r->pos * TL_REC);
-    r->pos++;
-    r->left--;
-    *got = 1;
-    return GDT_OK;
-}
-
-gdt_status tl_rfile_read(tl_rfile *r, gdt_point *out, size_t cap, size_t *n, gdt_error *err)
-{
-    size_t k = 0;
-    *n = 0;
-    while (k < cap) {
-        if (r->pos == r->len) {
-            gdt_status st;
-            if (r->left == 0)
-                break;
-            st = rfile_fill(r, err);
-            if (st != GDT_OK)
-                return st;
-        }
-        while (k < cap && r->pos < r->len) {
-            tl_rec_get(&out[k++], r->buf + r->pos * TL_REC);
-            r->pos++;
-            r->left--;
-        }
-    }
-    *n = k;
-    return GDT_OK;
-}
-
 gdt_status tl_rfile_raw(tl_rfile *r, const unsigned char **rec, size_t cap, size_t *n,
                         gdt_error *err)
 {
@@ -320,6 +279,37 @@ gdt_status tl_rfile_raw(tl_rfile *r, const unsigned char **rec, size_t cap, size
     *rec = r->buf + r->pos * TL_REC;
     r->pos += k;
     r->left -= k;
+    *n = k;
+    return GDT_OK;
+}
+
+gdt_status tl_rfile_next(tl_rfile *r, gdt_point *p, int *got, gdt_error *err)
+{
+    const unsigned char *rec;
+    size_t n;
+    gdt_status st = tl_rfile_raw(r, &rec, 1, &n, err);
+    *got = st == GDT_OK && n == 1;
+    if (*got)
+        tl_rec_get(p, rec);
+    return st;
+}
+
+gdt_status tl_rfile_read(tl_rfile *r, gdt_point *out, size_t cap, size_t *n, gdt_error *err)
+{
+    size_t k = 0;
+    *n = 0;
+    while (k < cap) {
+        const unsigned char *rec;
+        size_t m;
+        gdt_status st = tl_rfile_raw(r, &rec, cap - k, &m, err);
+        if (st != GDT_OK)
+            return st;
+        if (m == 0)
+            break;
+        for (size_t i = 0; i < m; i++)
+            tl_rec_get(&out[k + i], rec + i * TL_REC);
+        k += m;
+    }
     *n = k;
     return GDT_OK;
 }
