@@ -60,7 +60,10 @@
  * loads one renews its time) and, in a directory of gdt-tile's own (not a
  * POCL_CACHE_DIR the user set), PoCL's program directories (by the
  * last_accessed file PoCL touches at every build): the directory does not
- * grow by the kernels of every version that changed them.
+ * grow by the kernels of every version that changed them.  Each process
+ * holds a shared lock on the directory's ".in-use" file, and one prunes
+ * only when no other holds it (no entry goes while another run may load
+ * it).
  *
  * Errors: every OpenCL failure is GDT_EDEVICE (exit 5) with a message
  * naming the call and the OpenCL error (e.g. "clBuildProgram(gcd_pba.cl):

@@ -21,6 +21,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/file.h>
 #include <sys/mman.h>
 #include <sys/stat.h>
 #include <time.h>
@@ -592,10 +593,16 @@ static int remove_entry(const char *path, const struct stat *sb, int type, struc
  * gdt-tile's own, not one the user shares through POCL_CACHE_DIR), PoCL's
  * program directories (<two letters>/<letters>, whose last_accessed file
  * PoCL 3.1 touches at every build; the directory's own time where there is
- * none), then the two-letter directories left empty.  Only this user's,
- * never through a symbolic link.  A kernel text that changes with an
- * upgrade leaves its old entries behind: without this the directory grows
- * by every version's kernels.  Best effort, like the sweep above. */
+ * none).  Only this user's, never through a symbolic link.  A kernel text
+ * that changes with an upgrade leaves its old entries behind: without this
+ * the directory grows by every version's kernels.
+ *
+ * Every process that uses the directory holds a shared lock on its
+ * ".in-use" file for its whole life; only a process that gets the lock
+ * alone prunes (then keeps it shared), so no entry goes while another run
+ * (an MPI rank started beside this one, say) may be loading it.  The
+ * two-letter directories stay, empty or not: PoCL may be about to create
+ * an entry in one.  Best effort, like the sweep above. */
 #define OCL_CACHE_AGE (30L * 86400L)
 static void prune_cache(const char *dir, int pocl)
 {
@@ -604,7 +611,16 @@ static void prune_cache(const char *dir, int pocl)
     DIR *d;
     struct dirent *e;
     struct stat st;
+    int lock;
 
+    snprintf(path, sizeof path, "%s/.in-use", dir);
+    lock = open(path, O_RDWR | O_CREAT | O_CLOEXEC, 0600);
+    if (lock < 0)
+        return;
+    if (flock(lock, LOCK_EX | LOCK_NB) != 0) {
+        (void)flock(lock, LOCK_SH); /* another run uses the cache: no pruning */
+        return;                     /* the descriptor stays open, the lock held */
+    }
     snprintf(path, sizeof path, "%s/programs", dir);
     if ((d = opendir(path)) != NULL) {
         int fd = dirfd(d);
@@ -615,8 +631,10 @@ static void prune_cache(const char *dir, int pocl)
                 (void)unlinkat(fd, e->d_name, 0);
         closedir(d);
     }
-    if (!pocl || (d = opendir(dir)) == NULL)
+    if (!pocl || (d = opendir(dir)) == NULL) {
+        (void)flock(lock, LOCK_SH);
         return;
+    }
     while ((e = readdir(d)) != NULL) {
         DIR *sub;
         struct dirent *f;
@@ -643,9 +661,9 @@ static void prune_cache(const char *dir, int pocl)
                 (void)nftw(prog, remove_entry, 16, FTW_DEPTH | FTW_PHYS);
         }
         closedir(sub);
-        (void)rmdir(path); /* only when empty */
     }
     closedir(d);
+    (void)flock(lock, LOCK_SH);
 }
 
 /* Points POCL_CACHE_DIR at a usable directory (see gdt_ocl.h): the one
