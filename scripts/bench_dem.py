@@ -10,8 +10,9 @@ reused from --workdir) goes through
     gdt-tile CLOUD.las --tile T --threads N -o OUT.ply -q
 three ways: without --dem, with --dem OUT.tif --dem-res 1, and with --dem at the
 point spacing (the mean spacing sqrt(W*H/n) of the cloud's bounding box,
-rounded to a whole number of lattice steps, at least one).  The three
-configurations run in turn, --repeat rounds, round k starting with the k-th
+rounded to a whole number of lattice steps, at least one).  Each runs once
+untimed first (the first run on a machine compiles the OpenCL kernels).  The
+three configurations run in turn, --repeat rounds, round k starting with the k-th
 (so each runs first, second and third equally often over three rounds: a
 machine slower after a run does not always weigh on the same one); each
 reports its best wall time
@@ -76,21 +77,34 @@ def cloud_geometry(las):
                                      float(h.maxs[1])), float(h.scales[0]), float(h.scales[1]))
 
 
+def run_fresh(cmd, outputs, run_dir, tag):
+    """One run of cmd after deleting its outputs and the job folder: (wall s,
+    peak RSS bytes, CPU s); its log is run_dir/tag."""
+    for p in outputs:
+        p.unlink(missing_ok=True)
+    shutil.rmtree(run_dir / "job", ignore_errors=True)
+    log = str(run_dir / tag)
+    rc, wall, rss, cpu = be.run_measured(cmd, log)
+    be.check_run(rc, cmd, log, cmd[0].rsplit("/", 1)[-1])
+    return wall, rss, cpu
+
+
 def time_runs(cmds, a, run_dir):
-    """Runs every (name, cmd, its outputs) of cmds in turn, --repeat rounds, each
-    after deleting its outputs and the job folder; round k starts at the k-th
-    command (mod their number), so that each takes every place in a round
-    equally often over a multiple of that many rounds; returns name -> figures
-    (walls_s in round order)."""
+    """Runs every (name, cmd, its outputs) of cmds once untimed, then in turn,
+    --repeat rounds, each after deleting its outputs and the job folder;
+    round k starts at the k-th command (mod their number), so that each takes
+    every place in a round equally often over a multiple of that many rounds;
+    returns name -> figures (walls_s in round order)."""
     res = {name: {"walls": [], "rss": [], "cpu": []} for name, _, _ in cmds}
+    # the first run on a machine compiles the OpenCL kernels into the cache
+    # and loads the input and the libraries into memory, which no later run
+    # pays
+    for name, cmd, outputs in cmds:
+        wall, _, _ = run_fresh(cmd, outputs, run_dir, f"{name}-warm")
+        print(f"  {name} warm-up run (not counted): {wall:8.2f} s", file=sys.stderr, flush=True)
     for k in range(a.repeat):
         for name, cmd, outputs in cmds[k % len(cmds):] + cmds[:k % len(cmds)]:
-            for p in outputs:
-                p.unlink(missing_ok=True)
-            shutil.rmtree(run_dir / "job", ignore_errors=True)
-            log = str(run_dir / f"{name}-{k}")
-            rc, wall, rss, cpu = be.run_measured(cmd, log)
-            be.check_run(rc, cmd, log, cmd[0].rsplit("/", 1)[-1])
+            wall, rss, cpu = run_fresh(cmd, outputs, run_dir, f"{name}-{k}")
             r = res[name]
             r["walls"].append(wall)
             r["rss"].append(rss)

@@ -45,6 +45,14 @@ def test_bench_dem_runs_at_a_tiny_size(gdt_bin, tmp_path):
     order = [ln.split(" run ")[0].strip() for ln in r.stderr.splitlines()
              if " run " in ln and "/2:" in ln and not ln.strip().startswith("subset")]
     assert order == ["no DEM", "DEM 1 m", "DEM 0.35 m", "DEM 1 m", "DEM 0.35 m", "no DEM"], order
+    # each configuration ran once untimed before the rounds
+    warm = [ln.split(" warm-up run ")[0].strip() for ln in r.stderr.splitlines()
+            if "warm-up run (not counted)" in ln]
+    assert warm == ["no DEM", "DEM 1 m", "DEM 0.35 m", "subset gdt-tile", "subset gdal_grid"], \
+        r.stderr
+    first_timed = next(i for i, ln in enumerate(r.stderr.splitlines()) if "run 1/2:" in ln)
+    assert all(i < first_timed for i, ln in enumerate(r.stderr.splitlines())
+               if "warm-up run" in ln and not ln.strip().startswith("subset")), r.stderr
     assert len(d["targets"]) == 4 and d["pass"] == all(t["pass"] for t in d["targets"])
     assert (r.returncode == 0) == d["pass"]
     s = d["subset"]
