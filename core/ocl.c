@@ -514,25 +514,37 @@ static int usable_dir(const char *dir, int private)
     return access(dir, W_OK | X_OK) == 0 ? 0 : errno;
 }
 
-/* Whether name is one of PoCL's temporary files: "tempfile_" and the six
- * characters mkstemp chose, without a suffix. */
-static int pocl_tempfile_name(const char *name)
+/* What name is among PoCL's temporary files: 1 "tempfile_" and the six
+ * characters mkstemp chose (PoCL 3.1 leaves one, empty, at every start),
+ * 2 that with the suffix of a file PoCL's build writes and then renames
+ * into place (left behind, filled or not, by a build that was
+ * interrupted), 0 anything else. */
+static int pocl_tempfile_kind(const char *name)
 {
-    if (strncmp(name, "tempfile_", 9) != 0 || strlen(name) != 15)
+    static const char *const suffixes[] = {".so",  ".so.o",   ".bc",     ".cl",  ".preproc.cl",
+                                           ".spirv", ".binary", ".temp"};
+    if (strncmp(name, "tempfile_", 9) != 0 || strlen(name) < 15)
         return 0;
     for (int i = 9; i < 15; i++)
         if (!isalnum((unsigned char)name[i]))
             return 0;
-    return 1;
+    if (name[15] == '\0')
+        return 1;
+    for (size_t i = 0; i < sizeof suffixes / sizeof suffixes[0]; i++)
+        if (strcmp(name + 15, suffixes[i]) == 0)
+            return 2;
+    return 0;
 }
 
-/* Removes from PoCL's cache directory dir the empty files PoCL leaves
- * behind (see gdt_ocl.h): this user's, named as pocl_tempfile_name says,
- * empty, and older than OCL_TEMPFILE_AGE seconds, so that none another
- * process has just created (and may be about to fill) is touched.
+/* Removes from PoCL's cache directory dir the temporary files PoCL leaves
+ * behind (see gdt_ocl.h): this user's regular files named as
+ * pocl_tempfile_kind says and older than OCL_TEMPFILE_AGE seconds (no
+ * build takes that long, and none another process has just created, and
+ * may be about to fill, is touched): the empty ones of every start, and in
+ * a directory of gdt-tile's own (own) those of interrupted builds too.
  * Best effort: what cannot be read or removed is left. */
 #define OCL_TEMPFILE_AGE 3600
-static void sweep_pocl_tempfiles(const char *dir)
+static void sweep_pocl_tempfiles(const char *dir, int own)
 {
     DIR *d = opendir(dir);
     struct dirent *e;
@@ -544,11 +556,11 @@ static void sweep_pocl_tempfiles(const char *dir)
     fd = dirfd(d);
     while ((e = readdir(d)) != NULL) {
         struct stat st;
-        if (!pocl_tempfile_name(e->d_name) ||
-            fstatat(fd, e->d_name, &st, AT_SYMLINK_NOFOLLOW) != 0)
+        int kind = pocl_tempfile_kind(e->d_name);
+        if (kind == 0 || fstatat(fd, e->d_name, &st, AT_SYMLINK_NOFOLLOW) != 0)
             continue;
-        if (S_ISREG(st.st_mode) && st.st_size == 0 && st.st_uid == getuid() &&
-            st.st_mtime < now - OCL_TEMPFILE_AGE)
+        if (S_ISREG(st.st_mode) && st.st_uid == getuid() && st.st_mtime < now - OCL_TEMPFILE_AGE &&
+            (own || (kind == 1 && st.st_size == 0)))
             (void)unlinkat(fd, e->d_name, 0);
     }
     closedir(d);
@@ -708,7 +720,7 @@ static void set_pocl_cache(const char *cache_dir, gdt_log *log)
         if (env == NULL || strcmp(env, dir) != 0)
             setenv("POCL_CACHE_DIR", dir, 1);
         snprintf(g_prog_dir, sizeof g_prog_dir, "%s/programs", dir);
-        sweep_pocl_tempfiles(dir);
+        sweep_pocl_tempfiles(dir, step != 1);
         prune_cache(dir, step != 1);
         return;
     }

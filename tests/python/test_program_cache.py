@@ -187,9 +187,10 @@ def test_pocl_leftover_files_older_than_an_hour_are_removed(gdt_bin, tmp_path):
 def test_cache_entries_unused_for_30_days_are_removed(gdt_bin, tmp_path):
     """In gdt-tile's own kernel cache ($XDG_CACHE_HOME/gdt-tile/pocl here) a run
     removes program binaries and PoCL program directories that no run used for
-    30 days (PoCL's last_accessed file, else the directory's time), nothing
-    else, and nothing while another run holds the directory's lock; a binary a
-    run loads has its time renewed.  In a POCL_CACHE_DIR the user set, PoCL's entries are
+    30 days (PoCL's last_accessed file, else the directory's time), PoCL's
+    temporary files of interrupted builds older than an hour, nothing else,
+    and nothing of the 30-day entries while another run holds the directory's
+    lock; a binary a run loads has its time renewed.  In a POCL_CACHE_DIR the user set, PoCL's entries are
     the user's: only the program binaries are pruned there."""
     cloud = tu.gen_cloud(tmp_path / "c.las", 3000, 4, "lidar")
     xdg = tmp_path / "xdg"
@@ -229,6 +230,25 @@ def test_cache_entries_unused_for_30_days_are_removed(gdt_bin, tmp_path):
         f.write_bytes(b"x")
     for f in (old_bin, other):
         os.utime(f, (old, old))
+    # PoCL's temporaries of interrupted builds, filled or not, go after an
+    # hour in a directory of gdt-tile's own; a recent one, another suffix, a
+    # directory or a link stay
+    hour_ago = time.time() - 2 * 3600
+    tmp_gone = [cache / n for n in ("tempfile_Ab12Cd.so", "tempfile_Ef34Gh.so.o",
+                                    "tempfile_Ij56Kl.preproc.cl", "tempfile_Mn78Op.bc",
+                                    "tempfile_Qr90St")]
+    tmp_kept = [cache / n for n in ("tempfile_Fresh1.so", "tempfile_Uv12Wx.exe",
+                                    "tempfile_Yz34Ab.so.x", "tempfile_Cd56Ef.so",
+                                    "tempfile_Gh78Ij.so")]
+    for f in tmp_gone + tmp_kept:
+        if f.name == "tempfile_Cd56Ef.so":
+            f.mkdir()
+        elif f.name == "tempfile_Gh78Ij.so":
+            f.symlink_to(other)
+        else:
+            f.write_bytes(b"\x7fELF partial" if f.name != "tempfile_Qr90St" else b"")
+        if f.name != "tempfile_Fresh1.so":
+            os.utime(f, (hour_ago, hour_ago), follow_symlinks=False)
 
     # while another run uses the directory (a shared lock on .in-use), nothing goes
     with open(cache / ".in-use", "a") as lk:
@@ -247,6 +267,10 @@ def test_cache_entries_unused_for_30_days_are_removed(gdt_bin, tmp_path):
     for d in kept:
         assert (d / "k" / "0-0-0" / "k.so").exists(), d
     assert not old_bin.exists() and new_bin.exists() and other.exists()
+    for f in tmp_gone:
+        assert not f.exists(), f
+    for f in tmp_kept:
+        assert f.exists() or f.is_symlink(), f
 
     # a binary loaded again is renewed; one used 20 days ago stays
     real = sorted(p for p in programs.glob("*.bin") if p != new_bin)
@@ -259,8 +283,12 @@ def test_cache_entries_unused_for_30_days_are_removed(gdt_bin, tmp_path):
     fresh = [p for p in real if p.exists() and p.stat().st_mtime > time.time() - 3600]
     assert len(fresh) == counts(r.stderr)[0], (len(fresh), r.stderr)
 
-    # a POCL_CACHE_DIR of the user's: PoCL's old entries stay, old binaries go
+    # a POCL_CACHE_DIR of the user's: PoCL's old entries stay, old binaries go,
+    # and of PoCL's temporaries only the empty ones without a suffix
     own = private_cache(tmp_path / "own")
+    partial = own / "tempfile_Ab12Cd.so"
+    partial.write_bytes(b"\x7fELF partial")
+    os.utime(partial, (hour_ago, hour_ago))
     keep = own / "AB" / "CDEFGHIJKLMNOP"
     shutil.copytree(gone[0].parent.parent / "AC", own / "AB")  # any PoCL-like entry
     (own / "AB" / "ABCDEFGHIJ").rename(keep)
@@ -270,7 +298,7 @@ def test_cache_entries_unused_for_30_days_are_removed(gdt_bin, tmp_path):
     stale.write_bytes(b"x")
     os.utime(stale, (old, old))
     run(gdt_bin, cloud, tmp_path / "c.ply", own)
-    assert (keep / "program.bc").exists() and not stale.exists()
+    assert (keep / "program.bc").exists() and not stale.exists() and partial.exists()
 
 
 def test_a_moved_kernel_directory_keeps_its_compiled_programs(gdt_bin, root, tmp_path):
