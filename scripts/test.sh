@@ -59,7 +59,8 @@ unset POCL_CACHE_DIR
 export GDT_TEST_POCL_SEED="$SEED"
 PYTEST=(.venv/bin/python -m pytest -q -n "$JOBS" --dist worksteal)
 step "pytest (release build)"
-GDT_BUILD_DIR="$ROOT/build" "${PYTEST[@]}" tests/python
+# --durations: the slowest tests named in the log, where the suite's time goes
+GDT_BUILD_DIR="$ROOT/build" "${PYTEST[@]}" --durations=25 tests/python
 step "pytest, sanitize-marked tests (ASan+UBSan build)"
 GDT_BUILD_DIR="$ROOT/build-asan" "${PYTEST[@]}" -m sanitize tests/python
 step "pytest, launch tests of a build without MPI (clang ASan+UBSan fuzz build)"
