@@ -57,9 +57,9 @@
  * start, and a build that is interrupted leaves its temporaries (the same
  * name with a suffix such as ".so"): those of this user older than an hour
  * are removed then (of the second kind, only in a directory of gdt-tile's
- * own), so the directory holds no more of them than an hour's runs left.  Entries no run
- * used for 30 days are removed then too: program binaries (a run that
- * loads one renews its time) and, in a directory of gdt-tile's own (not a
+ * own), so the directory holds no more of them than an hour's runs left.
+ * Entries no run used for 30 days are removed then too: program binaries
+ * (a run that loads one renews its time) and, in a directory of gdt-tile's own (not a
  * POCL_CACHE_DIR the user set), PoCL's program directories (by the
  * last_accessed file PoCL touches at every build): the directory does not
  * grow by the kernels of every version that changed them.  Each process

@@ -31,8 +31,8 @@ cloud's south-west corner (one point per (x, y), the first z, as gdt-tile
 keeps them); gdt-tile --dem
 --dem-res 1 runs on the LAS, then gdal_grid -a linear:radius=0 (qhull and
 linear interpolation) on the CSV, on the same grid as gdt-tile's GeoTIFF (its
-extent and size, R = 1).  Both best of --repeat, wall time and peak RSS; the
-share of cells where both have a value and agree within 1e-6 relative is
+extent and size, R = 1).  Both once untimed, then best of --repeat, wall time
+and peak RSS; the share of cells where both have a value and agree within 1e-6 relative is
 printed as a check, not a target.
 
 Outputs are deleted after each run; without --workdir everything lives in a

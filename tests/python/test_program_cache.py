@@ -157,9 +157,11 @@ def test_the_temporary_cache_directory_is_made_private(gdt_bin, tmp_path):
 
 def test_pocl_leftover_files_older_than_an_hour_are_removed(gdt_bin, tmp_path):
     """PoCL 3.1 leaves an empty "tempfile_XXXXXX" in its cache directory at
-    every start; a run removes those of this user older than an hour, and
-    nothing else: not a recent one (another process may be about to fill
-    it), not one with data, a suffix or another length, not a directory."""
+    every start; in a POCL_CACHE_DIR the user set, a run removes those of this
+    user older than an hour, and nothing else: not a recent one (another
+    process may be about to fill it), not one with data, a suffix or another
+    length, not a directory (in gdt-tile's own directory those with data or
+    a build's suffix go too: test_cache_entries_unused_for_30_days_are_removed)."""
     cloud = tu.gen_cloud(tmp_path / "c.las", 3000, 4, "lidar")
     cache = private_cache(tmp_path)
     for f in cache.glob("tempfile_*"):
@@ -190,8 +192,9 @@ def test_cache_entries_unused_for_30_days_are_removed(gdt_bin, tmp_path):
     30 days (PoCL's last_accessed file, else the directory's time), PoCL's
     temporary files of interrupted builds older than an hour, nothing else,
     and nothing of the 30-day entries while another run holds the directory's
-    lock; a binary a run loads has its time renewed.  In a POCL_CACHE_DIR the user set, PoCL's entries are
-    the user's: only the program binaries are pruned there."""
+    lock; a binary a run loads has its time renewed.  In a POCL_CACHE_DIR the
+    user set, PoCL's entries and filled temporaries are the user's: only the
+    program binaries (and empty temporaries) are pruned there."""
     cloud = tu.gen_cloud(tmp_path / "c.las", 3000, 4, "lidar")
     xdg = tmp_path / "xdg"
     cache = xdg / "gdt-tile" / "pocl"
@@ -270,7 +273,7 @@ def test_cache_entries_unused_for_30_days_are_removed(gdt_bin, tmp_path):
     for f in tmp_gone:
         assert not f.exists(), f
     for f in tmp_kept:
-        assert f.exists() or f.is_symlink(), f
+        assert f.is_symlink() or f.exists(), f  # the link itself, not its target
 
     # a binary loaded again is renewed; one used 20 days ago stays
     real = sorted(p for p in programs.glob("*.bin") if p != new_bin)
