@@ -20,6 +20,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "private/kernel_text.h"
+
 #ifndef GDT_PRED_KERNEL_DIR
 #define GDT_PRED_KERNEL_DIR "kernels"
 #endif
@@ -28,7 +30,6 @@
 
 /* Test kernel: one work-item per case, same op codes as pred_eval. */
 static const char *kernel_source =
-    "#include \"gdt_exact.clh\"\n"
     "__kernel void pred_eval(__global const long *rec, __global uchar *out, uint n)\n"
     "{\n"
     "    size_t i = get_global_id(0);\n"
@@ -128,6 +129,7 @@ int main(int argc, char **argv)
     cl_state s;
     memset(&s, 0, sizeof s);
     unsigned char *out = NULL;
+    char *header = NULL;
     size_t len = 0;
     unsigned char *in = read_all(&len);
     if (in == NULL) {
@@ -162,12 +164,21 @@ int main(int argc, char **argv)
     s.queue = clCreateCommandQueue(s.ctx, dev, 0, &e);
     if (e != CL_SUCCESS)
         goto fail;
-    s.prog = clCreateProgramWithSource(s.ctx, 1, &kernel_source, NULL, &e);
+    /* the header's text in front of the kernel, as the product hands its
+     * programs over (private/kernel_text.h): no -I naming a directory,
+     * which a path with spaces would break */
+    char failed[1024] = "";
+    int te = gdt_kernel_text(kdir, "gdt_exact.clh", &header, NULL, failed, sizeof failed);
+    if (te != 0) {
+        fprintf(stderr, "pred_cl_eval: cannot read %s: %s\n", failed, strerror(te));
+        goto fail;
+    }
+    const char *texts[2] = {header, kernel_source};
+    s.prog = clCreateProgramWithSource(s.ctx, 2, texts, NULL, &e);
     if (e != CL_SUCCESS)
         goto fail;
-    char opts[4096];
-    snprintf(opts, sizeof opts, "-cl-std=CL1.2 -Werror -I %s%s", kdir,
-             no_fp64 ? " -D GDT_X_NO_F64" : "");
+    char opts[256];
+    snprintf(opts, sizeof opts, "-cl-std=CL1.2 -Werror%s", no_fp64 ? " -D GDT_X_NO_F64" : "");
     e = clBuildProgram(s.prog, 1, &dev, opts, NULL, NULL);
     if (e != CL_SUCCESS) {
         size_t log_len = 0;
@@ -219,6 +230,7 @@ fail:
     if (e != CL_SUCCESS)
         fprintf(stderr, "pred_cl_eval: OpenCL error %d\n", (int)e);
     cl_state_release(&s);
+    free(header);
     free(out);
     free(in);
     return rc;
