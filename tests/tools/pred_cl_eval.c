@@ -30,6 +30,7 @@
 
 /* Test kernel: one work-item per case, same op codes as pred_eval. */
 static const char *kernel_source =
+    "\n#line 1 \"pred_cl_eval.c kernel\"\n" /* after the header's text, its own lines */
     "__kernel void pred_eval(__global const long *rec, __global uchar *out, uint n)\n"
     "{\n"
     "    size_t i = get_global_id(0);\n"
