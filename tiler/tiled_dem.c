@@ -205,6 +205,25 @@ static gdt_status batch_put(void *ctx, int64_t row, int64_t col, int64_t n, cons
     return GDT_OK;
 }
 
+/* Point k of tile t as the rasteriser takes it; GDT_EJOB 6802 when it lies
+ * outside the tile. */
+static gdt_status tile_vertex(const tr_dem_tile *t, uint64_t k, gdt_raster_vertex *v,
+                              gdt_error *err)
+{
+    uint64_t w[3];
+    memcpy(w, t->rec + k * TL_REC, sizeof w);
+    v->x = (int64_t)tl_le64(w[0]);
+    v->y = (int64_t)tl_le64(w[1]);
+    w[2] = tl_le64(w[2]);
+    memcpy(&v->z, &w[2], sizeof v->z);
+    if ((uint64_t)(v->x - t->x0) >= (uint64_t)t->extent ||
+        (uint64_t)(v->y - t->y0) >= (uint64_t)t->extent)
+        return gdt_error_set(err, GDT_EJOB, 6802, "%s: point (%" PRId64 ", %" PRId64
+                             ") outside its tile", t->path != NULL ? t->path : "(a tile)",
+                             v->x, v->y);
+    return GDT_OK;
+}
+
 /* Rasterises faces [lo, hi) of tri through batch b. */
 static gdt_status raster_range(tr_dem *d, td_batch *b, const tr_dem_tile *t, uint64_t base,
                                const int32_t *tri, size_t lo, size_t hi, gdt_error *err)
@@ -217,20 +236,17 @@ static gdt_status raster_range(tr_dem *d, td_batch *b, const tr_dem_tile *t, uin
                 uint64_t k = (uint64_t)((int64_t)tri[3 * (f + TD_AHEAD) + (size_t)i] -
                                         (int64_t)base);
                 if (k < t->n)
-                    __builtin_prefetch(&t->pts[k]);
+                    __builtin_prefetch(t->rec + k * TL_REC);
             }
-        for (int i = 0; i < 3; i++) {
+        for (int i = 0; i < 3 && st == GDT_OK; i++) {
             int64_t k = (int64_t)tri[3 * f + (size_t)i] - (int64_t)base;
-            if (k < 0 || (uint64_t)k >= t->n) {
+            if (k < 0 || (uint64_t)k >= t->n)
                 st = gdt_error_set(err, GDT_EINTERNAL, 7663,
                                    "DEM: a certified face names vertex %d, outside its "
                                    "tile's %" PRIu64 "..%" PRIu64,
                                    (int)tri[3 * f + (size_t)i], base, base + t->n - 1);
-                break;
-            }
-            v[i].x = t->ox + (int64_t)t->pts[k].x;
-            v[i].y = t->oy + (int64_t)t->pts[k].y;
-            v[i].z = t->pts[k].z;
+            else
+                st = tile_vertex(t, (uint64_t)k, &v[i], err);
         }
         if (st == GDT_OK)
             st = gdt_raster_triangle(&d->grid, NULL, v, batch_put, b, err);
@@ -498,7 +514,13 @@ gdt_status tr_dem_window_begin(tr_dem *d, const tr_dem_tile *t, const char *path
     if (wn->path == NULL)
         return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory");
     for (size_t i = 0; i < n; i++) {
-        const int64_t x = t->ox + (int64_t)t->pts[i].x, y = t->oy + (int64_t)t->pts[i].y;
+        gdt_raster_vertex v;
+        int64_t x, y;
+        gdt_status st = tile_vertex(t, i, &v, err);
+        if (st != GDT_OK)
+            return st;
+        x = v.x;
+        y = v.y;
         if (i == 0 || x < minx)
             minx = x;
         if (i == 0 || x > maxx)

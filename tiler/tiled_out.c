@@ -1,5 +1,6 @@
 /* tiled_out.c — the mesh of a tiled run, written beside the tile stage (see
  * private/tiled_out.h). */
+#define _GNU_SOURCE 1 /* MADV_DONTNEED */
 #include "private/tiled_out.h"
 #include "gdt_grow.h"
 #include "gdt_ply.h"
@@ -15,6 +16,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <fcntl.h>
+#include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -63,9 +66,10 @@ struct tr_out {
     const uint64_t *dlab; /* a part without the trim graph: the (tile, label) pairs it
                            * drops, sorted (tr_out_set_dropped) */
     size_t ndlab;
-    tr_dem_pt *tile_pts; /* with a DEM: the points of the tile whose faces are
-                          * copied (16 bytes a point, not the 32 of a record) */
-    size_t cap_tile_pts;
+    const unsigned char *tile_map; /* with a DEM: the .pts file of the tile whose faces
+                                    * are copied, mapped (tile_map_len bytes), or NULL */
+    size_t tile_map_len;
+    size_t tile_released; /* bytes of tile_map handed back from its start */
     unsigned char *mdem;         /* with a DEM: MD_RECORD TR_CHUNK bytes of merge.dem */
     void (*on_complete)(void *); /* tr_out_on_complete: called once, or never */
     void *on_complete_ctx;
@@ -207,58 +211,83 @@ static gdt_status copy_face_records(tr_out *o, FILE *f, FILE *df, const char *pa
     return GDT_OK;
 }
 
-/* With a DEM: tile k's points (d->points of them) into o->tile_pts,
- * relative to the tile's local origin. */
-static gdt_status load_tile_points(tr_out *o, const gdt_tile_desc *d, gdt_error *err)
+/* With a DEM: tile k's .pts file (d->points records, checked against its
+ * size) mapped read-only at o->tile_map for the rasteriser, which reads
+ * the points where they lie: a copy would be a tile's worth of fresh
+ * memory, which costs more to fault in than the copy itself.  The file is
+ * read ahead now (most of it is in the page cache since pass 2); the pages
+ * the faces have left behind are released as they go (release_tile_points).
+ * *path: the file's path, for messages (the caller frees it). */
+static gdt_status map_tile_points(tr_out *o, const gdt_tile_desc *d, char **path, gdt_error *err)
 {
-    tl_rfile rf;
-    char *path = NULL;
-    size_t n = 0;
-    gdt_status st;
+    struct stat sb;
+    size_t len;
+    void *p;
+    int fd;
+    gdt_status st = tr_tile_path(o->src.tiles_dir, d, "pts", path, err);
 
-    if (gdt_grow(&o->tile_pts, &o->cap_tile_pts, (size_t)d->points + 1, sizeof *o->tile_pts,
-                 TR_CHUNK) != 0)
-        return gdt_error_set(err, GDT_EINTERNAL, 7001, "out of memory (the DEM's tile points)");
-    memset(&rf, 0, sizeof rf);
-    rf.fd = -1;
-    st = tr_tile_path(o->src.tiles_dir, d, "pts", &path, err);
-    if (st == GDT_OK)
-        st = tl_rfile_open_buf(&rf, path, d->points, o->rbuf, TR_CHUNK, err);
-    while (st == GDT_OK && n < d->points) {
-        size_t m = 0;
-        const unsigned char *rec = NULL;
-        /* x, y and z straight from the records (tl_rec_put's layout) */
-        st = tl_rfile_raw(&rf, &rec,
-                          (size_t)d->points - n < TR_CHUNK ? (size_t)d->points - n : TR_CHUNK, &m,
-                          err);
-        if (st == GDT_OK && m == 0)
-            st = gdt_error_set(err, GDT_EJOB, 6802, "%s: truncated", path);
-        for (size_t i = 0; st == GDT_OK && i < m; i++) {
-            uint64_t w[3];
-            int64_t px, py, x, y;
-            memcpy(w, rec + i * TL_REC, sizeof w);
-            w[0] = tl_le64(w[0]);
-            w[1] = tl_le64(w[1]);
-            w[2] = tl_le64(w[2]);
-            memcpy(&px, &w[0], 8);
-            memcpy(&py, &w[1], 8);
-            x = px - d->local_x0;
-            y = py - d->local_y0;
-            if (x < 0 || y < 0 || x > (int64_t)UINT32_MAX || y > (int64_t)UINT32_MAX) {
-                st = gdt_error_set(err, GDT_EJOB, 6802,
-                                   "%s: point (%" PRId64 ", %" PRId64 ") outside its tile",
-                                   path, px, py);
-                break;
-            }
-            o->tile_pts[n + i].x = (uint32_t)x;
-            o->tile_pts[n + i].y = (uint32_t)y;
-            memcpy(&o->tile_pts[n + i].z, &w[2], 8);
-        }
-        n += m;
+    if (st != GDT_OK)
+        return st;
+    fd = open(*path, O_RDONLY | O_CLOEXEC);
+    if (fd < 0)
+        return gdt_error_set(err, GDT_EIO, 4504, "cannot open %s: %s", *path, strerror(errno));
+    if (fstat(fd, &sb) != 0 || sb.st_size < 0 || (uint64_t)sb.st_size % TL_REC != 0 ||
+        (uint64_t)sb.st_size / TL_REC != d->points || (uint64_t)sb.st_size > SIZE_MAX) {
+        close(fd);
+        return gdt_error_set(err, GDT_EJOB, 6503,
+                             "%s: it does not hold the %llu records written to it (the job "
+                             "directory was changed; rerun with --restart)",
+                             *path, (unsigned long long)d->points);
     }
-    tl_rfile_close(&rf);
-    free(path);
-    return st;
+    len = (size_t)sb.st_size;
+    if (len == 0) {
+        close(fd);
+        return GDT_OK;
+    }
+    p = mmap(NULL, len, PROT_READ, MAP_PRIVATE, fd, 0);
+    close(fd);
+    if (p == MAP_FAILED)
+        return gdt_error_set(err, GDT_EIO, 4504, "cannot map %s: %s", *path, strerror(errno));
+    (void)posix_madvise(p, len, POSIX_MADV_WILLNEED); /* advice only */
+    o->tile_map = p;
+    o->tile_map_len = len;
+    o->tile_released = 0;
+    return GDT_OK;
+}
+
+/* The mapped tile's records below record `below` handed back (advice
+ * only): the faces are sorted by their smallest vertex, so once a chunk
+ * starts at vertex v no later face reads a point below it, and the
+ * mapping's resident pages stay those of the points still to come near
+ * the faces being copied (a cloud in acquisition order), not the whole
+ * tile.  A page read again after all is mapped again from the page cache:
+ * nothing depends on this. */
+static void release_tile_points(tr_out *o, uint64_t below)
+{
+#ifdef MADV_DONTNEED
+    const size_t page = (size_t)sysconf(_SC_PAGESIZE);
+    size_t end;
+    if (o->tile_map == NULL || page == 0 || below > o->tile_map_len / TL_REC)
+        return;
+    end = (size_t)below * TL_REC / page * page;
+    if (end > o->tile_released) {
+        (void)madvise((void *)(o->tile_map + o->tile_released), end - o->tile_released,
+                      MADV_DONTNEED);
+        o->tile_released = end;
+    }
+#else
+    (void)o;
+    (void)below;
+#endif
+}
+
+/* Unmaps what map_tile_points mapped. */
+static void unmap_tile_points(tr_out *o)
+{
+    if (o->tile_map != NULL)
+        munmap((void *)o->tile_map, o->tile_map_len);
+    o->tile_map = NULL;
+    o->tile_map_len = 0;
 }
 
 /* Orders (tile, label) pairs. */
@@ -301,18 +330,21 @@ static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
     uint64_t nf, ic = 0, ia = 0;
     size_t kept = 0;
     tr_trim_counts tc = {0, 0, 0};
-    tr_dem_tile tile = {NULL, 0, 0, 0};
+    char *pts_path = NULL;
+    tr_dem_tile tile = {NULL, 0, 0, 0, 0, NULL};
     gdt_status st = gdt_tiler_tile_info(o->src.tiler, k, &d, err);
 
     memset(&r, 0, sizeof r);
     r.fd = -1;
     if (st == GDT_OK && o->src.dem != NULL)
-        st = load_tile_points(o, &d, err);
+        st = map_tile_points(o, &d, &pts_path, err);
     if (st == GDT_OK) {
-        tile.pts = o->tile_pts;
+        tile.rec = o->tile_map;
         tile.n = (size_t)d.points;
-        tile.ox = d.local_x0;
-        tile.oy = d.local_y0;
+        tile.x0 = d.local_x0;
+        tile.y0 = d.local_y0;
+        tile.extent = d.local_extent;
+        tile.path = pts_path;
     }
     if (st == GDT_OK && tr_dem_windowed(o->src.dem)) {
         /* another rank's DEM: the tile's cells, for rank 0 */
@@ -369,18 +401,24 @@ static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
             alone = o->ready < o->src.ntiles;
             pthread_mutex_unlock(&o->mu);
             st = tr_dem_tile_faces(o->src.dem, &tile, o->src.base[k], o->tri, kept, alone, err);
+            /* the faces given before are done; these start at the first
+             * face's smallest index (its first), and so do all to come */
+            if (st == GDT_OK && m > 0 && tr_get_u32(o->raw) >= o->src.base[k])
+                release_tile_points(o, tr_get_u32(o->raw) - o->src.base[k]);
         }
         done += m;
     }
     if (o->src.dem != NULL) {
-        /* the tile's points (o->tile_pts) are the helpers' until they finish */
+        /* the tile's points (o->tile_map) are the helpers' until they finish */
         gdt_error werr;
         gdt_status ws = tr_dem_tile_wait(o->src.dem, &werr);
         if (st == GDT_OK && ws != GDT_OK) {
             st = ws;
             *err = werr;
         }
+        unmap_tile_points(o);
     }
+    free(pts_path);
     if (st == GDT_OK)
         o->tc.faces += nf;
     tr_dread_close(&r);
@@ -625,7 +663,7 @@ static void out_free(tr_out *o)
     free(o->drop);
     free(o->cut);
     free(o->cand);
-    free(o->tile_pts);
+    unmap_tile_points(o);
     free(o->mdem);
     free(o);
 }

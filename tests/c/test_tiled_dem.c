@@ -11,10 +11,13 @@
  *   - to two helper threads (alone = 0), the caller's chunk overwritten
  *     with out-of-range indices as soon as each call returns (the job must
  *     hold its own copy) and with alone switching between chunks;
- * every way must write the same GeoTIFF bytes.  Faces naming a vertex
- * outside the tile, placed in two parts of one job, fail with 7663 naming
- * the first in face order, reported by tr_dem_tile_wait (also when the
- * helpers took both parts), and the DEM is then not written.
+ * every way must write the same GeoTIFF bytes.  The tile's points are
+ * records as in a .pts file (tl_rec_put), as the mesh writer maps them.
+ * Faces naming a vertex outside the tile, placed in two parts of one job,
+ * fail with 7663 naming the first in face order, reported by
+ * tr_dem_tile_wait (also when the helpers took both parts), and the DEM is
+ * then not written; a point outside the tile's square fails with 6802
+ * naming the tile's file.
  */
 #include <stdio.h>
 #include <stdlib.h>
@@ -24,6 +27,7 @@
 
 #include "gdt_check.h"
 #include "private/tiled_dem.h"
+#include "private/tiler_io.h"
 
 static gdt_checks T = {0, 0};
 
@@ -35,7 +39,7 @@ static gdt_checks T = {0, 0};
 #define CHUNK 65536
 
 typedef struct cloud {
-    tr_dem_pt *pts;
+    unsigned char *rec; /* n records, TL_REC bytes each */
     size_t n;
     int32_t *tri;
     size_t nf;
@@ -46,24 +50,27 @@ static void make_cloud(cloud *c)
 {
     uint64_t seed = 12345;
     c->n = (size_t)NX * NY;
-    c->pts = malloc(c->n * sizeof *c->pts);
+    c->rec = malloc(c->n * TL_REC);
     c->tri = malloc((size_t)(NX - 1) * (NY - 1) * 6 * sizeof *c->tri);
     c->nf = 0;
     c->min_x = c->min_y = INT64_MAX;
     c->max_x = c->max_y = INT64_MIN;
-    if (c->pts == NULL || c->tri == NULL)
+    if (c->rec == NULL || c->tri == NULL)
         return;
     for (int j = 0; j < NY; j++)
         for (int i = 0; i < NX; i++) {
-            tr_dem_pt *p = &c->pts[(size_t)j * NX + (size_t)i];
+            gdt_point p;
+            memset(&p, 0, sizeof p);
             /* jitter below half a step: the squares stay convex and unflipped */
-            p->x = (uint32_t)(i * STEP + (int)(gdt_splitmix64(&seed) % 15));
-            p->y = (uint32_t)(j * STEP + (int)(gdt_splitmix64(&seed) % 15));
-            p->z = 100.0 + 0.25 * (double)(gdt_splitmix64(&seed) % 4000) / 7.0;
-            if (p->x < c->min_x) c->min_x = p->x;
-            if (p->x > c->max_x) c->max_x = p->x;
-            if (p->y < c->min_y) c->min_y = p->y;
-            if (p->y > c->max_y) c->max_y = p->y;
+            p.x = i * STEP + (int)(gdt_splitmix64(&seed) % 15);
+            p.y = j * STEP + (int)(gdt_splitmix64(&seed) % 15);
+            p.z = 100.0 + 0.25 * (double)(gdt_splitmix64(&seed) % 4000) / 7.0;
+            p.ord = (uint64_t)j * NX + (uint64_t)i;
+            tl_rec_put(c->rec + (size_t)p.ord * TL_REC, &p);
+            if (p.x < c->min_x) c->min_x = p.x;
+            if (p.x > c->max_x) c->max_x = p.x;
+            if (p.y < c->min_y) c->min_y = p.y;
+            if (p.y > c->max_y) c->max_y = p.y;
         }
     for (int j = 0; j + 1 < NY; j++)
         for (int i = 0; i + 1 < NX; i++) {
@@ -105,14 +112,18 @@ static void make_plan(plan *p, const cloud *c, const char *dem, int threads)
 /* How the faces are handed over. */
 enum { ALONE, HELPERS, MIXED };
 
-/* Rasterises every face of c into a DEM at path, in CHUNK-face calls;
- * returns the status of the first failing step (err: its message). */
+/* The tile's square: every point of the cloud lies in it. */
+#define EXTENT (NX * STEP)
+
+/* Rasterises every face of c into a DEM at path, in CHUNK-face calls, the
+ * tile's square [0, extent)^2; returns the status of the first failing
+ * step (err: its message). */
 static gdt_status run(const cloud *c, const int32_t *faces, const char *path, int threads, int mode,
-                      gdt_error *err)
+                      int64_t extent, gdt_error *err)
 {
     plan p;
     tr_dem *d = NULL;
-    tr_dem_tile t = {c->pts, c->n, 0, 0};
+    tr_dem_tile t = {c->rec, c->n, 0, 0, extent, "tile.pts"};
     int32_t *chunk = malloc((size_t)CHUNK * 3 * sizeof *chunk);
     gdt_status st;
     size_t k = 0;
@@ -158,7 +169,7 @@ int main(int argc, char **argv)
     }
     mkdir(argv[1], 0755);
     make_cloud(&c);
-    if (c.pts == NULL || c.tri == NULL) {
+    if (c.rec == NULL || c.tri == NULL) {
         fprintf(stderr, "out of memory\n");
         return 1;
     }
@@ -167,7 +178,7 @@ int main(int argc, char **argv)
     snprintf(ref, sizeof ref, "%s/alone.tif", argv[1]);
     unlink(ref);
     gdt_error_clear(&err);
-    st = run(&c, c.tri, ref, 1, ALONE, &err);
+    st = run(&c, c.tri, ref, 1, ALONE, EXTENT, &err);
     CHECK(st == GDT_OK, "one thread: %s", err.msg);
     want = gdt_check_slurp(ref, &want_len);
     CHECK(want != NULL && want_len > 1000, "%s: no DEM written", ref);
@@ -186,7 +197,7 @@ int main(int argc, char **argv)
             snprintf(path, sizeof path, "%s/way%zu.tif", argv[1], w);
             unlink(path);
             gdt_error_clear(&err);
-            st = run(&c, c.tri, path, ways[w].threads, ways[w].mode, &err);
+            st = run(&c, c.tri, path, ways[w].threads, ways[w].mode, EXTENT, &err);
             CHECK(st == GDT_OK, "%s: %s", ways[w].name, err.msg);
             got = gdt_check_slurp(path, &len);
             CHECK(got != NULL && want != NULL && len == want_len &&
@@ -213,7 +224,7 @@ int main(int argc, char **argv)
                 snprintf(path, sizeof path, "%s/bad%d.tif", argv[1], threads);
                 unlink(path);
                 gdt_error_clear(&err);
-                st = run(&c, bad, path, threads, HELPERS, &err);
+                st = run(&c, bad, path, threads, HELPERS, EXTENT, &err);
                 CHECK(st == GDT_EINTERNAL && err.code == 7663 && strstr(err.msg, want_msg) != NULL,
                       "threads %d: status %d, error %d: %s", threads, (int)st, err.code, err.msg);
                 CHECK(stat(path, &sb) != 0, "threads %d: a failed DEM was written at %s",
@@ -222,8 +233,21 @@ int main(int argc, char **argv)
             free(bad);
         }
     }
+    /* the tile's square one step too small: the points on its last
+     * column lie outside it */
+    for (int threads = 1; threads <= 3; threads += 2) {
+        snprintf(path, sizeof path, "%s/outside%d.tif", argv[1], threads);
+        unlink(path);
+        gdt_error_clear(&err);
+        st = run(&c, c.tri, path, threads, HELPERS, c.max_x, &err);
+        CHECK(st == GDT_EJOB && err.code == 6802 && strstr(err.msg, "tile.pts: point (") != NULL &&
+                  strstr(err.msg, "outside its tile") != NULL,
+              "threads %d, a point outside the tile: status %d, error %d: %s", threads, (int)st,
+              err.code, err.msg);
+        CHECK(stat(path, &sb) != 0, "threads %d: a failed DEM was written at %s", threads, path);
+    }
     free(want);
-    free(c.pts);
+    free(c.rec);
     free(c.tri);
     return gdt_check_finish(&T, "test_tiled_dem");
 }

@@ -42,21 +42,19 @@ gdt_status tr_dem_create(tr_dem **out, const gdt_options *opts, const gdt_cloud_
                          const gdt_tile_plan *pl, uint64_t vertices, const char *scratch_dir,
                          gdt_error *err);
 
-/* A tile's point as the rasteriser takes it: its lattice coordinates
- * relative to the tile's local origin (gdt_tile_desc local_x0, local_y0:
- * within [0, 2^31), as the core's) and its z.  16 bytes instead of a
- * gdt_raster_vertex's 24: the writer holds a whole tile of them. */
-typedef struct tr_dem_pt {
-    uint32_t x, y;
-    double z;
-} tr_dem_pt;
-
-/* The tile points of tr_dem_tile_faces and tr_dem_window_begin: pts[0..n),
- * point i at global lattice (ox + pts[i].x, oy + pts[i].y). */
+/* The points of a tile as tr_dem_tile_faces and tr_dem_window_begin read
+ * them: its n records as they lie in its .pts file (TL_REC bytes each, in
+ * tl_rec_put's layout: global lattice x and y, then z, little-endian),
+ * mapped from that file by the mesh writer, so that a tile's points take
+ * no memory of their own.  Every point lies in the tile's local square
+ * [x0, x0 + extent) x [y0, y0 + extent) (gdt_tile_desc local_x0, local_y0,
+ * local_extent); one that does not fails the faces that name it with
+ * GDT_EJOB 6802, naming path. */
 typedef struct tr_dem_tile {
-    const tr_dem_pt *pts;
+    const unsigned char *rec;
     size_t n;
-    int64_t ox, oy;
+    int64_t x0, y0, extent;
+    const char *path;
 } tr_dem_tile;
 
 /* Rasterises m faces tri[3m] (output vertex indices) of a tile whose points
@@ -69,6 +67,7 @@ typedef struct tr_dem_tile {
  * next call or tr_dem_tile_wait.  The DEM is the same either way.
  * Thread-safe.
  * returns: GDT_OK; GDT_EINTERNAL 7663 (an index outside the tile), 7001;
+ * GDT_EJOB 6802 (a point outside the tile);
  * the writer's errors; a failure of the faces given before (the first in
  * face order) is returned by the next call or tr_dem_tile_wait. */
 gdt_status tr_dem_tile_faces(tr_dem *d, const tr_dem_tile *t, uint64_t base, const int32_t *tri,
@@ -115,7 +114,8 @@ const gdt_raster_grid *tr_dem_grid(const tr_dem *d);
  * at path.  A window of up to 2^24 cells (or the environment's
  * GDT_DEM_WINDOW_CELLS) is kept in memory; a larger one (a raster much
  * finer than the points) is written to path run by run as the faces are
- * rasterised.  returns: GDT_OK; GDT_EIO 4806; 7001. */
+ * rasterised.  returns: GDT_OK; GDT_EIO 4806; GDT_EJOB 6802 (a point outside
+ * the tile); 7001. */
 gdt_status tr_dem_window_begin(tr_dem *d, const tr_dem_tile *t, const char *path,
                                gdt_error *err);
 
