@@ -16,8 +16,8 @@
  * Faces naming a vertex outside the tile, placed in two parts of one job,
  * fail with 7663 naming the first in face order, reported by
  * tr_dem_tile_wait (also when the helpers took both parts), and the DEM is
- * then not written; a point outside the tile's square fails with 6802
- * naming the tile's file.
+ * then not written; a point outside the tile's square (also one as far
+ * away as an int64 goes) fails with 6802 naming the tile's file.
  */
 #include <stdio.h>
 #include <stdlib.h>
@@ -112,18 +112,20 @@ static void make_plan(plan *p, const cloud *c, const char *dem, int threads)
 /* How the faces are handed over. */
 enum { ALONE, HELPERS, MIXED };
 
-/* The tile's square: every point of the cloud lies in it. */
-#define EXTENT (NX * STEP)
+/* The tile's square [ORIGIN, ORIGIN + extent)^2 (a tile whose halo reaches
+ * below 0); with EXTENT every point of the cloud lies in it. */
+#define ORIGIN (-STEP)
+#define EXTENT ((NX + 1) * STEP)
 
 /* Rasterises every face of c into a DEM at path, in CHUNK-face calls, the
- * tile's square [0, extent)^2; returns the status of the first failing
- * step (err: its message). */
+ * tile's square of side extent at ORIGIN; returns the status of the first
+ * failing step (err: its message). */
 static gdt_status run(const cloud *c, const int32_t *faces, const char *path, int threads, int mode,
                       int64_t extent, gdt_error *err)
 {
     plan p;
     tr_dem *d = NULL;
-    tr_dem_tile t = {c->rec, c->n, 0, 0, extent, "tile.pts"};
+    tr_dem_tile t = {c->rec, c->n, ORIGIN, ORIGIN, extent, "tile.pts"};
     int32_t *chunk = malloc((size_t)CHUNK * 3 * sizeof *chunk);
     gdt_status st;
     size_t k = 0;
@@ -233,8 +235,8 @@ int main(int argc, char **argv)
             free(bad);
         }
     }
-    /* the tile's square one step too small: the points on its last
-     * column lie outside it */
+    /* the tile's square too small: the points on its last column lie
+     * outside it */
     for (int threads = 1; threads <= 3; threads += 2) {
         snprintf(path, sizeof path, "%s/outside%d.tif", argv[1], threads);
         unlink(path);
@@ -245,6 +247,24 @@ int main(int argc, char **argv)
               "threads %d, a point outside the tile: status %d, error %d: %s", threads, (int)st,
               err.code, err.msg);
         CHECK(stat(path, &sb) != 0, "threads %d: a failed DEM was written at %s", threads, path);
+    }
+    /* a record whose x is as far from the tile as an int64 goes (a damaged
+     * file): the same failure, with no overflow on the way */
+    {
+        unsigned char keep[TL_REC];
+        gdt_point p;
+        const size_t at = (size_t)NX * 7 + 11;
+        memcpy(keep, c.rec + at * TL_REC, TL_REC);
+        tl_rec_get(&p, c.rec + at * TL_REC);
+        p.x = INT64_MAX;
+        tl_rec_put(c.rec + at * TL_REC, &p);
+        snprintf(path, sizeof path, "%s/far.tif", argv[1]);
+        unlink(path);
+        gdt_error_clear(&err);
+        st = run(&c, c.tri, path, 1, ALONE, EXTENT, &err);
+        CHECK(st == GDT_EJOB && err.code == 6802 && strstr(err.msg, "tile.pts: point (") != NULL,
+              "a point at x = INT64_MAX: status %d, error %d: %s", (int)st, err.code, err.msg);
+        memcpy(c.rec + at * TL_REC, keep, TL_REC);
     }
     free(want);
     free(c.rec);
