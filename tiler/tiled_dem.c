@@ -205,19 +205,14 @@ static gdt_status batch_put(void *ctx, int64_t row, int64_t col, int64_t n, cons
     return GDT_OK;
 }
 
-/* Point k of tile t as the rasteriser takes it, decoded from its record
- * (x, y, z little-endian at offsets 0, 8, 16); GDT_EJOB 6802 when it lies
+/* Point k of tile t as the rasteriser takes it, decoded from its record;
+ * GDT_EJOB 6802 when it lies
  * outside the tile's square (the differences taken unsigned: a damaged
  * record's coordinates may be anything). */
 static gdt_status tile_vertex(const tr_dem_tile *t, uint64_t k, gdt_raster_vertex *v,
                               gdt_error *err)
 {
-    uint64_t w[3];
-    memcpy(w, t->rec + k * TL_REC, sizeof w);
-    v->x = (int64_t)tl_le64(w[0]);
-    v->y = (int64_t)tl_le64(w[1]);
-    w[2] = tl_le64(w[2]);
-    memcpy(&v->z, &w[2], sizeof v->z);
+    tl_rec_xyz(t->rec + k * TL_REC, &v->x, &v->y, &v->z);
     if ((uint64_t)v->x - (uint64_t)t->x0 >= (uint64_t)t->extent ||
         (uint64_t)v->y - (uint64_t)t->y0 >= (uint64_t)t->extent)
         return gdt_error_set(err, GDT_EJOB, 6802, "%s: point (%" PRId64 ", %" PRId64

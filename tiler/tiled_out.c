@@ -1,6 +1,5 @@
 /* tiled_out.c — the mesh of a tiled run, written beside the tile stage (see
  * private/tiled_out.h). */
-#define _GNU_SOURCE 1 /* MADV_DONTNEED */
 #include "private/tiled_out.h"
 #include "gdt_grow.h"
 #include "gdt_ply.h"
@@ -16,8 +15,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <fcntl.h>
-#include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -211,81 +208,23 @@ static gdt_status copy_face_records(tr_out *o, FILE *f, FILE *df, const char *pa
     return GDT_OK;
 }
 
-/* With a DEM: tile k's .pts file (d->points records, checked against its
- * size) mapped read-only at o->tile_map for the rasteriser, which reads
- * the points where they lie: a copy would be a tile's worth of fresh
- * memory, which costs more to fault in than the copy itself.  The file is
- * read ahead now (most of it is in the page cache since pass 2); the pages
- * the faces have left behind are released as they go (release_tile_points).
- * *path: the file's path, for messages (the caller frees it). */
+/* With a DEM: tile k's .pts file mapped at o->tile_map for the rasteriser,
+ * which reads the points where they lie: a copy would be a tile's worth of
+ * fresh memory, which costs more to fault in than the copy itself (most
+ * of the file is in the page cache since pass 2).  *path: the file's path,
+ * for messages (the caller frees it). */
 static gdt_status map_tile_points(tr_out *o, const gdt_tile_desc *d, char **path, gdt_error *err)
 {
-    struct stat sb;
-    size_t len;
-    void *p;
-    int fd;
     gdt_status st = tr_tile_path(o->src.tiles_dir, d, "pts", path, err);
-
-    if (st != GDT_OK)
-        return st;
-    fd = open(*path, O_RDONLY | O_CLOEXEC);
-    if (fd < 0)
-        return gdt_error_set(err, GDT_EIO, 4504, "cannot open %s: %s", *path, strerror(errno));
-    if (fstat(fd, &sb) != 0 || sb.st_size < 0 || (uint64_t)sb.st_size % TL_REC != 0 ||
-        (uint64_t)sb.st_size / TL_REC != d->points || (uint64_t)sb.st_size > SIZE_MAX) {
-        close(fd);
-        return gdt_error_set(err, GDT_EJOB, 6503,
-                             "%s: it does not hold the %llu records written to it (the job "
-                             "directory was changed; rerun with --restart)",
-                             *path, (unsigned long long)d->points);
-    }
-    len = (size_t)sb.st_size;
-    if (len == 0) {
-        close(fd);
-        return GDT_OK;
-    }
-    p = mmap(NULL, len, PROT_READ, MAP_PRIVATE, fd, 0);
-    close(fd);
-    if (p == MAP_FAILED)
-        return gdt_error_set(err, GDT_EIO, 4504, "cannot map %s: %s", *path, strerror(errno));
-    (void)posix_madvise(p, len, POSIX_MADV_WILLNEED); /* advice only */
-    o->tile_map = p;
-    o->tile_map_len = len;
     o->tile_released = 0;
-    return GDT_OK;
+    if (st == GDT_OK)
+        st = tl_map_records(*path, d->points, &o->tile_map, &o->tile_map_len, err);
+    return st;
 }
 
-/* The mapped tile's records below record `below` handed back (advice
- * only): the faces are sorted by their smallest vertex, so once a chunk
- * starts at vertex v no later face reads a point below it, and the
- * mapping's resident pages stay those of the points still to come near
- * the faces being copied (a cloud in acquisition order), not the whole
- * tile.  A page read again after all is mapped again from the page cache:
- * nothing depends on this. */
-static void release_tile_points(tr_out *o, uint64_t below)
-{
-#ifdef MADV_DONTNEED
-    const size_t page = (size_t)sysconf(_SC_PAGESIZE);
-    size_t end;
-    if (o->tile_map == NULL || page == 0 || below > o->tile_map_len / TL_REC)
-        return;
-    end = (size_t)below * TL_REC / page * page;
-    if (end > o->tile_released) {
-        (void)madvise((void *)(o->tile_map + o->tile_released), end - o->tile_released,
-                      MADV_DONTNEED);
-        o->tile_released = end;
-    }
-#else
-    (void)o;
-    (void)below;
-#endif
-}
-
-/* Unmaps what map_tile_points mapped. */
 static void unmap_tile_points(tr_out *o)
 {
-    if (o->tile_map != NULL)
-        munmap((void *)o->tile_map, o->tile_map_len);
+    tl_unmap_records(o->tile_map, o->tile_map_len);
     o->tile_map = NULL;
     o->tile_map_len = 0;
 }
@@ -401,10 +340,14 @@ static gdt_status copy_faces(tr_out *o, uint64_t k, gdt_error *err)
             alone = o->ready < o->src.ntiles;
             pthread_mutex_unlock(&o->mu);
             st = tr_dem_tile_faces(o->src.dem, &tile, o->src.base[k], o->tri, kept, alone, err);
-            /* the faces given before are done; these start at the first
-             * face's smallest index (its first), and so do all to come */
+            /* the faces given before are done, and these and all to come
+             * are sorted by their smallest vertex, the first face's first:
+             * no face reads a point below it again, so the mapping's
+             * resident pages stay near the faces being copied (for a cloud
+             * in acquisition order) */
             if (st == GDT_OK && m > 0 && tr_get_u32(o->raw) >= o->src.base[k])
-                release_tile_points(o, tr_get_u32(o->raw) - o->src.base[k]);
+                tl_release_records(o->tile_map, o->tile_map_len, &o->tile_released,
+                                   tr_get_u32(o->raw) - o->src.base[k]);
         }
         done += m;
     }

@@ -7,6 +7,7 @@
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -186,10 +187,81 @@ gdt_status tl_file_records(const char *path, uint64_t *nrec, gdt_error *err)
     return GDT_OK;
 }
 
+/* GDT_EJOB 6503 unless fd (open on path) holds exactly nrec records: a job
+ * file that changed since it was written means a damaged job. */
+static gdt_status check_records(int fd, const char *path, uint64_t nrec, uint64_t *size,
+                                gdt_error *err)
+{
+    struct stat sb;
+    if (fstat(fd, &sb) != 0 || sb.st_size < 0 || (uint64_t)sb.st_size / TL_REC != nrec ||
+        (uint64_t)sb.st_size % TL_REC != 0)
+        return gdt_error_set(err, GDT_EJOB, 6503,
+                             "%s: it does not hold the %llu records written to it (the job "
+                             "directory was changed; rerun with --restart)",
+                             path, (unsigned long long)nrec);
+    *size = (uint64_t)sb.st_size;
+    return GDT_OK;
+}
+
+gdt_status tl_map_records(const char *path, uint64_t nrec, const unsigned char **map,
+                          size_t *len, gdt_error *err)
+{
+    uint64_t size = 0;
+    void *p;
+    gdt_status st;
+    int fd = open(path, O_RDONLY | O_CLOEXEC);
+
+    *map = NULL;
+    *len = 0;
+    if (fd < 0)
+        return gdt_error_set(err, GDT_EIO, 4504, "cannot open %s: %s", path, strerror(errno));
+    st = check_records(fd, path, nrec, &size, err);
+    if (st == GDT_OK && size > SIZE_MAX)
+        st = gdt_error_set(err, GDT_EIO, 4504, "cannot map %s: larger than memory", path);
+    if (st != GDT_OK || size == 0) {
+        close(fd);
+        return st;
+    }
+    p = mmap(NULL, (size_t)size, PROT_READ, MAP_PRIVATE, fd, 0);
+    close(fd);
+    if (p == MAP_FAILED)
+        return gdt_error_set(err, GDT_EIO, 4504, "cannot map %s: %s", path, strerror(errno));
+    (void)posix_madvise(p, (size_t)size, POSIX_MADV_WILLNEED); /* advice only */
+    *map = p;
+    *len = (size_t)size;
+    return GDT_OK;
+}
+
+void tl_release_records(const unsigned char *map, size_t len, size_t *released, uint64_t below)
+{
+#ifdef MADV_DONTNEED
+    const long page = sysconf(_SC_PAGESIZE);
+    size_t end;
+    if (map == NULL || page <= 0 || below > len / TL_REC)
+        return;
+    end = (size_t)below * TL_REC / (size_t)page * (size_t)page;
+    if (end > *released) {
+        (void)madvise((void *)(map + *released), end - *released, MADV_DONTNEED);
+        *released = end;
+    }
+#else
+    (void)map;
+    (void)len;
+    (void)released;
+    (void)below;
+#endif
+}
+
+void tl_unmap_records(const unsigned char *map, size_t len)
+{
+    if (map != NULL)
+        munmap((void *)map, len);
+}
+
 static gdt_status rfile_open(tl_rfile *r, const char *path, uint64_t nrec, unsigned char *buf,
                              size_t cap, gdt_error *err)
 {
-    struct stat sb;
+    uint64_t size = 0;
     gdt_status st = GDT_OK;
 
     memset(r, 0, sizeof *r);
@@ -208,15 +280,9 @@ static gdt_status rfile_open(tl_rfile *r, const char *path, uint64_t nrec, unsig
         st = gdt_error_set(err, GDT_EIO, 4504, "cannot open %s: %s", path, strerror(errno));
         goto fail;
     }
-    if (fstat(r->fd, &sb) != 0 || sb.st_size < 0 || (uint64_t)sb.st_size / TL_REC != nrec ||
-        (uint64_t)sb.st_size % TL_REC != 0) {
-        /* a job file that changed since it was written: the job is damaged */
-        st = gdt_error_set(err, GDT_EJOB, 6503,
-                           "%s: it does not hold the %llu records written to it (the job "
-                           "directory was changed; rerun with --restart)",
-                           path, (unsigned long long)nrec);
+    st = check_records(r->fd, path, nrec, &size, err);
+    if (st != GDT_OK)
         goto fail;
-    }
     (void)posix_fadvise(r->fd, 0, 0, POSIX_FADV_SEQUENTIAL);
     return GDT_OK;
 fail:

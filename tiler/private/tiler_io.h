@@ -59,6 +59,19 @@ static inline void tl_rec_put(unsigned char *dst, const gdt_point *p)
     memcpy(dst, w, sizeof w);
 }
 
+/* x, y and z of a record, without its ordinal. */
+static inline void tl_rec_xyz(const unsigned char *src, int64_t *x, int64_t *y, double *z)
+{
+    uint64_t w[3];
+    memcpy(w, src, sizeof w);
+    w[0] = tl_le64(w[0]);
+    w[1] = tl_le64(w[1]);
+    w[2] = tl_le64(w[2]);
+    memcpy(x, &w[0], 8);
+    memcpy(y, &w[1], 8);
+    memcpy(z, &w[2], 8);
+}
+
 static inline void tl_rec_get(gdt_point *p, const unsigned char *src)
 {
     uint64_t w[4];
@@ -151,6 +164,22 @@ gdt_status tl_rfile_read(tl_rfile *r, gdt_point *out, size_t cap, size_t *n, gdt
 gdt_status tl_rfile_raw(tl_rfile *r, const unsigned char **rec, size_t cap, size_t *n,
                         gdt_error *err);
 void tl_rfile_close(tl_rfile *r);
+
+/* A record file of exactly nrec records (checked against its size, as
+ * tl_rfile_open does) mapped read-only at *map, *len bytes (NULL and 0 for
+ * an empty file), read ahead as advice.  The records are read in place
+ * (tl_rec_get, tl_rec_xyz); its pages are the page cache's, which the
+ * kernel can take back under pressure.  A file cut short while it is
+ * mapped would end the process with SIGBUS: job files are the run's own.
+ * returns: GDT_OK; GDT_EIO 4504 (open, map); GDT_EJOB 6503 (its size).
+ * Ownership: release with tl_unmap_records. */
+gdt_status tl_map_records(const char *path, uint64_t nrec, const unsigned char **map,
+                          size_t *len, gdt_error *err);
+/* Advice only: the mapped records below record `below` are handed back
+ * (their pages are mapped again from the page cache if read after all);
+ * *released is the byte count handed back so far, 0 at the start. */
+void tl_release_records(const unsigned char *map, size_t len, size_t *released, uint64_t below);
+void tl_unmap_records(const unsigned char *map, size_t len);
 
 /* Size of a file in records (GDT_EIO 4504 if it cannot be stat'ed or its
  * size is not a multiple of the record size). */
